@@ -1,0 +1,76 @@
+//! Typed errors of the library: one variant family per stage, each saying what was wrong
+//! with which input.
+
+use std::path::PathBuf;
+
+/// Result alias of the library.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Every error the library can return.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// An operating-system I/O error on a named file.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file being read or written.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// A particle or mesh file whose content is malformed.
+    #[error("{path}: {location}: {message}")]
+    Parse {
+        /// The file being read.
+        path: PathBuf,
+        /// Where in the file: "line 12", "byte offset 4096", "header".
+        location: String,
+        /// What was wrong.
+        message: String,
+    },
+    /// A file whose format is not known or not supported.
+    #[error("{path}: {message}")]
+    UnsupportedFormat {
+        /// The file.
+        path: PathBuf,
+        /// What is not supported and what is.
+        message: String,
+    },
+    /// An option with a value that cannot work.
+    #[error("invalid option {option}: {message}")]
+    InvalidOption {
+        /// Option name as the user sees it (`--particle-radius`).
+        option: &'static str,
+        /// Why the value is rejected.
+        message: String,
+    },
+    /// The input holds no particles.
+    #[error("{path}: the file holds no particles")]
+    EmptyInput {
+        /// The file.
+        path: PathBuf,
+    },
+}
+
+impl Error {
+    /// Wraps an I/O error with the path it concerns.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    /// A parse error at a location of a file.
+    pub fn parse(
+        path: impl Into<PathBuf>,
+        location: impl Into<String>,
+        message: impl Into<String>,
+    ) -> Self {
+        Error::Parse {
+            path: path.into(),
+            location: location.into(),
+            message: message.into(),
+        }
+    }
+}

@@ -1,0 +1,1 @@
+//! Mesh writers (in progress).

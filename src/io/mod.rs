@@ -1,0 +1,9 @@
+//! File input and output.
+//!
+//! * [`particles`]: particle readers (raw `.xyz`, legacy VTK, PLY, classic BGEO) behind one
+//!   [`particles::read_particles`] entry that picks the format by extension.
+//! * [`mesh`]: mesh writers (glTF `.glb`/`.gltf`, PLY, OBJ, legacy VTK) behind
+//!   [`mesh::write_surface`]; every write is atomic (temporary file + rename).
+
+pub mod mesh;
+pub mod particles;

@@ -1,0 +1,147 @@
+//! The indexed triangle mesh shared by every stage, its normals, and topology validation.
+//!
+//! Invariants a [`TriMesh`] may carry (checked by [`validate`], not by construction):
+//! triangles index existing vertices; a *closed 2-manifold* has every edge in exactly two
+//! triangles and a single fan of triangles around every vertex; *consistent orientation*
+//! means every edge is traversed once in each direction. Outward orientation is counter-
+//! clockwise seen from outside (positive enclosed volume).
+
+mod topology;
+
+pub use topology::triangle_components;
+
+pub use topology::{validate, TopologyReport};
+
+use glam::{DVec3, Vec3};
+
+/// An indexed triangle mesh. Positions are world units.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TriMesh {
+    /// Vertex positions, world units.
+    pub positions: Vec<Vec3>,
+    /// Triangles as vertex indices, counter-clockwise seen from outside.
+    pub triangles: Vec<[u32; 3]>,
+    /// Unit vertex normals, one per vertex, or empty when not computed.
+    pub normals: Vec<Vec3>,
+}
+
+impl TriMesh {
+    /// Number of triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Number of vertices.
+    pub fn vertex_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Area-weighted unit vertex normals (each triangle adds its area times its unit normal
+    /// to its three vertices), stored in [`TriMesh::normals`]. A vertex with no area around
+    /// it gets +y.
+    pub fn compute_normals(&mut self) {
+        let mut acc = vec![DVec3::ZERO; self.positions.len()];
+        for t in &self.triangles {
+            let [a, b, c] = t.map(|i| self.positions[i as usize].as_dvec3());
+            // The cross product is twice the area times the unit normal.
+            let n = (b - a).cross(c - a);
+            for &i in t {
+                acc[i as usize] += n;
+            }
+        }
+        self.normals = acc
+            .into_iter()
+            .map(|n| {
+                let len = n.length();
+                if len > 0.0 && len.is_finite() {
+                    (n / len).as_vec3()
+                } else {
+                    Vec3::Y
+                }
+            })
+            .collect();
+    }
+
+    /// Signed enclosed volume (world units cubed), positive for an outward-oriented closed
+    /// mesh. Meaningful only for closed meshes.
+    pub fn signed_volume(&self) -> f64 {
+        self.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| self.positions[i as usize].as_dvec3());
+                a.dot(b.cross(c)) / 6.0
+            })
+            .sum()
+    }
+
+    /// Total surface area (world units squared).
+    pub fn area(&self) -> f64 {
+        self.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| self.positions[i as usize].as_dvec3());
+                0.5 * (b - a).cross(c - a).length()
+            })
+            .sum()
+    }
+
+    /// Appends another mesh (its vertices and triangles, re-indexed). Normals are kept only
+    /// when both meshes have them.
+    pub fn append(&mut self, other: &TriMesh) {
+        let offset = self.positions.len() as u32;
+        let keep_normals = self.normals.len() == self.positions.len()
+            && other.normals.len() == other.positions.len();
+        self.positions.extend_from_slice(&other.positions);
+        self.triangles
+            .extend(other.triangles.iter().map(|t| t.map(|i| i + offset)));
+        if keep_normals {
+            self.normals.extend_from_slice(&other.normals);
+        } else {
+            self.normals.clear();
+        }
+    }
+}
+
+/// Isolated particles rendered as instances of one icosphere.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SphereInstances {
+    /// The sphere, centred at the origin, radius = particle radius (world units).
+    pub template: TriMesh,
+    /// One centre per isolated particle, world units.
+    pub centers: Vec<Vec3>,
+}
+
+impl SphereInstances {
+    /// The instances merged into one mesh (template translated to every centre).
+    pub fn merged(&self) -> TriMesh {
+        let mut out = TriMesh::default();
+        for c in &self.centers {
+            let mut s = self.template.clone();
+            for p in &mut s.positions {
+                *p += *c;
+            }
+            out.append(&s);
+        }
+        out
+    }
+}
+
+/// The result of a reconstruction: the fluid surface plus the isolated-particle spheres.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Surface {
+    /// The fluid surface extracted from the field (after any post-processing).
+    pub fluid: TriMesh,
+    /// Icospheres standing for isolated particles (empty when disabled or none).
+    pub spheres: SphereInstances,
+}
+
+impl Surface {
+    /// Fluid surface and spheres merged into one mesh (for formats without instancing).
+    pub fn merged(&self) -> TriMesh {
+        let mut out = self.fluid.clone();
+        if !self.spheres.centers.is_empty() {
+            out.append(&self.spheres.merged());
+        }
+        out
+    }
+}
