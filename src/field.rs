@@ -1,1 +1,517 @@
-//! (in progress)
+//! The scalar field of Solenthaler, Schläfli and Pajarola 2007, "A Unified Particle Model
+//! for Fluid-Solid Interactions" (§ surface reconstruction), as used by Akinci et al. 2013.
+//!
+//! **Input:** particle centres (world units) and [`FieldOptions`].
+//! **Output:** a [`SparseField`] holding `phi` (world units, negative inside the fluid) at
+//! every lattice vertex that has a particle within the influence radius `R`, in 8³ blocks.
+//!
+//! For a vertex `v`, with `k(s) = max(0, (1 − s²)³)` and `w_i = k(|v − x_i| / R)`:
+//! * `vbar(v) = Σ w_i x_i / Σ w_i`,
+//! * `phi(v) = |v − vbar(v)| − r·f(v)`,
+//! * `f = 1` when `EVmax < t_low`, else `γ³ − 3γ² + 3γ` with
+//!   `γ = (t_high − EVmax) / (t_high − t_low)`, EVmax clamped to `[t_low, t_high]`,
+//!   EVmax the largest eigenvalue of the Jacobian `∇vbar`.
+//!
+//! `∇vbar` has the closed form `J_ab = (Σ x_ia ∂_b w_i − vbar_a Σ ∂_b w_i) / Σ w_i` with
+//! `∇w_i = −6 (1 − s²)² (v − x_i) / R²`; with `r_i = v − x_i` the sums become
+//! `Σ w`, `Σ w r`, `Σ ∇w` and the symmetric `Σ g r⊗r`, thirteen per vertex. `J` is not symmetric; its eigenvalues are the
+//! roots of the characteristic cubic, solved in f64 in closed form (Cardano for one real
+//! root, the trigonometric form for three); "largest" is the largest real part.
+//!
+//! **Evaluation order (the invariant that makes tiling exact):** the sums at a vertex run
+//! over particles binned by *home block* (the lattice block containing the particle), home
+//! blocks visited in a fixed (z, y, x) offset order, particles of a home block in ascending
+//! input index. The order depends only on global lattice coordinates, never on the thread
+//! count or on how the domain is cut. Sums are accumulated in f32 on block-local
+//! coordinates (in cells), which keeps them exact enough far from the origin.
+
+use crate::error::{Error, Result};
+use crate::grid::{BlockKey, SparseField, BLOCK_EDGE, BLOCK_VOLUME};
+use glam::Vec3;
+use hashbrown::{HashMap, HashSet};
+use rayon::prelude::*;
+
+/// Parameters of the field. Lengths other than the particle radius are multiples of `r`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FieldOptions {
+    /// Particle radius `r`, world units (half the rest spacing). Required, > 0.
+    pub particle_radius: f32,
+    /// Influence radius `R` in multiples of `r`. Default 4.
+    pub influence_radius: f32,
+    /// Marching-cubes cell edge `h` in multiples of `r`. Default 1.
+    pub cell_size: f32,
+    /// Lower eigenvalue threshold `t_low` of the concavity factor. Default 0.4.
+    pub t_low: f32,
+    /// Upper eigenvalue threshold `t_high` of the concavity factor. Default 3.5.
+    pub t_high: f32,
+}
+
+impl FieldOptions {
+    /// The defaults of the paper for a given particle radius (world units).
+    pub fn new(particle_radius: f32) -> Self {
+        FieldOptions {
+            particle_radius,
+            influence_radius: 4.0,
+            cell_size: 1.0,
+            t_low: 0.4,
+            t_high: 3.5,
+        }
+    }
+
+    /// Cell size `h` in world units.
+    pub fn cell_size_world(&self) -> f64 {
+        self.cell_size as f64 * self.particle_radius as f64
+    }
+
+    /// Influence radius `R` in world units.
+    pub fn influence_radius_world(&self) -> f64 {
+        self.influence_radius as f64 * self.particle_radius as f64
+    }
+
+    /// Value stored for vertices with no particle in range (positive: outside).
+    pub fn outside_value(&self) -> f32 {
+        (self.influence_radius_world()) as f32
+    }
+
+    /// Checks that every parameter can work.
+    pub fn validate(&self) -> Result<()> {
+        let positive = |v: f32| v.is_finite() && v > 0.0;
+        if !positive(self.particle_radius) {
+            return Err(Error::InvalidOption {
+                option: "--particle-radius",
+                message: format!("must be a finite number > 0, got {}", self.particle_radius),
+            });
+        }
+        if !positive(self.influence_radius) {
+            return Err(Error::InvalidOption {
+                option: "--influence-radius",
+                message: format!(
+                    "must be > 0 (multiples of r), got {}",
+                    self.influence_radius
+                ),
+            });
+        }
+        if !positive(self.cell_size) {
+            return Err(Error::InvalidOption {
+                option: "--cell-size",
+                message: format!("must be > 0 (multiples of r), got {}", self.cell_size),
+            });
+        }
+        if self.influence_radius / self.cell_size > 64.0 {
+            return Err(Error::InvalidOption {
+                option: "--influence-radius",
+                message: format!(
+                    "R = {} r spans more than 64 cells of {} r; raise --cell-size",
+                    self.influence_radius, self.cell_size
+                ),
+            });
+        }
+        if !(self.t_low.is_finite() && self.t_high.is_finite() && self.t_low < self.t_high) {
+            return Err(Error::InvalidOption {
+                option: "--t-low/--t-high",
+                message: format!(
+                    "need t_low < t_high, got {} and {}",
+                    self.t_low, self.t_high
+                ),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// What the field stage did.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct FieldStats {
+    /// Particles that entered the field.
+    pub particles: usize,
+    /// Allocated 8³ blocks.
+    pub blocks: usize,
+    /// Lattice vertices with at least one particle in range.
+    pub vertices_in_band: usize,
+    /// Bytes of block storage.
+    pub block_bytes: usize,
+}
+
+/// Largest coordinate, in cells, the lattice accepts (block keys must pack in 21 bits).
+const MAX_CELL_COORDINATE: f64 = (1u64 << 23) as f64;
+
+/// Computes the field of `positions` (world units) on the sparse lattice.
+pub fn compute_field(
+    positions: &[Vec3],
+    options: &FieldOptions,
+) -> Result<(SparseField, FieldStats)> {
+    options.validate()?;
+    let h = options.cell_size_world();
+    let inv_h = 1.0 / h;
+    if let Some((i, p)) = positions.iter().enumerate().find(|(_, p)| {
+        !p.is_finite() || (p.as_dvec3() * inv_h).abs().max_element() > MAX_CELL_COORDINATE
+    }) {
+        return Err(Error::InvalidOption {
+            option: "--cell-size",
+            message: format!(
+                "particle {i} at {p} is not finite or lies more than 2^23 cells from the origin"
+            ),
+        });
+    }
+    let reach = (options.influence_radius / options.cell_size / BLOCK_EDGE as f32).ceil() as i32;
+
+    // Home block of every particle, and the particle indices sorted by (home block, index).
+    let home: Vec<BlockKey> = positions
+        .par_iter()
+        .map(|p| {
+            let c = p.as_dvec3() * inv_h;
+            [c.x, c.y, c.z].map(|v| (v.floor() as i32).div_euclid(BLOCK_EDGE))
+        })
+        .collect();
+    let mut order: Vec<u32> = (0..positions.len() as u32).collect();
+    order.par_sort_unstable_by_key(|&i| {
+        let k = home[i as usize];
+        (k[2], k[1], k[0], i)
+    });
+    let mut home_ranges: HashMap<BlockKey, (u32, u32)> = HashMap::new();
+    let mut start = 0;
+    while start < order.len() {
+        let key = home[order[start] as usize];
+        let mut end = start + 1;
+        while end < order.len() && home[order[end] as usize] == key {
+            end += 1;
+        }
+        home_ranges.insert(key, (start as u32, end as u32));
+        start = end;
+    }
+
+    // Candidate blocks: within `reach` blocks of a populated home block.
+    let mut candidates: HashSet<BlockKey> = HashSet::new();
+    for key in home_ranges.keys() {
+        for dz in -reach..=reach {
+            for dy in -reach..=reach {
+                for dx in -reach..=reach {
+                    candidates.insert([key[0] + dx, key[1] + dy, key[2] + dz]);
+                }
+            }
+        }
+    }
+    let mut candidates: Vec<BlockKey> = candidates.into_iter().collect();
+    candidates.sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
+
+    let kernel = BlockKernel {
+        positions,
+        order: &order,
+        home_ranges: &home_ranges,
+        reach,
+        inv_h,
+        radius_cells: options.influence_radius / options.cell_size,
+        h,
+        options,
+    };
+    let computed: Vec<(BlockKey, Box<[f32; BLOCK_VOLUME]>, usize)> = candidates
+        .par_iter()
+        .map_init(Accumulators::new, |acc, &key| {
+            kernel
+                .evaluate(key, acc)
+                .map(|(values, n)| (key, values, n))
+        })
+        .flatten()
+        .collect();
+
+    let mut stats = FieldStats {
+        particles: positions.len(),
+        blocks: computed.len(),
+        ..FieldStats::default()
+    };
+    let mut blocks = HashMap::with_capacity(computed.len());
+    for (key, values, n) in computed {
+        stats.vertices_in_band += n;
+        blocks.insert(key, values);
+    }
+    let field = SparseField {
+        cell_size: h,
+        outside_value: options.outside_value(),
+        blocks,
+    };
+    stats.block_bytes = field.memory_bytes();
+    Ok((field, stats))
+}
+
+/// Number of running sums per vertex: Σw, Σw·r (3), Σ∇w (3), Σ g·r⊗r (6, symmetric),
+/// with `r = v − x_i` (cells) and `∇w_i = g·r`, `g = −6 (1 − s²)² / R²`.
+const SUMS: usize = 13;
+/// Row length: one block row of vertices along x.
+const ROW: usize = BLOCK_EDGE as usize;
+
+/// Per-thread scratch: the running sums of every vertex of one block, as
+/// `[sum][row][x]` so that one particle updates whole rows with vector instructions.
+struct Accumulators {
+    sums: Vec<[[f32; ROW]; BLOCK_VOLUME / ROW]>,
+}
+
+impl Accumulators {
+    fn new() -> Self {
+        Accumulators {
+            sums: vec![[[0.0; ROW]; BLOCK_VOLUME / ROW]; SUMS],
+        }
+    }
+
+    fn clear(&mut self) {
+        for s in &mut self.sums {
+            for row in s.iter_mut() {
+                *row = [0.0; ROW];
+            }
+        }
+    }
+}
+
+struct BlockKernel<'a> {
+    positions: &'a [Vec3],
+    order: &'a [u32],
+    home_ranges: &'a HashMap<BlockKey, (u32, u32)>,
+    reach: i32,
+    inv_h: f64,
+    radius_cells: f32,
+    h: f64,
+    options: &'a FieldOptions,
+}
+
+impl BlockKernel<'_> {
+    /// Accumulates and finalises one block; `None` when no particle reaches it.
+    fn evaluate(
+        &self,
+        key: BlockKey,
+        acc: &mut Accumulators,
+    ) -> Option<(Box<[f32; BLOCK_VOLUME]>, usize)> {
+        acc.clear();
+        let origin = [0, 1, 2].map(|a| key[a] as f64 * BLOCK_EDGE as f64);
+        let rc = self.radius_cells;
+        let rc2 = rc * rc;
+        let inv_rc2 = 1.0 / rc2;
+        let mut touched = false;
+        for dz in -self.reach..=self.reach {
+            for dy in -self.reach..=self.reach {
+                for dx in -self.reach..=self.reach {
+                    let Some(&(s, e)) =
+                        self.home_ranges
+                            .get(&[key[0] + dx, key[1] + dy, key[2] + dz])
+                    else {
+                        continue;
+                    };
+                    for &pi in &self.order[s as usize..e as usize] {
+                        let p = self.positions[pi as usize].as_dvec3() * self.inv_h;
+                        // Particle in block-local cell units.
+                        let x = [
+                            (p.x - origin[0]) as f32,
+                            (p.y - origin[1]) as f32,
+                            (p.z - origin[2]) as f32,
+                        ];
+                        let lo = x.map(|c| ((c - rc).ceil() as i32).max(0));
+                        let hi = x.map(|c| ((c + rc).floor() as i32).min(BLOCK_EDGE - 1));
+                        if lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2] {
+                            continue;
+                        }
+                        touched = true;
+                        let mut rx = [0.0f32; ROW];
+                        let mut rx2 = [0.0f32; ROW];
+                        for i in 0..ROW {
+                            rx[i] = i as f32 - x[0];
+                            rx2[i] = rx[i] * rx[i];
+                        }
+                        for c in lo[2]..=hi[2] {
+                            let rz = c as f32 - x[2];
+                            for b in lo[1]..=hi[1] {
+                                let ry = b as f32 - x[1];
+                                let ryz2 = ry * ry + rz * rz;
+                                if ryz2 >= rc2 {
+                                    continue;
+                                }
+                                let row = (c * BLOCK_EDGE + b) as usize;
+                                accumulate_row(
+                                    &mut acc.sums,
+                                    row,
+                                    &rx,
+                                    &rx2,
+                                    ry,
+                                    rz,
+                                    ryz2,
+                                    inv_rc2,
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        if !touched {
+            return None;
+        }
+        let mut values = Box::new([0.0f32; BLOCK_VOLUME]);
+        let mut in_band = 0;
+        let r = self.options.particle_radius as f64;
+        let (t_low, t_high) = (self.options.t_low as f64, self.options.t_high as f64);
+        for row in 0..BLOCK_VOLUME / ROW {
+            for i in 0..ROW {
+                let sum = |k: usize| acc.sums[k][row][i] as f64;
+                let idx = row * ROW + i;
+                let w = sum(0);
+                if w <= 0.0 {
+                    values[idx] = self.options.outside_value();
+                    continue;
+                }
+                in_band += 1;
+                // v − vbar = Σ w r / Σ w.
+                let d = [sum(1) / w, sum(2) / w, sum(3) / w];
+                let g = [sum(4), sum(5), sum(6)];
+                let s = [
+                    sum(7),
+                    sum(8),
+                    sum(9),
+                    sum(8),
+                    sum(10),
+                    sum(11),
+                    sum(9),
+                    sum(11),
+                    sum(12),
+                ];
+                // x_i = v − r_i gives J_ab = ((v − vbar)_a Σ∂_b w − Σ g r_a r_b) / Σ w.
+                let mut jac = [0.0f64; 9];
+                for a in 0..3 {
+                    for b in 0..3 {
+                        jac[a * 3 + b] = (d[a] * g[b] - s[a * 3 + b]) / w;
+                    }
+                }
+                let f = concavity_factor(largest_eigenvalue_real_part(&jac), t_low, t_high);
+                let dist_cells = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                values[idx] = (dist_cells * self.h - r * f) as f32;
+            }
+        }
+        Some((values, in_band))
+    }
+}
+
+/// Adds one particle's terms to one row of vertices. Lanes outside the influence sphere
+/// get `q = 0`, hence zero weight and zero gradient.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn accumulate_row(
+    sums: &mut [[[f32; ROW]; BLOCK_VOLUME / ROW]],
+    row: usize,
+    rx: &[f32; ROW],
+    rx2: &[f32; ROW],
+    ry: f32,
+    rz: f32,
+    ryz2: f32,
+    inv_rc2: f32,
+) {
+    let [s0, s1, s2, s3, s4, s5, s6, s7, s8, s9, s10, s11, s12] = sums else {
+        unreachable!("SUMS accumulators")
+    };
+    let (s0, s1, s2, s3) = (&mut s0[row], &mut s1[row], &mut s2[row], &mut s3[row]);
+    let (s4, s5, s6, s7) = (&mut s4[row], &mut s5[row], &mut s6[row], &mut s7[row]);
+    let (s8, s9, s10, s11, s12) = (
+        &mut s8[row],
+        &mut s9[row],
+        &mut s10[row],
+        &mut s11[row],
+        &mut s12[row],
+    );
+    for i in 0..ROW {
+        let q = (1.0 - (rx2[i] + ryz2) * inv_rc2).max(0.0);
+        let q2 = q * q;
+        let w = q2 * q;
+        let g = -6.0 * q2 * inv_rc2;
+        let (gx, gy, gz) = (g * rx[i], g * ry, g * rz);
+        s0[i] += w;
+        s1[i] += w * rx[i];
+        s2[i] += w * ry;
+        s3[i] += w * rz;
+        s4[i] += gx;
+        s5[i] += gy;
+        s6[i] += gz;
+        s7[i] += gx * rx[i];
+        s8[i] += gx * ry;
+        s9[i] += gx * rz;
+        s10[i] += gy * ry;
+        s11[i] += gy * rz;
+        s12[i] += gz * rz;
+    }
+}
+
+/// The factor `f` of Solenthaler et al. 2007 for the largest eigenvalue `ev`.
+pub fn concavity_factor(ev: f64, t_low: f64, t_high: f64) -> f64 {
+    if !(ev >= t_low) {
+        // Also catches NaN: treat an undefined eigenvalue as a flat neighbourhood.
+        return 1.0;
+    }
+    let ev = ev.min(t_high);
+    let g = (t_high - ev) / (t_high - t_low);
+    g * g * g - 3.0 * g * g + 3.0 * g
+}
+
+/// Largest real part among the eigenvalues of a row-major 3×3 matrix, from the
+/// characteristic cubic `λ³ + a λ² + b λ + c = 0` in closed form.
+pub fn largest_eigenvalue_real_part(m: &[f64; 9]) -> f64 {
+    let tr = m[0] + m[4] + m[8];
+    let minors = m[0] * m[4] - m[1] * m[3] + m[0] * m[8] - m[2] * m[6] + m[4] * m[8] - m[5] * m[7];
+    let det = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6])
+        + m[2] * (m[3] * m[7] - m[4] * m[6]);
+    let (a, b, c) = (-tr, minors, -det);
+    // Depressed cubic t³ + p t + q = 0 with λ = t − a/3.
+    let shift = -a / 3.0;
+    let p = b - a * a / 3.0;
+    let q = 2.0 * a * a * a / 27.0 - a * b / 3.0 + c;
+    let disc = (q / 2.0).powi(2) + (p / 3.0).powi(3);
+    if disc > 0.0 {
+        // One real root and a complex pair.
+        let s = disc.sqrt();
+        let t = (-q / 2.0 + s).cbrt() + (-q / 2.0 - s).cbrt();
+        let real_root = t + shift;
+        let pair_real = (tr - real_root) / 2.0;
+        real_root.max(pair_real)
+    } else if p < 0.0 {
+        // Three real roots; k = 0 gives the largest.
+        let rho = 2.0 * (-p / 3.0).sqrt();
+        let arg = (3.0 * q / (p * rho)).clamp(-1.0, 1.0);
+        rho * (arg.acos() / 3.0).cos() + shift
+    } else {
+        shift
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn eigenvalue_of_diagonal_and_rotation_matrices() {
+        assert!(
+            (largest_eigenvalue_real_part(&[1.0, 0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.0, 2.0]) - 3.0)
+                .abs()
+                < 1e-9
+        );
+        assert!(
+            (largest_eigenvalue_real_part(&[-1.0, 0.0, 0.0, 0.0, -3.0, 0.0, 0.0, 0.0, -2.0]) + 1.0)
+                .abs()
+                < 1e-9
+        );
+        // Rotation by 90° about z scaled by 2, plus 0.5 on z: eigenvalues ±2i and 0.5.
+        let ev = largest_eigenvalue_real_part(&[0.0, -2.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.5]);
+        assert!((ev - 0.5).abs() < 1e-9, "{ev}");
+        // Identity: triple root.
+        assert!(
+            (largest_eigenvalue_real_part(&[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]) - 1.0)
+                .abs()
+                < 1e-6
+        );
+        // Non-symmetric with real eigenvalues 1, 2, 4 (upper triangular).
+        let ev = largest_eigenvalue_real_part(&[1.0, 5.0, -3.0, 0.0, 2.0, 7.0, 0.0, 0.0, 4.0]);
+        assert!((ev - 4.0).abs() < 1e-7, "{ev}");
+    }
+
+    #[test]
+    fn concavity_factor_is_one_below_t_low_and_zero_at_t_high() {
+        assert_eq!(concavity_factor(0.1, 0.4, 3.5), 1.0);
+        assert!((concavity_factor(0.4, 0.4, 3.5) - 1.0).abs() < 1e-12);
+        assert!(concavity_factor(3.5, 0.4, 3.5).abs() < 1e-12);
+        assert!(concavity_factor(10.0, 0.4, 3.5).abs() < 1e-12);
+        let mid = concavity_factor(2.0, 0.4, 3.5);
+        assert!(mid > 0.0 && mid < 1.0);
+    }
+}

@@ -1,1 +1,120 @@
-//! (in progress)
+//! Neighbour search with a cell hash: particles binned into cubic cells of edge equal to
+//! the search radius, cells kept in a hashbrown map (no dense grid), so a query visits the
+//! 27 cells around a point.
+
+use glam::Vec3;
+use hashbrown::HashMap;
+use rayon::prelude::*;
+
+/// Particles binned into cells of a fixed edge length (world units).
+pub struct CellHash {
+    cell_size: f32,
+    /// Particle indices sorted by cell, ascending index within a cell.
+    order: Vec<u32>,
+    /// Cell key → range in `order`.
+    cells: HashMap<[i32; 3], (u32, u32)>,
+}
+
+impl CellHash {
+    /// Bins `positions` into cells of edge `cell_size` (world units, > 0).
+    pub fn new(positions: &[Vec3], cell_size: f32) -> Self {
+        let inv = 1.0 / cell_size;
+        let keys: Vec<[i32; 3]> = positions.par_iter().map(|p| cell_of(*p, inv)).collect();
+        let mut order: Vec<u32> = (0..positions.len() as u32).collect();
+        order.par_sort_unstable_by_key(|&i| {
+            let k = keys[i as usize];
+            (k[2], k[1], k[0], i)
+        });
+        let mut cells = HashMap::new();
+        let mut start = 0usize;
+        while start < order.len() {
+            let key = keys[order[start] as usize];
+            let mut end = start + 1;
+            while end < order.len() && keys[order[end] as usize] == key {
+                end += 1;
+            }
+            cells.insert(key, (start as u32, end as u32));
+            start = end;
+        }
+        CellHash {
+            cell_size,
+            order,
+            cells,
+        }
+    }
+
+    /// Calls `visit(j)` for every particle `j` within the 27 cells around `p` (a superset of
+    /// the particles within one cell size of `p`).
+    pub fn for_each_candidate(&self, p: Vec3, mut visit: impl FnMut(u32)) {
+        let c = cell_of(p, 1.0 / self.cell_size);
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    if let Some(&(s, e)) = self.cells.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
+                        for &j in &self.order[s as usize..e as usize] {
+                            visit(j);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn cell_of(p: Vec3, inv: f32) -> [i32; 3] {
+    [
+        (p.x * inv).floor() as i32,
+        (p.y * inv).floor() as i32,
+        (p.z * inv).floor() as i32,
+    ]
+}
+
+/// Marks the particles that have no other particle strictly closer than `radius` (world
+/// units). Output is independent of thread count.
+pub fn find_isolated(positions: &[Vec3], radius: f32) -> Vec<bool> {
+    let hash = CellHash::new(positions, radius);
+    let r2 = radius * radius;
+    positions
+        .par_iter()
+        .enumerate()
+        .map(|(i, &p)| {
+            let mut alone = true;
+            hash.for_each_candidate(p, |j| {
+                if alone && j as usize != i && (positions[j as usize] - p).length_squared() < r2 {
+                    alone = false;
+                }
+            });
+            alone
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lcg(seed: &mut u64) -> f32 {
+        *seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((*seed >> 40) as f32) / ((1u64 << 24) as f32)
+    }
+
+    #[test]
+    fn isolation_matches_brute_force() {
+        let mut seed = 7;
+        let pts: Vec<Vec3> = (0..600)
+            .map(|_| Vec3::new(lcg(&mut seed), lcg(&mut seed), lcg(&mut seed)) * 4.0 - 2.0)
+            .collect();
+        let radius = 0.3;
+        let fast = find_isolated(&pts, radius);
+        for (i, p) in pts.iter().enumerate() {
+            let brute = pts
+                .iter()
+                .enumerate()
+                .all(|(j, q)| j == i || (*q - *p).length_squared() >= radius * radius);
+            assert_eq!(fast[i], brute, "particle {i}");
+        }
+        assert!(fast.iter().any(|&b| b) && fast.iter().any(|&b| !b));
+    }
+}

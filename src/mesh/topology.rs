@@ -39,7 +39,8 @@ pub fn validate(mesh: &TriMesh) -> TopologyReport {
     let n = mesh.positions.len();
     let mut report = TopologyReport::default();
     // Directed edge counts, keyed by (min, max) with the count of each direction.
-    let mut edges: HashMap<(u32, u32), (u32, u32)> = HashMap::with_capacity(mesh.triangles.len() * 2);
+    let mut edges: HashMap<(u32, u32), (u32, u32)> =
+        HashMap::with_capacity(mesh.triangles.len() * 2);
     let mut referenced = vec![false; n];
     for t in &mesh.triangles {
         if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
