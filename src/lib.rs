@@ -23,9 +23,12 @@ pub mod error;
 pub mod field;
 pub mod grid;
 pub mod io;
+pub mod isolated;
 pub mod marching_cubes;
 pub mod mesh;
 pub mod neighbors;
+pub mod pipeline;
+pub mod sequence;
 
 pub use error::{Error, Result};
 pub use mesh::TriMesh;

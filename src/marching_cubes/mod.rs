@@ -13,7 +13,7 @@
 //!   region with values `< 0` is bounded.
 //! * Every mesh vertex is identified by its global lattice edge (lower endpoint + axis) and
 //!   computed once, by the block owning the lower endpoint, from the two endpoint values
-//!   only: `t = v_lo / (v_lo − v_hi)`, clamped to `[2⁻¹⁰, 1 − 2⁻¹⁰]` so that vertices of
+//!   only (the rare loops that need a centre vertex, see [`table`], key it by their cell): `t = v_lo / (v_lo − v_hi)`, clamped to `[2⁻¹⁰, 1 − 2⁻¹⁰]` so that vertices of
 //!   distinct edges never coincide.
 //! * Output order: blocks in ascending (z, y, x), vertices by owned edge within a block,
 //!   triangles by cell. It depends only on the field, never on the thread count.
@@ -22,7 +22,7 @@ mod table;
 
 use crate::grid::{local_index, BlockKey, SparseField, BLOCK_EDGE};
 use crate::mesh::TriMesh;
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use hashbrown::{HashMap, HashSet};
 use rayon::prelude::*;
 
@@ -43,7 +43,8 @@ const CUBE: usize = ((E + 1) * (E + 1) * (E + 1)) as usize;
 const T_MIN: f64 = 1.0 / 1024.0;
 
 /// A reference to a mesh vertex: the owning block (offset bits x, y, z from the referring
-/// block) and the owned edge's id in that block (`local vertex index · 3 + axis`).
+/// block) and the vertex's id in that block (`local vertex index · 3 + axis` for edge
+/// vertices, from `CENTER_ID_BASE` for cell-centre vertices).
 type EdgeRef = u32;
 
 fn edge_ref(owner_offset: u32, local_edge: u32) -> EdgeRef {
@@ -134,6 +135,22 @@ pub fn extract_surface(field: &SparseField) -> (TriMesh, MarchingCubesStats) {
     )
 }
 
+/// First local id of cell-centre vertices (after the `8³ · 3` edge ids): cell `n`'s
+/// `k`-th centred loop has id `CENTER_ID_BASE + 4n + k`.
+const CENTER_ID_BASE: u32 = (E * E * E * 3) as u32;
+
+/// World position of the vertex on the lattice edge from cube-local `corner` along `axis`.
+fn edge_position(cube: &[f32], key: BlockKey, corner: [i32; 3], axis: usize, h: f64) -> DVec3 {
+    let mut hi = corner;
+    hi[axis] += 1;
+    let v0 = cube[cube_index(corner[0], corner[1], corner[2])] as f64;
+    let v1 = cube[cube_index(hi[0], hi[1], hi[2])] as f64;
+    let t = (v0 / (v0 - v1)).clamp(T_MIN, 1.0 - T_MIN);
+    let mut g = [0, 1, 2].map(|i| (key[i] * E + corner[i]) as f64);
+    g[axis] += t;
+    DVec3::new(g[0] * h, g[1] * h, g[2] * h)
+}
+
 #[inline]
 fn cube_index(a: i32, b: i32, c: i32) -> usize {
     ((c * (E + 1) + b) * (E + 1) + a) as usize
@@ -165,7 +182,9 @@ fn march_block(field: &SparseField, key: BlockKey, cube: &mut [f32]) -> BlockSur
     let table = table::table();
     let edges = table::cube_edges();
     let mut triangles = Vec::new();
-    let mut owned_ids: Vec<u16> = Vec::new();
+    let mut owned_edges: Vec<u16> = Vec::new();
+    let mut centers: Vec<(u16, Vec3)> = Vec::new();
+    let h = field.cell_size;
     let corner_offset = |k: u8| ((k & 1) as i32, ((k >> 1) & 1) as i32, ((k >> 2) & 1) as i32);
     for c in 0..E {
         for b in 0..E {
@@ -188,23 +207,41 @@ fn march_block(field: &SparseField, key: BlockKey, cube: &mut [f32]) -> BlockSur
                     if table::face_is_ambiguous(case, face) {
                         let [p, q, r, s] = table::face_corners(face).map(|k| values[k as usize]);
                         let saddle = (p * r - q * s) / (p + r - q - s);
-                        // The saddle is the interpolant's value at the face centre region:
-                        // negative means the inside corners meet there.
+                        // The saddle is the bilinear interpolant's value where the two
+                        // diagonals' regions meet: negative means the inside corners meet.
                         if saddle < 0.0 {
                             connect |= 1 << face;
                         }
                     }
                 }
-                for tri in table.triangles(case, connect) {
-                    triangles.push(tri.map(|e| {
-                        let edge = edges[e as usize];
-                        let (x, y, z) = corner_offset(edge.lo);
-                        let (ga, gb, gc) = (a + x, b + y, c + z);
+                let entry = table.entry(case, connect);
+                let edge_key = |e: u8| {
+                    let edge = edges[e as usize];
+                    let (x, y, z) = corner_offset(edge.lo);
+                    ((a + x, b + y, c + z), edge.axis as usize)
+                };
+                let cell = local_index(a, b, c) as u32;
+                for (n, lp) in entry.centered_loops.iter().enumerate() {
+                    let sum = lp.iter().fold(DVec3::ZERO, |acc, &e| {
+                        let ((ga, gb, gc), axis) = edge_key(e);
+                        acc + edge_position(cube, key, [ga, gb, gc], axis, h)
+                    });
+                    let id = CENTER_ID_BASE + cell * 4 + n as u32;
+                    centers.push((id as u16, (sum / lp.len() as f64).as_vec3()));
+                }
+                for tri in &entry.triangles {
+                    triangles.push(tri.map(|p| {
+                        if p >= table::CENTER {
+                            return edge_ref(
+                                0,
+                                CENTER_ID_BASE + cell * 4 + (p - table::CENTER) as u32,
+                            );
+                        }
+                        let ((ga, gb, gc), axis) = edge_key(p);
                         let owner = ((ga / E) | ((gb / E) << 1) | ((gc / E) << 2)) as u32;
-                        let local =
-                            (local_index(ga % E, gb % E, gc % E) * 3 + edge.axis as usize) as u32;
+                        let local = (local_index(ga % E, gb % E, gc % E) * 3 + axis) as u32;
                         if owner == 0 {
-                            owned_ids.push(local as u16);
+                            owned_edges.push(local as u16);
                         }
                         edge_ref(owner, local)
                     }));
@@ -212,31 +249,20 @@ fn march_block(field: &SparseField, key: BlockKey, cube: &mut [f32]) -> BlockSur
             }
         }
     }
-    owned_ids.sort_unstable();
-    owned_ids.dedup();
-    let h = field.cell_size;
-    let owned = owned_ids
+    owned_edges.sort_unstable();
+    owned_edges.dedup();
+    // Edge ids (< CENTER_ID_BASE) first, then centres in cell order: ascending ids.
+    let mut owned: Vec<(u16, Vec3)> = owned_edges
         .into_iter()
         .map(|id| {
-            let axis = (id % 3) as usize;
             let l = (id / 3) as i32;
-            let (a, b, c) = (l % E, (l / E) % E, l / (E * E));
-            let mut hi = [a, b, c];
-            hi[axis] += 1;
-            let v0 = cube[cube_index(a, b, c)] as f64;
-            let v1 = cube[cube_index(hi[0], hi[1], hi[2])] as f64;
-            let t = (v0 / (v0 - v1)).clamp(T_MIN, 1.0 - T_MIN);
-            let mut g = [
-                (key[0] * E + a) as f64,
-                (key[1] * E + b) as f64,
-                (key[2] * E + c) as f64,
-            ];
-            g[axis] += t;
+            let corner = [l % E, (l / E) % E, l / (E * E)];
             (
                 id,
-                Vec3::new((g[0] * h) as f32, (g[1] * h) as f32, (g[2] * h) as f32),
+                edge_position(cube, key, corner, (id % 3) as usize, h).as_vec3(),
             )
         })
         .collect();
+    owned.extend(centers);
     BlockSurface { owned, triangles }
 }

@@ -7,12 +7,16 @@
 //! ambiguous face (diagonal corners alike) has two, paired either to *separate* or to
 //! *connect* its inside corners. The decision depends only on the four values of that face
 //! (the asymptotic decider, see [`super`]), so the two cubes sharing a face trace the same
-//! segments, in opposite directions. The segments of a cube form disjoint closed loops;
-//! each loop is triangulated as a fan. Hence, for any field:
+//! segments, in opposite directions. The segments of a cube form disjoint closed loops.
+//! Each loop is triangulated with *face-free* diagonals only: a diagonal may join two
+//! points only if no cube face holds both, so no neighbouring cube can produce the same
+//! edge. A loop that has no such triangulation gets a centre vertex (the mean of its
+//! points, owned by the cell) and a fan around it. Hence, for any field:
 //! * every mesh edge on a cube face is shared by exactly the two cubes of that face, with
-//!   opposite directions — no boundary, consistent orientation;
+//!   opposite directions, and every other edge lies inside one cube and is shared by two
+//!   of its triangles — no boundary, no non-manifold edge, consistent orientation;
 //! * loops in one cube share no vertex, and the four cubes around a grid edge chain their
-//!   fans around the vertex on it — every vertex is manifold.
+//!   triangle fans around the vertex on it — every vertex is manifold.
 //!
 //! Corner `c = x + 2y + 4z`. Edge `axis·4 + (bit of the first other axis) + 2·(bit of the
 //! second)`, the other axes taken in increasing order.
@@ -26,6 +30,7 @@ pub(crate) struct CubeEdge {
     pub axis: u8,
 }
 
+#[cfg(test)]
 impl CubeEdge {
     /// The upper corner.
     pub fn hi(&self) -> u8 {
@@ -72,19 +77,30 @@ pub(crate) fn face_is_ambiguous(case: u8, face: usize) -> bool {
     c[0] == c[2] && c[1] == c[3] && c[0] != c[1]
 }
 
-/// Triangles, as triples of edge indices, for every (configuration, face decisions) pair.
+/// First point id of centre vertices: ids `0..12` are cube edges, id `CENTER + n` is the
+/// centre vertex of the configuration's `n`-th centred loop.
+pub(crate) const CENTER: u8 = 12;
+
+/// The triangulation of one configuration.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Entry {
+    /// Triangles as point ids (edges `0..12`, centres from [`CENTER`]).
+    pub triangles: Vec<[u8; 3]>,
+    /// The edges of every loop that needs a centre vertex.
+    pub centered_loops: Vec<Vec<u8>>,
+}
+
+/// Triangulations for every (configuration, face decisions) pair.
 pub(crate) struct Table {
-    offsets: Vec<u32>,
-    triangles: Vec<[u8; 3]>,
+    entries: Vec<Entry>,
 }
 
 impl Table {
-    /// Triangles of `case` with ambiguous-face decisions `connect` (bit f set: the inside
-    /// corners of face f are connected). Bits of unambiguous faces must be zero.
+    /// Triangulation of `case` with ambiguous-face decisions `connect` (bit f set: the
+    /// inside corners of face f are connected). Bits of unambiguous faces must be zero.
     #[inline]
-    pub fn triangles(&self, case: u8, connect: u8) -> &[[u8; 3]] {
-        let i = (case as usize) | ((connect as usize) << 8);
-        &self.triangles[self.offsets[i] as usize..self.offsets[i + 1] as usize]
+    pub fn entry(&self, case: u8, connect: u8) -> &Entry {
+        &self.entries[(case as usize) | ((connect as usize) << 8)]
     }
 }
 
@@ -95,19 +111,83 @@ pub(crate) fn table() -> &'static Table {
 }
 
 fn build() -> Table {
-    let mut offsets = vec![0u32];
-    let mut triangles = Vec::new();
-    for connect in 0..64u8 {
-        for case in 0..=255u8 {
-            triangulate(case, connect, &mut triangles);
-            offsets.push(triangles.len() as u32);
+    let mut entries = vec![Entry::default(); 256 * 64];
+    for case in 0..=255u8 {
+        let ambiguous = (0..6).fold(0u8, |m, f| m | ((face_is_ambiguous(case, f) as u8) << f));
+        // Every subset of the ambiguous faces; other bits are never set by the caller.
+        let mut connect = 0u8;
+        loop {
+            entries[(case as usize) | ((connect as usize) << 8)] = triangulate(case, connect);
+            if connect == ambiguous {
+                break;
+            }
+            connect = (connect.wrapping_sub(ambiguous)) & ambiguous;
         }
     }
-    Table { offsets, triangles }
+    Table { entries }
 }
 
-/// Appends the triangles of one configuration.
-fn triangulate(case: u8, connect: u8, out: &mut Vec<[u8; 3]>) {
+/// Whether some cube face holds both edges (then a chord between their points could be
+/// produced by the neighbouring cube too).
+fn share_a_face(a: u8, b: u8) -> bool {
+    let edges = cube_edges();
+    let (ea, eb) = (edges[a as usize], edges[b as usize]);
+    // A face is fixed by (axis, side); an edge lies on the faces of its two other axes,
+    // at the sides given by its lower corner's bits.
+    (0..3u8).any(|axis| {
+        axis != ea.axis && axis != eb.axis && ((ea.lo >> axis) & 1) == ((eb.lo >> axis) & 1)
+    })
+}
+
+/// A triangulation of the polygon `poly` (in order) using only face-free chords, or `None`.
+fn triangulate_face_free(poly: &[u8]) -> Option<Vec<[u8; 3]>> {
+    let k = poly.len();
+    // best[i][j]: split vertex of a triangulation of the sub-polygon i..=j whose closing
+    // side (i, j) is a polygon side or a face-free chord.
+    let side_ok = |i: usize, j: usize| {
+        j == i + 1 || (i == 0 && j == k - 1) || !share_a_face(poly[i], poly[j])
+    };
+    let mut split = vec![vec![None::<usize>; k]; k];
+    let mut solvable = vec![vec![false; k]; k];
+    for i in 0..k - 1 {
+        solvable[i][i + 1] = true;
+    }
+    for len in 2..k {
+        for i in 0..k - len {
+            let j = i + len;
+            if !side_ok(i, j) {
+                continue;
+            }
+            // Prefer splits near the middle: balanced triangulations avoid long fans.
+            let mut ms: Vec<usize> = (i + 1..j).collect();
+            ms.sort_by_key(|&m| (2 * m).abs_diff(i + j));
+            if let Some(m) = ms
+                .into_iter()
+                .find(|&m| side_ok(i, m) && side_ok(m, j) && solvable[i][m] && solvable[m][j])
+            {
+                split[i][j] = Some(m);
+                solvable[i][j] = true;
+            }
+        }
+    }
+    if !solvable[0][k - 1] {
+        return None;
+    }
+    let mut out = Vec::with_capacity(k - 2);
+    let mut stack = vec![(0, k - 1)];
+    while let Some((i, j)) = stack.pop() {
+        if let Some(m) = split[i][j] {
+            out.push([poly[i], poly[m], poly[j]]);
+            stack.push((i, m));
+            stack.push((m, j));
+        }
+    }
+    Some(out)
+}
+
+/// The triangulation of one configuration.
+fn triangulate(case: u8, connect: u8) -> Entry {
+    let mut entry = Entry::default();
     let inside = |c: u8| (case >> c) & 1 == 1;
     // next[e] = the edge point following e on its loop.
     let mut next = [u8::MAX; 12];
@@ -166,12 +246,22 @@ fn triangulate(case: u8, connect: u8, out: &mut Vec<[u8; 3]>) {
             poly.push(e);
             e = next[e as usize];
         }
-        // The loop runs counter-clockwise seen from outside the fluid (checked by a test),
-        // so fans keep its direction: normals point towards positive values.
-        for k in 1..poly.len() - 1 {
-            out.push([poly[0], poly[k], poly[k + 1]]);
+        // The loop runs counter-clockwise seen from outside the fluid (checked by a test);
+        // triangles keep its direction, so normals point towards positive values.
+        match triangulate_face_free(&poly) {
+            Some(tris) => entry.triangles.extend(tris),
+            None => {
+                let center = CENTER + entry.centered_loops.len() as u8;
+                for k in 0..poly.len() {
+                    entry
+                        .triangles
+                        .push([center, poly[k], poly[(k + 1) % poly.len()]]);
+                }
+                entry.centered_loops.push(poly);
+            }
         }
     }
+    entry
 }
 
 #[cfg(test)]
@@ -188,7 +278,7 @@ mod tests {
     #[test]
     fn single_inside_corner_gives_one_triangle_facing_away_from_it() {
         let t = table();
-        let tris = t.triangles(1, 0);
+        let tris = &t.entry(1, 0).triangles;
         assert_eq!(tris.len(), 1);
         let edges = cube_edges();
         let mid = |e: u8| {
@@ -216,9 +306,16 @@ mod tests {
                 .count();
             // A fan over a loop of k points has k − 2 triangles; summed over loops the
             // triangle count is (crossing points) − 2·(loops) ≥ 0.
-            let tris = t.triangles(case, 0).len();
+            let entry = t.entry(case, 0);
+            let tris = entry.triangles.len();
             assert!(tris <= n_changes, "case {case}");
             assert_eq!(tris == 0, n_changes == 0, "case {case}");
+            for tri in &entry.triangles {
+                for k in 0..3 {
+                    let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                    assert_ne!(a, b, "case {case}");
+                }
+            }
         }
     }
 }

@@ -1,0 +1,188 @@
+//! The whole reconstruction of one frame, stage by stage (Akinci et al. 2013, Fig. 2):
+//!
+//! 1. split off isolated particles (no other particle within the influence radius `R`);
+//! 2. Solenthaler field on the sparse lattice ([`crate::field`]);
+//! 3. marching cubes ([`crate::marching_cubes`]);
+//! 4. quadric decimation ([`crate::decimation`]);
+//! 5. Loop subdivision ([`crate::subdivision`]);
+//! 6. icospheres of radius `r` at the isolated particles ([`crate::isolated`]);
+//! 7. area-weighted vertex normals.
+//!
+//! Every stage is timed; [`ReconstructionStats`] is the paper's Table 1 for one frame.
+
+use crate::error::Result;
+use crate::field::{compute_field, FieldOptions, FieldStats};
+use crate::marching_cubes::{extract_surface, MarchingCubesStats};
+use crate::mesh::{SphereInstances, Surface};
+use crate::neighbors::find_isolated;
+use glam::Vec3;
+use std::time::Instant;
+
+/// Options of the whole pipeline. Defaults are the paper's.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ReconstructOptions {
+    /// Field parameters (particle radius, influence radius, cell size, thresholds).
+    pub field: FieldOptions,
+    /// Icosphere subdivision level for isolated particles, or `None` to keep isolated
+    /// particles in the field like any other. Default `Some(2)` (320 triangles).
+    pub isolated_sphere_level: Option<u32>,
+}
+
+impl ReconstructOptions {
+    /// The paper's defaults for particle radius `r` (world units).
+    pub fn new(particle_radius: f32) -> Self {
+        ReconstructOptions {
+            field: FieldOptions::new(particle_radius),
+            isolated_sphere_level: Some(2),
+        }
+    }
+}
+
+/// Time and output size of one stage.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct StageTiming {
+    /// Stage name.
+    pub stage: String,
+    /// Wall time, seconds.
+    pub seconds: f64,
+    /// Triangles of the fluid surface after the stage (0 before marching cubes).
+    pub triangles: usize,
+}
+
+/// Everything measured while reconstructing one frame.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct ReconstructionStats {
+    /// Input particles.
+    pub particles: usize,
+    /// Particles emitted as icospheres instead of entering the field.
+    pub isolated_particles: usize,
+    /// Field stage figures.
+    pub field: FieldStats,
+    /// Marching-cubes figures.
+    pub marching_cubes: MarchingCubesStats,
+    /// Per-stage wall times in pipeline order.
+    pub stages: Vec<StageTiming>,
+    /// Triangles of the final fluid surface.
+    pub fluid_triangles: usize,
+    /// Triangles of all isolated-particle spheres together.
+    pub sphere_triangles: usize,
+}
+
+impl ReconstructionStats {
+    /// Records a stage that took `seconds`.
+    pub fn push_stage(&mut self, stage: &str, seconds: f64, triangles: usize) {
+        self.stages.push(StageTiming {
+            stage: stage.to_string(),
+            seconds,
+            triangles,
+        });
+    }
+
+    /// Sum of all stage times, seconds.
+    pub fn total_seconds(&self) -> f64 {
+        self.stages.iter().map(|s| s.seconds).sum()
+    }
+
+    /// A plain-text table of the stages (the paper's Table 1 for one frame).
+    pub fn table(&self) -> String {
+        let mut out = format!("{:<18} {:>10} {:>12}\n", "stage", "time [ms]", "triangles");
+        for s in &self.stages {
+            out += &format!(
+                "{:<18} {:>10.1} {:>12}\n",
+                s.stage,
+                s.seconds * 1e3,
+                s.triangles
+            );
+        }
+        out += &format!(
+            "{:<18} {:>10.1} {:>12}\n",
+            "total",
+            self.total_seconds() * 1e3,
+            self.fluid_triangles + self.sphere_triangles
+        );
+        out
+    }
+}
+
+/// Reconstructs the surface of one frame of particles (world units).
+pub fn reconstruct(
+    positions: &[Vec3],
+    options: &ReconstructOptions,
+) -> Result<(Surface, ReconstructionStats)> {
+    options.field.validate()?;
+    let mut stats = ReconstructionStats {
+        particles: positions.len(),
+        ..Default::default()
+    };
+    let r = options.field.particle_radius;
+
+    // 1. Isolated particles leave the field.
+    let clock = Instant::now();
+    let (fluid_particles, isolated_centers) = match options.isolated_sphere_level {
+        Some(_) => split_isolated(positions, options.field.influence_radius_world() as f32),
+        None => (positions.to_vec(), Vec::new()),
+    };
+    stats.isolated_particles = isolated_centers.len();
+    stats.push_stage("isolated split", clock.elapsed().as_secs_f64(), 0);
+
+    // 2. Field.
+    let clock = Instant::now();
+    let (field, field_stats) = compute_field(&fluid_particles, &options.field)?;
+    stats.field = field_stats;
+    stats.push_stage("field", clock.elapsed().as_secs_f64(), 0);
+
+    // 3. Marching cubes.
+    let clock = Instant::now();
+    let (mut fluid, mc_stats) = extract_surface(&field);
+    drop(field);
+    stats.marching_cubes = mc_stats;
+    stats.push_stage(
+        "marching cubes",
+        clock.elapsed().as_secs_f64(),
+        fluid.triangle_count(),
+    );
+
+    // 6. Spheres.
+    let clock = Instant::now();
+    let spheres = match options.isolated_sphere_level {
+        Some(level) if !isolated_centers.is_empty() => SphereInstances {
+            template: crate::isolated::icosphere(level, r),
+            centers: isolated_centers,
+        },
+        _ => SphereInstances::default(),
+    };
+    stats.sphere_triangles = spheres.template.triangle_count() * spheres.centers.len();
+    stats.push_stage(
+        "spheres",
+        clock.elapsed().as_secs_f64(),
+        fluid.triangle_count(),
+    );
+
+    // 7. Normals.
+    let clock = Instant::now();
+    fluid.compute_normals();
+    stats.fluid_triangles = fluid.triangle_count();
+    stats.push_stage(
+        "normals",
+        clock.elapsed().as_secs_f64(),
+        fluid.triangle_count(),
+    );
+
+    Ok((Surface { fluid, spheres }, stats))
+}
+
+/// Splits `positions` into (particles with a neighbour closer than `radius`, isolated
+/// particle centres), both in input order.
+pub fn split_isolated(positions: &[Vec3], radius: f32) -> (Vec<Vec3>, Vec<Vec3>) {
+    let isolated = find_isolated(positions, radius);
+    let mut kept = Vec::with_capacity(positions.len());
+    let mut alone = Vec::new();
+    for (p, lonely) in positions.iter().zip(isolated) {
+        if lonely {
+            alone.push(*p);
+        } else {
+            kept.push(*p);
+        }
+    }
+    (kept, alone)
+}
