@@ -1,0 +1,184 @@
+//! The Solenthaler field against a brute-force oracle: a direct O(N) sum in f64 at random
+//! lattice vertices, with the Jacobian taken by central finite differences of vbar and its
+//! eigenvalues found by bisection on the characteristic polynomial — none of it shares code
+//! with the library's closed forms.
+
+use glam::Vec3;
+use meniscus::field::{compute_field, FieldOptions};
+use meniscus::grid::split_coordinate;
+
+struct Lcg(u64);
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((self.0 >> 11) as f64) / ((1u64 << 53) as f64)
+    }
+}
+
+/// A jittered blob of particles (spacing 2r) with a few loose ones around it.
+fn blob(r: f64, rng: &mut Lcg) -> Vec<Vec3> {
+    let mut pts = Vec::new();
+    for k in -6..6 {
+        for j in -5..5 {
+            for i in -7..7 {
+                let p = [i as f64, j as f64, k as f64].map(|c| (c + 0.5) * 2.0 * r);
+                if (p[0] / 14.0).powi(2) + (p[1] / 10.0).powi(2) + (p[2] / 12.0).powi(2) > r * r {
+                    continue;
+                }
+                let q = p.map(|c| c + (rng.next() - 0.5) * 0.6 * r + 1.7);
+                pts.push(Vec3::new(q[0] as f32, q[1] as f32, q[2] as f32));
+            }
+        }
+    }
+    for _ in 0..20 {
+        let q = [0, 1, 2].map(|_| 1.7 + (rng.next() - 0.5) * 40.0 * r);
+        pts.push(Vec3::new(q[0] as f32, q[1] as f32, q[2] as f32));
+    }
+    pts
+}
+
+fn vbar(v: [f64; 3], pts: &[Vec3], big_r: f64) -> Option<[f64; 3]> {
+    let (mut w, mut a) = (0.0, [0.0; 3]);
+    for p in pts {
+        let x = [p.x as f64, p.y as f64, p.z as f64];
+        let s2 = ((v[0] - x[0]).powi(2) + (v[1] - x[1]).powi(2) + (v[2] - x[2]).powi(2)) / (big_r * big_r);
+        if s2 < 1.0 {
+            let wi = (1.0 - s2).powi(3);
+            w += wi;
+            for c in 0..3 {
+                a[c] += wi * x[c];
+            }
+        }
+    }
+    (w > 0.0).then(|| a.map(|c| c / w))
+}
+
+/// Largest real part of the eigenvalues, by scanning the characteristic polynomial.
+fn largest_eigenvalue(m: [[f64; 3]; 3]) -> f64 {
+    let det3 = |l: f64| {
+        let a = [[m[0][0] - l, m[0][1], m[0][2]], [m[1][0], m[1][1] - l, m[1][2]], [m[2][0], m[2][1], m[2][2] - l]];
+        a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+            + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
+    };
+    // det(M − λI) → −∞ as λ → +∞: the largest real root is the last sign change.
+    let (mut lo, mut hi) = (-50.0, 50.0);
+    let steps = 20000;
+    let mut roots = Vec::new();
+    let mut prev = det3(lo);
+    for s in 1..=steps {
+        let l = lo + (hi - lo) * s as f64 / steps as f64;
+        let cur = det3(l);
+        if prev == 0.0 || prev.signum() != cur.signum() {
+            let (mut a, mut b) = (l - (hi - lo) / steps as f64, l);
+            for _ in 0..80 {
+                let mid = 0.5 * (a + b);
+                if det3(a).signum() == det3(mid).signum() { a = mid } else { b = mid }
+            }
+            roots.push(0.5 * (a + b));
+        }
+        prev = cur;
+    }
+    lo = roots.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    hi = lo;
+    let trace = m[0][0] + m[1][1] + m[2][2];
+    if roots.len() == 1 {
+        // A complex pair with real part (trace − λ_real) / 2.
+        hi = hi.max((trace - roots[0]) / 2.0);
+    }
+    hi
+}
+
+fn oracle_phi(v: [f64; 3], pts: &[Vec3], r: f64, big_r: f64) -> Option<f64> {
+    let vb = vbar(v, pts, big_r)?;
+    let eps = 1e-5 * r;
+    let mut jac = [[0.0; 3]; 3];
+    for b in 0..3 {
+        let (mut vp, mut vm) = (v, v);
+        vp[b] += eps;
+        vm[b] -= eps;
+        let (p, m) = (vbar(vp, pts, big_r)?, vbar(vm, pts, big_r)?);
+        for a in 0..3 {
+            jac[a][b] = (p[a] - m[a]) / (2.0 * eps);
+        }
+    }
+    let ev = largest_eigenvalue(jac).clamp(0.4, 3.5);
+    let f = if ev <= 0.4 {
+        1.0
+    } else {
+        let g = (3.5 - ev) / 3.1;
+        g * g * g - 3.0 * g * g + 3.0 * g
+    };
+    let d = ((v[0] - vb[0]).powi(2) + (v[1] - vb[1]).powi(2) + (v[2] - vb[2]).powi(2)).sqrt();
+    Some(d - r * f)
+}
+
+#[test]
+fn field_matches_direct_sum_at_random_vertices() {
+    let r = 0.05f64;
+    let mut rng = Lcg(2024);
+    let pts = blob(r, &mut rng);
+    let options = FieldOptions::new(r as f32);
+    let (field, stats) = compute_field(&pts, &options).unwrap();
+    assert!(stats.vertices_in_band > 1000);
+    let h = options.cell_size_world();
+    let keys = field.sorted_keys();
+    let mut checked = 0;
+    let mut inside = 0;
+    let mut tries = 0;
+    while checked < 300 {
+        tries += 1;
+        assert!(tries < 100_000);
+        let key = keys[(rng.next() * keys.len() as f64) as usize];
+        let local = [0, 1, 2].map(|_| (rng.next() * 8.0) as i32);
+        let g = [0, 1, 2].map(|a| key[a] * 8 + local[a]);
+        assert_eq!(split_coordinate(g[0]).0, key[0]);
+        let value = field.value(g[0], g[1], g[2]) as f64;
+        let v = g.map(|c| c as f64 * h);
+        match oracle_phi(v, &pts, r, 4.0 * r) {
+            None => assert_eq!(value as f32, field.outside_value, "vertex {g:?} has no particle in range"),
+            Some(phi) => {
+                // f32 sums and finite differences: agreement to 1e-3 r.
+                assert!((value - phi).abs() < 1e-3 * r, "vertex {g:?}: field {value}, oracle {phi}");
+                checked += 1;
+                inside += (phi < 0.0) as usize;
+            }
+        }
+    }
+    assert!(inside > 20 && inside < 280, "the sample must cover both signs ({inside} inside)");
+}
+
+#[test]
+fn field_does_not_depend_on_thread_count() {
+    let mut rng = Lcg(7);
+    let pts = blob(0.05, &mut rng);
+    let options = FieldOptions::new(0.05);
+    let run = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| compute_field(&pts, &options).unwrap().0)
+    };
+    let one = run(1);
+    let two = run(3);
+    assert_eq!(one.blocks.len(), two.blocks.len());
+    for (key, values) in &one.blocks {
+        let other = &two.blocks[key];
+        assert!(values.iter().zip(other.iter()).all(|(a, b)| a.to_bits() == b.to_bits()), "block {key:?}");
+    }
+}
+
+#[test]
+fn bad_options_are_rejected_with_the_option_name() {
+    let pts = vec![Vec3::ZERO, Vec3::X];
+    for (options, name) in [
+        (FieldOptions::new(0.0), "--particle-radius"),
+        (FieldOptions::new(-1.0), "--particle-radius"),
+        (FieldOptions::new(f32::NAN), "--particle-radius"),
+        (FieldOptions { cell_size: 0.0, ..FieldOptions::new(0.1) }, "--cell-size"),
+        (FieldOptions { influence_radius: -2.0, ..FieldOptions::new(0.1) }, "--influence-radius"),
+    ] {
+        let err = compute_field(&pts, &options).unwrap_err().to_string();
+        assert!(err.contains(name), "{err}");
+    }
+}
