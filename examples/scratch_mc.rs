@@ -15,7 +15,10 @@ fn main() {
         })
         .collect();
     let t = std::time::Instant::now();
-    let opts = field::FieldOptions::new(r);
+    let mut opts = field::FieldOptions::new(r);
+    opts.particle_coverage = std::env::var("COV")
+        .map(|v| v.parse().unwrap())
+        .unwrap_or(0.0);
     let (f, fs) = field::compute_field(&pts, &opts).unwrap();
     let t1 = t.elapsed();
     let (m, ms) = marching_cubes::extract_surface(&f);

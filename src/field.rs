@@ -27,7 +27,8 @@
 
 use crate::error::{Error, Result};
 use crate::grid::{BlockKey, SparseField, BLOCK_EDGE, BLOCK_VOLUME};
-use glam::Vec3;
+use crate::neighbors::CellHash;
+use glam::{DVec3, Vec3};
 use hashbrown::{HashMap, HashSet};
 use rayon::prelude::*;
 
@@ -44,6 +45,14 @@ pub struct FieldOptions {
     pub t_low: f32,
     /// Upper eigenvalue threshold `t_high` of the concavity factor. Default 3.5.
     pub t_high: f32,
+    /// Coverage radius `c`, multiples of `r`. The Solenthaler surface retreats inside
+    /// particles at sharp convex corners and in one-particle films (`f → 0` there). A
+    /// particle whose own field value `phi(x_i)` is above `−r/4` is *uncovered*; around
+    /// every uncovered particle `phi ← min(phi, |v − x_i| − c·r)`, so the surface encloses
+    /// it. Covered particles (all of the bulk and of flat surfaces) leave the field exactly
+    /// the paper's. `c ≥ (√3/2)·h/r` puts a negative lattice vertex next to every
+    /// uncovered particle. 0 turns coverage off. Default 0.9.
+    pub particle_coverage: f32,
 }
 
 impl FieldOptions {
@@ -55,6 +64,7 @@ impl FieldOptions {
             cell_size: 1.0,
             t_low: 0.4,
             t_high: 3.5,
+            particle_coverage: 0.9,
         }
     }
 
@@ -128,6 +138,9 @@ pub struct FieldStats {
     pub blocks: usize,
     /// Lattice vertices with at least one particle in range.
     pub vertices_in_band: usize,
+    /// Particles the Solenthaler surface would leave outside, covered by a sphere of
+    /// radius `c·r` (see [`FieldOptions::particle_coverage`]).
+    pub uncovered_particles: usize,
     /// Bytes of block storage.
     pub block_bytes: usize,
 }
@@ -194,8 +207,14 @@ pub fn compute_field(
     let mut candidates: Vec<BlockKey> = candidates.into_iter().collect();
     candidates.sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
 
+    let uncovered = if options.particle_coverage > 0.0 {
+        find_uncovered(positions, options)
+    } else {
+        vec![false; positions.len()]
+    };
     let kernel = BlockKernel {
         positions,
+        uncovered: &uncovered,
         order: &order,
         home_ranges: &home_ranges,
         reach,
@@ -217,6 +236,7 @@ pub fn compute_field(
     let mut stats = FieldStats {
         particles: positions.len(),
         blocks: computed.len(),
+        uncovered_particles: uncovered.iter().filter(|u| **u).count(),
         ..FieldStats::default()
     };
     let mut blocks = HashMap::with_capacity(computed.len());
@@ -243,12 +263,15 @@ const ROW: usize = BLOCK_EDGE as usize;
 /// `[sum][row][x]` so that one particle updates whole rows with vector instructions.
 struct Accumulators {
     sums: Vec<[[f32; ROW]; BLOCK_VOLUME / ROW]>,
+    /// Squared distance (cells²) to the nearest uncovered particle.
+    nearest: Vec<[f32; ROW]>,
 }
 
 impl Accumulators {
     fn new() -> Self {
         Accumulators {
             sums: vec![[[0.0; ROW]; BLOCK_VOLUME / ROW]; SUMS],
+            nearest: vec![[f32::INFINITY; ROW]; BLOCK_VOLUME / ROW],
         }
     }
 
@@ -258,11 +281,15 @@ impl Accumulators {
                 *row = [0.0; ROW];
             }
         }
+        for row in self.nearest.iter_mut() {
+            *row = [f32::INFINITY; ROW];
+        }
     }
 }
 
 struct BlockKernel<'a> {
     positions: &'a [Vec3],
+    uncovered: &'a [bool],
     order: &'a [u32],
     home_ranges: &'a HashMap<BlockKey, (u32, u32)>,
     reach: i32,
@@ -323,6 +350,12 @@ impl BlockKernel<'_> {
                                     continue;
                                 }
                                 let row = (c * BLOCK_EDGE + b) as usize;
+                                if self.uncovered[pi as usize] {
+                                    let nearest = &mut acc.nearest[row];
+                                    for i in 0..ROW {
+                                        nearest[i] = nearest[i].min(rx2[i] + ryz2);
+                                    }
+                                }
                                 accumulate_row(
                                     &mut acc.sums,
                                     row,
@@ -346,6 +379,7 @@ impl BlockKernel<'_> {
         let mut in_band = 0;
         let r = self.options.particle_radius as f64;
         let (t_low, t_high) = (self.options.t_low as f64, self.options.t_high as f64);
+        let coverage = self.options.particle_coverage as f64 * r;
         for row in 0..BLOCK_VOLUME / ROW {
             for i in 0..ROW {
                 let sum = |k: usize| acc.sums[k][row][i] as f64;
@@ -379,7 +413,12 @@ impl BlockKernel<'_> {
                 }
                 let f = concavity_factor(largest_eigenvalue_real_part(&jac), t_low, t_high);
                 let dist_cells = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                values[idx] = (dist_cells * self.h - r * f) as f32;
+                let mut phi = dist_cells * self.h - r * f;
+                let nearest = acc.nearest[row][i];
+                if nearest.is_finite() {
+                    phi = phi.min((nearest as f64).sqrt() * self.h - coverage);
+                }
+                values[idx] = phi as f32;
             }
         }
         Some((values, in_band))
@@ -432,6 +471,57 @@ fn accumulate_row(
         s11[i] += gy * rz;
         s12[i] += gz * rz;
     }
+}
+
+/// Value, in multiples of `r`, below which a particle's own field value counts as covered.
+const UNCOVERED_MARGIN: f64 = 0.25;
+
+/// Marks the particles whose own Solenthaler value `phi(x_i)` is above `−r/4` (see
+/// [`FieldOptions::particle_coverage`]). Sums run over the cell hash in its canonical
+/// order, in f64.
+fn find_uncovered(positions: &[Vec3], options: &FieldOptions) -> Vec<bool> {
+    let big_r = options.influence_radius_world();
+    let r = options.particle_radius as f64;
+    let hash = CellHash::new(positions, big_r as f32);
+    let inv_r2 = 1.0 / (big_r * big_r);
+    positions
+        .par_iter()
+        .map(|&p| {
+            let v = p.as_dvec3();
+            let (mut w, mut wr, mut g) = (0.0, DVec3::ZERO, DVec3::ZERO);
+            let mut s = [0.0f64; 6];
+            hash.for_each_candidate(p, |j| {
+                let d = v - positions[j as usize].as_dvec3();
+                let q = 1.0 - d.length_squared() * inv_r2;
+                if q <= 0.0 {
+                    return;
+                }
+                let wi = q * q * q;
+                let gi = -6.0 * q * q * inv_r2;
+                w += wi;
+                wr += wi * d;
+                g += gi * d;
+                let gd = gi * d;
+                s[0] += gd.x * d.x;
+                s[1] += gd.x * d.y;
+                s[2] += gd.x * d.z;
+                s[3] += gd.y * d.y;
+                s[4] += gd.y * d.z;
+                s[5] += gd.z * d.z;
+            });
+            let dv = wr / w;
+            let sym = [s[0], s[1], s[2], s[1], s[3], s[4], s[2], s[4], s[5]];
+            let (dv, g) = (dv.to_array(), g.to_array());
+            let jac: [f64; 9] = std::array::from_fn(|k| (dv[k / 3] * g[k % 3] - sym[k]) / w);
+            let f = concavity_factor(
+                largest_eigenvalue_real_part(&jac),
+                options.t_low as f64,
+                options.t_high as f64,
+            );
+            let phi = DVec3::from_array(dv).length() - r * f;
+            phi > -UNCOVERED_MARGIN * r
+        })
+        .collect()
 }
 
 /// The factor `f` of Solenthaler et al. 2007 for the largest eigenvalue `ev`.

@@ -10,7 +10,10 @@ use meniscus::grid::split_coordinate;
 struct Lcg(u64);
 impl Lcg {
     fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         ((self.0 >> 11) as f64) / ((1u64 << 53) as f64)
     }
 }
@@ -41,7 +44,8 @@ fn vbar(v: [f64; 3], pts: &[Vec3], big_r: f64) -> Option<[f64; 3]> {
     let (mut w, mut a) = (0.0, [0.0; 3]);
     for p in pts {
         let x = [p.x as f64, p.y as f64, p.z as f64];
-        let s2 = ((v[0] - x[0]).powi(2) + (v[1] - x[1]).powi(2) + (v[2] - x[2]).powi(2)) / (big_r * big_r);
+        let s2 = ((v[0] - x[0]).powi(2) + (v[1] - x[1]).powi(2) + (v[2] - x[2]).powi(2))
+            / (big_r * big_r);
         if s2 < 1.0 {
             let wi = (1.0 - s2).powi(3);
             w += wi;
@@ -56,8 +60,13 @@ fn vbar(v: [f64; 3], pts: &[Vec3], big_r: f64) -> Option<[f64; 3]> {
 /// Largest real part of the eigenvalues, by scanning the characteristic polynomial.
 fn largest_eigenvalue(m: [[f64; 3]; 3]) -> f64 {
     let det3 = |l: f64| {
-        let a = [[m[0][0] - l, m[0][1], m[0][2]], [m[1][0], m[1][1] - l, m[1][2]], [m[2][0], m[2][1], m[2][2] - l]];
-        a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+        let a = [
+            [m[0][0] - l, m[0][1], m[0][2]],
+            [m[1][0], m[1][1] - l, m[1][2]],
+            [m[2][0], m[2][1], m[2][2] - l],
+        ];
+        a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
+            - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
             + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
     };
     // det(M − λI) → −∞ as λ → +∞: the largest real root is the last sign change.
@@ -72,7 +81,11 @@ fn largest_eigenvalue(m: [[f64; 3]; 3]) -> f64 {
             let (mut a, mut b) = (l - (hi - lo) / steps as f64, l);
             for _ in 0..80 {
                 let mid = 0.5 * (a + b);
-                if det3(a).signum() == det3(mid).signum() { a = mid } else { b = mid }
+                if det3(a).signum() == det3(mid).signum() {
+                    a = mid
+                } else {
+                    b = mid
+                }
             }
             roots.push(0.5 * (a + b));
         }
@@ -135,16 +148,25 @@ fn field_matches_direct_sum_at_random_vertices() {
         let value = field.value(g[0], g[1], g[2]) as f64;
         let v = g.map(|c| c as f64 * h);
         match oracle_phi(v, &pts, r, 4.0 * r) {
-            None => assert_eq!(value as f32, field.outside_value, "vertex {g:?} has no particle in range"),
+            None => assert_eq!(
+                value as f32, field.outside_value,
+                "vertex {g:?} has no particle in range"
+            ),
             Some(phi) => {
                 // f32 sums and finite differences: agreement to 1e-3 r.
-                assert!((value - phi).abs() < 1e-3 * r, "vertex {g:?}: field {value}, oracle {phi}");
+                assert!(
+                    (value - phi).abs() < 1e-3 * r,
+                    "vertex {g:?}: field {value}, oracle {phi}"
+                );
                 checked += 1;
                 inside += (phi < 0.0) as usize;
             }
         }
     }
-    assert!(inside > 20 && inside < 280, "the sample must cover both signs ({inside} inside)");
+    assert!(
+        inside > 20 && inside < 280,
+        "the sample must cover both signs ({inside} inside)"
+    );
 }
 
 #[test]
@@ -164,7 +186,13 @@ fn field_does_not_depend_on_thread_count() {
     assert_eq!(one.blocks.len(), two.blocks.len());
     for (key, values) in &one.blocks {
         let other = &two.blocks[key];
-        assert!(values.iter().zip(other.iter()).all(|(a, b)| a.to_bits() == b.to_bits()), "block {key:?}");
+        assert!(
+            values
+                .iter()
+                .zip(other.iter())
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "block {key:?}"
+        );
     }
 }
 
@@ -175,8 +203,20 @@ fn bad_options_are_rejected_with_the_option_name() {
         (FieldOptions::new(0.0), "--particle-radius"),
         (FieldOptions::new(-1.0), "--particle-radius"),
         (FieldOptions::new(f32::NAN), "--particle-radius"),
-        (FieldOptions { cell_size: 0.0, ..FieldOptions::new(0.1) }, "--cell-size"),
-        (FieldOptions { influence_radius: -2.0, ..FieldOptions::new(0.1) }, "--influence-radius"),
+        (
+            FieldOptions {
+                cell_size: 0.0,
+                ..FieldOptions::new(0.1)
+            },
+            "--cell-size",
+        ),
+        (
+            FieldOptions {
+                influence_radius: -2.0,
+                ..FieldOptions::new(0.1)
+            },
+            "--influence-radius",
+        ),
     ] {
         let err = compute_field(&pts, &options).unwrap_err().to_string();
         assert!(err.contains(name), "{err}");

@@ -6,10 +6,12 @@
 //! means every edge is traversed once in each direction. Outward orientation is counter-
 //! clockwise seen from outside (positive enclosed volume).
 
+mod inside;
 mod topology;
 
 pub use topology::triangle_components;
 
+pub use inside::InsideTest;
 pub use topology::{validate, TopologyReport};
 
 use glam::{DVec3, Vec3};

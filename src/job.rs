@@ -1,0 +1,164 @@
+//! File-level jobs: read a particle file, reconstruct, write the surface; and whole
+//! sequences of frames. The CLI is a thin layer over [`run_frames`].
+
+use crate::error::{Error, Result};
+use crate::io::mesh::{write_surface, MeshWriteOptions};
+use crate::io::particles::{read_particles, ParticleFormat};
+use crate::pipeline::{reconstruct, ReconstructOptions, ReconstructionStats};
+use crate::sequence::{self, Frame};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// What to do with the files of a job.
+#[derive(Clone, Debug, Default)]
+pub struct JobOptions {
+    /// Force an input format instead of choosing by extension.
+    pub input_format: Option<ParticleFormat>,
+    /// Mesh writer options.
+    pub write: MeshWriteOptions,
+    /// Skip frames whose output file already exists (resume a sequence).
+    pub skip_existing: bool,
+}
+
+/// The outcome of one frame.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct FrameReport {
+    /// Frame number (0 for a single file).
+    pub frame: i64,
+    /// Input file.
+    pub input: PathBuf,
+    /// Output file.
+    pub output: PathBuf,
+    /// True when the frame was skipped because its output existed.
+    pub skipped: bool,
+    /// Reading time, seconds.
+    pub read_seconds: f64,
+    /// Pipeline figures (stages, counts).
+    pub reconstruction: ReconstructionStats,
+    /// Writing time, seconds.
+    pub write_seconds: f64,
+    /// Bytes written.
+    pub output_bytes: u64,
+}
+
+/// Reads `input`, reconstructs it and writes `output`. `on_stage` is told when a phase
+/// starts ("read", "reconstruct", "write").
+pub fn reconstruct_file(
+    input: &Path,
+    output: &Path,
+    options: &ReconstructOptions,
+    job: &JobOptions,
+    on_stage: &mut dyn FnMut(&str),
+) -> Result<FrameReport> {
+    on_stage("read");
+    let clock = Instant::now();
+    let particles = read_particles(input, job.input_format)?;
+    if particles.positions.is_empty() {
+        return Err(Error::EmptyInput {
+            path: input.to_path_buf(),
+        });
+    }
+    let read_seconds = clock.elapsed().as_secs_f64();
+    on_stage("reconstruct");
+    let (surface, mut reconstruction) = reconstruct(&particles.positions, options)?;
+    drop(particles);
+    on_stage("write");
+    let clock = Instant::now();
+    let written = write_surface(output, &surface, &job.write)?;
+    let write_seconds = clock.elapsed().as_secs_f64();
+    reconstruction.push_stage("write", write_seconds, reconstruction.fluid_triangles);
+    Ok(FrameReport {
+        frame: 0,
+        input: input.to_path_buf(),
+        output: output.to_path_buf(),
+        skipped: false,
+        read_seconds,
+        reconstruction,
+        write_seconds,
+        output_bytes: written.bytes,
+    })
+}
+
+/// The frames of a job: a single file, or every frame of a `{}` pattern. The output must
+/// be a pattern exactly when the input is.
+pub fn plan_frames(input: &str, output: &str, start: Option<i64>, end: Option<i64>) -> Result<Vec<(Frame, PathBuf)>> {
+    match (sequence::is_pattern(input), sequence::is_pattern(output)) {
+        (true, true) => Ok(sequence::frames(input, start, end)?
+            .into_iter()
+            .map(|f| {
+                let out = sequence::substitute(output, &f.label);
+                (f, out)
+            })
+            .collect()),
+        (false, false) => {
+            if start.is_some() || end.is_some() {
+                return Err(Error::InvalidOption {
+                    option: "--start/--end",
+                    message: "a frame range needs a {} pattern in INPUT and OUTPUT".into(),
+                });
+            }
+            Ok(vec![(
+                Frame {
+                    number: 0,
+                    label: String::new(),
+                    input: PathBuf::from(input),
+                },
+                PathBuf::from(output),
+            )])
+        }
+        (true, false) => Err(Error::InvalidOption {
+            option: "--output",
+            message: format!("INPUT {input:?} is a sequence pattern, so OUTPUT {output:?} needs a {{}} too"),
+        }),
+        (false, true) => Err(Error::InvalidOption {
+            option: "--output",
+            message: format!("OUTPUT {output:?} has a {{}} but INPUT {input:?} is a single file"),
+        }),
+    }
+}
+
+/// Runs every planned frame in order; stops at the first error. `on_frame` is called
+/// before each frame with its index in the plan, `on_stage` at each phase.
+pub fn run_frames(
+    plan: &[(Frame, PathBuf)],
+    options: &ReconstructOptions,
+    job: &JobOptions,
+    on_frame: &mut dyn FnMut(usize, &Frame),
+    on_stage: &mut dyn FnMut(&str),
+    on_done: &mut dyn FnMut(&FrameReport),
+) -> Result<Vec<FrameReport>> {
+    let mut reports = Vec::with_capacity(plan.len());
+    for (i, (frame, output)) in plan.iter().enumerate() {
+        on_frame(i, frame);
+        let report = if job.skip_existing && output.exists() {
+            FrameReport {
+                frame: frame.number,
+                input: frame.input.clone(),
+                output: output.clone(),
+                skipped: true,
+                read_seconds: 0.0,
+                reconstruction: ReconstructionStats::default(),
+                write_seconds: 0.0,
+                output_bytes: 0,
+            }
+        } else {
+            if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
+                std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+            }
+            let mut r = reconstruct_file(&frame.input, output, options, job, on_stage)?;
+            r.frame = frame.number;
+            r
+        };
+        on_done(&report);
+        reports.push(report);
+    }
+    Ok(reports)
+}
+
+/// Peak resident memory of this process so far (Linux `VmHWM`), bytes.
+pub fn peak_rss_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
