@@ -148,14 +148,51 @@ pub struct FieldStats {
 /// Largest coordinate, in cells, the lattice accepts (block keys must pack in 21 bits).
 const MAX_CELL_COORDINATE: f64 = (1u64 << 23) as f64;
 
-/// Computes the field of `positions` (world units) on the sparse lattice.
-pub fn compute_field(
-    positions: &[Vec3],
-    options: &FieldOptions,
-) -> Result<(SparseField, FieldStats)> {
-    options.validate()?;
-    let h = options.cell_size_world();
-    let inv_h = 1.0 / h;
+/// An inclusive box of block keys.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BlockRange {
+    /// Lowest block key, per axis.
+    pub lo: BlockKey,
+    /// Highest block key, per axis (inclusive).
+    pub hi: BlockKey,
+}
+
+impl BlockRange {
+    /// True when `key` lies in the range.
+    pub fn contains(&self, key: BlockKey) -> bool {
+        (0..3).all(|a| self.lo[a] <= key[a] && key[a] <= self.hi[a])
+    }
+
+    /// The range grown by `lo` blocks downwards and `hi` blocks upwards on every axis.
+    pub fn grown(&self, lo: i32, hi: i32) -> BlockRange {
+        BlockRange {
+            lo: self.lo.map(|c| c - lo),
+            hi: self.hi.map(|c| c + hi),
+        }
+    }
+}
+
+/// Blocks, per axis, between a block and the farthest block a particle of it can reach
+/// (`⌈R / (8h)⌉`).
+pub fn block_reach(options: &FieldOptions) -> i32 {
+    (options.influence_radius / options.cell_size / BLOCK_EDGE as f32).ceil() as i32
+}
+
+/// The home block (lattice block containing the point) of every position.
+pub fn home_blocks(positions: &[Vec3], options: &FieldOptions) -> Vec<BlockKey> {
+    let inv_h = 1.0 / options.cell_size_world();
+    positions
+        .par_iter()
+        .map(|p| {
+            let c = p.as_dvec3() * inv_h;
+            [c.x, c.y, c.z].map(|v| (v.floor() as i32).div_euclid(BLOCK_EDGE))
+        })
+        .collect()
+}
+
+/// Checks that every position is finite and within the lattice's coordinate range.
+pub fn check_positions(positions: &[Vec3], options: &FieldOptions) -> Result<()> {
+    let inv_h = 1.0 / options.cell_size_world();
     if let Some((i, p)) = positions.iter().enumerate().find(|(_, p)| {
         !p.is_finite() || (p.as_dvec3() * inv_h).abs().max_element() > MAX_CELL_COORDINATE
     }) {
@@ -166,16 +203,36 @@ pub fn compute_field(
             ),
         });
     }
-    let reach = (options.influence_radius / options.cell_size / BLOCK_EDGE as f32).ceil() as i32;
+    Ok(())
+}
 
-    // Home block of every particle, and the particle indices sorted by (home block, index).
-    let home: Vec<BlockKey> = positions
-        .par_iter()
-        .map(|p| {
-            let c = p.as_dvec3() * inv_h;
-            [c.x, c.y, c.z].map(|v| (v.floor() as i32).div_euclid(BLOCK_EDGE))
-        })
-        .collect();
+/// Computes the field of `positions` (world units) on the whole sparse lattice.
+pub fn compute_field(
+    positions: &[Vec3],
+    options: &FieldOptions,
+) -> Result<(SparseField, FieldStats)> {
+    options.validate()?;
+    check_positions(positions, options)?;
+    let uncovered = find_uncovered(positions, options);
+    Ok(compute_blocks(positions, &uncovered, options, None))
+}
+
+/// Computes the blocks of the field within `range` (all blocks when `None`) from
+/// `positions` (which must include every particle within `R` of those blocks, in a
+/// subsequence of the global input order) and their coverage flags (see
+/// [`find_uncovered`]). Options must be valid.
+pub fn compute_blocks(
+    positions: &[Vec3],
+    uncovered: &[bool],
+    options: &FieldOptions,
+    range: Option<BlockRange>,
+) -> (SparseField, FieldStats) {
+    let h = options.cell_size_world();
+    let inv_h = 1.0 / h;
+    let reach = block_reach(options);
+
+    // Particle indices sorted by (home block, index).
+    let home = home_blocks(positions, options);
     let mut order: Vec<u32> = (0..positions.len() as u32).collect();
     order.par_sort_unstable_by_key(|&i| {
         let k = home[i as usize];
@@ -199,7 +256,10 @@ pub fn compute_field(
         for dz in -reach..=reach {
             for dy in -reach..=reach {
                 for dx in -reach..=reach {
-                    candidates.insert([key[0] + dx, key[1] + dy, key[2] + dz]);
+                    let c = [key[0] + dx, key[1] + dy, key[2] + dz];
+                    if range.is_none_or(|r| r.contains(c)) {
+                        candidates.insert(c);
+                    }
                 }
             }
         }
@@ -207,14 +267,9 @@ pub fn compute_field(
     let mut candidates: Vec<BlockKey> = candidates.into_iter().collect();
     candidates.sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
 
-    let uncovered = if options.particle_coverage > 0.0 {
-        find_uncovered(positions, options)
-    } else {
-        vec![false; positions.len()]
-    };
     let kernel = BlockKernel {
         positions,
-        uncovered: &uncovered,
+        uncovered,
         order: &order,
         home_ranges: &home_ranges,
         reach,
@@ -250,7 +305,7 @@ pub fn compute_field(
         blocks,
     };
     stats.block_bytes = field.memory_bytes();
-    Ok((field, stats))
+    (field, stats)
 }
 
 /// Number of running sums per vertex: Σw, Σw·r (3), Σ∇w (3), Σ g·r⊗r (6, symmetric),
@@ -478,15 +533,32 @@ const UNCOVERED_MARGIN: f64 = 0.25;
 
 /// Marks the particles whose own Solenthaler value `phi(x_i)` is above `−r/4` (see
 /// [`FieldOptions::particle_coverage`]). Sums run over the cell hash in its canonical
-/// order, in f64.
-fn find_uncovered(positions: &[Vec3], options: &FieldOptions) -> Vec<bool> {
+/// order, in f64. A particle's flag depends only on the particles within `R` of it.
+/// Returns all `false` when coverage is off.
+pub fn find_uncovered(positions: &[Vec3], options: &FieldOptions) -> Vec<bool> {
+    find_uncovered_where(positions, options, &vec![true; positions.len()])
+}
+
+/// [`find_uncovered`] evaluated only where `wanted` is true (`false` elsewhere).
+pub fn find_uncovered_where(
+    positions: &[Vec3],
+    options: &FieldOptions,
+    wanted: &[bool],
+) -> Vec<bool> {
+    if options.particle_coverage <= 0.0 {
+        return vec![false; positions.len()];
+    }
     let big_r = options.influence_radius_world();
     let r = options.particle_radius as f64;
     let hash = CellHash::new(positions, big_r as f32);
     let inv_r2 = 1.0 / (big_r * big_r);
     positions
         .par_iter()
-        .map(|&p| {
+        .zip(wanted.par_iter())
+        .map(|(&p, &wanted)| {
+            if !wanted {
+                return false;
+            }
             let v = p.as_dvec3();
             let (mut w, mut wr, mut g) = (0.0, DVec3::ZERO, DVec3::ZERO);
             let mut s = [0.0f64; 6];

@@ -29,6 +29,7 @@ pub mod mesh;
 pub mod neighbors;
 pub mod pipeline;
 pub mod sequence;
+pub mod tiles;
 
 pub use error::{Error, Result};
 pub use mesh::TriMesh;

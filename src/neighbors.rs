@@ -72,12 +72,20 @@ fn cell_of(p: Vec3, inv: f32) -> [i32; 3] {
 /// Marks the particles that have no other particle strictly closer than `radius` (world
 /// units). Output is independent of thread count.
 pub fn find_isolated(positions: &[Vec3], radius: f32) -> Vec<bool> {
+    find_isolated_where(positions, radius, &vec![true; positions.len()])
+}
+
+/// [`find_isolated`] evaluated only where `wanted` is true (`false` elsewhere).
+pub fn find_isolated_where(positions: &[Vec3], radius: f32, wanted: &[bool]) -> Vec<bool> {
     let hash = CellHash::new(positions, radius);
     let r2 = radius * radius;
     positions
         .par_iter()
         .enumerate()
         .map(|(i, &p)| {
+            if !wanted[i] {
+                return false;
+            }
             let mut alone = true;
             hash.for_each_candidate(p, |j| {
                 if alone && j as usize != i && (positions[j as usize] - p).length_squared() < r2 {

@@ -3,6 +3,8 @@
 //! 1. split off isolated particles (no other particle within the influence radius `R`);
 //! 2. Solenthaler field on the sparse lattice ([`crate::field`]);
 //! 3. marching cubes ([`crate::marching_cubes`]);
+//!
+//! (1–3 run tile by tile and are stitched exactly, see [`crate::tiles`])
 //! 4. quadric decimation ([`crate::decimation`]);
 //! 5. Loop subdivision ([`crate::subdivision`]);
 //! 6. icospheres of radius `r` at the isolated particles ([`crate::isolated`]);
@@ -11,10 +13,11 @@
 //! Every stage is timed; [`ReconstructionStats`] is the paper's Table 1 for one frame.
 
 use crate::error::Result;
-use crate::field::{compute_field, FieldOptions, FieldStats};
-use crate::marching_cubes::{extract_surface, MarchingCubesStats};
+use crate::field::{FieldOptions, FieldStats};
+use crate::marching_cubes::MarchingCubesStats;
 use crate::mesh::{SphereInstances, Surface};
 use crate::neighbors::find_isolated;
+use crate::tiles::{reconstruct_tiled, TileOptions, TileStats};
 use glam::Vec3;
 use std::time::Instant;
 
@@ -26,6 +29,8 @@ pub struct ReconstructOptions {
     /// Icosphere subdivision level for isolated particles, or `None` to keep isolated
     /// particles in the field like any other. Default `Some(2)` (320 triangles).
     pub isolated_sphere_level: Option<u32>,
+    /// How the lattice is cut into tiles. Default: one tile.
+    pub tiles: TileOptions,
 }
 
 impl ReconstructOptions {
@@ -34,6 +39,7 @@ impl ReconstructOptions {
         ReconstructOptions {
             field: FieldOptions::new(particle_radius),
             isolated_sphere_level: Some(2),
+            tiles: TileOptions::default(),
         }
     }
 }
@@ -60,6 +66,8 @@ pub struct ReconstructionStats {
     pub field: FieldStats,
     /// Marching-cubes figures.
     pub marching_cubes: MarchingCubesStats,
+    /// Tiling figures.
+    pub tiles: TileStats,
     /// Per-stage wall times in pipeline order.
     pub stages: Vec<StageTiming>,
     /// Triangles of the final fluid surface.
@@ -116,28 +124,26 @@ pub fn reconstruct(
     };
     let r = options.field.particle_radius;
 
-    // 1. Isolated particles leave the field.
+    // 1.–3. Isolated particles leave the field; field and marching cubes, tile by tile.
     let clock = Instant::now();
-    let (fluid_particles, isolated_centers) = match options.isolated_sphere_level {
-        Some(_) => split_isolated(positions, options.field.influence_radius_world() as f32),
-        None => (positions.to_vec(), Vec::new()),
-    };
+    let isolation_radius = options
+        .isolated_sphere_level
+        .map(|_| options.field.influence_radius_world() as f32);
+    let tiled = reconstruct_tiled(
+        positions,
+        &options.field,
+        isolation_radius,
+        &options.tiles,
+        &|_, _| {},
+    )?;
+    let mut fluid = tiled.mesh;
+    let isolated_centers = tiled.isolated;
     stats.isolated_particles = isolated_centers.len();
-    stats.push_stage("isolated split", clock.elapsed().as_secs_f64(), 0);
-
-    // 2. Field.
-    let clock = Instant::now();
-    let (field, field_stats) = compute_field(&fluid_particles, &options.field)?;
-    stats.field = field_stats;
-    stats.push_stage("field", clock.elapsed().as_secs_f64(), 0);
-
-    // 3. Marching cubes.
-    let clock = Instant::now();
-    let (mut fluid, mc_stats) = extract_surface(&field);
-    drop(field);
-    stats.marching_cubes = mc_stats;
+    stats.field = tiled.field;
+    stats.marching_cubes = tiled.marching_cubes;
+    stats.tiles = tiled.tiles;
     stats.push_stage(
-        "marching cubes",
+        "field + marching cubes",
         clock.elapsed().as_secs_f64(),
         fluid.triangle_count(),
     );

@@ -20,6 +20,7 @@
 
 mod table;
 
+use crate::field::BlockRange;
 use crate::grid::{local_index, BlockKey, SparseField, BLOCK_EDGE};
 use crate::mesh::TriMesh;
 use glam::{DVec3, Vec3};
@@ -51,67 +52,94 @@ fn edge_ref(owner_offset: u32, local_edge: u32) -> EdgeRef {
     (owner_offset << 16) | local_edge
 }
 
-struct BlockSurface {
-    /// Owned edge ids, ascending, and their positions.
+/// The marching-cubes output of one block: the vertices it owns and its triangles, which
+/// may refer to vertices owned by its +x/+y/+z neighbours. Joined by [`stitch`].
+pub struct BlockSurface {
+    key: BlockKey,
+    /// Owned vertex ids, ascending, and their positions.
     owned: Vec<(u16, Vec3)>,
     triangles: Vec<[EdgeRef; 3]>,
 }
 
+impl BlockSurface {
+    /// Bytes held (for memory accounting).
+    pub fn memory_bytes(&self) -> usize {
+        self.owned.capacity() * 16 + self.triangles.capacity() * 12 + 64
+    }
+}
+
 /// Extracts the zero level set of `field` as a triangle mesh.
 pub fn extract_surface(field: &SparseField) -> (TriMesh, MarchingCubesStats) {
-    // Blocks to visit: every block whose cells can touch a negative vertex, i.e. the block
-    // itself or one of its +x/+y/+z neighbours holds a negative value.
+    stitch(march_blocks(field, None))
+}
+
+/// Marches the cells of every block within `range` (all when `None`) whose cells can
+/// touch a negative vertex. `field` must hold every block of `range` grown by one block
+/// upwards. Results are sorted by block key in (z, y, x) order.
+pub fn march_blocks(field: &SparseField, range: Option<BlockRange>) -> Vec<BlockSurface> {
+    // Blocks to visit: the block itself or one of its +x/+y/+z neighbours holds a negative
+    // value.
     let mut visit: HashSet<BlockKey> = HashSet::new();
     for (key, values) in &field.blocks {
         if values.iter().any(|&v| v < 0.0) {
             for o in 0..8 {
-                visit.insert([
+                let k = [
                     key[0] - (o & 1),
                     key[1] - ((o >> 1) & 1),
                     key[2] - ((o >> 2) & 1),
-                ]);
+                ];
+                if range.is_none_or(|r| r.contains(k)) {
+                    visit.insert(k);
+                }
             }
         }
     }
     let mut keys: Vec<BlockKey> = visit.into_iter().collect();
     keys.sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
-
-    let surfaces: Vec<BlockSurface> = keys
-        .par_iter()
+    keys.par_iter()
         .map_init(
             || vec![0.0f32; CUBE],
             |cube, &key| march_block(field, key, cube),
         )
-        .collect();
+        .collect()
+}
 
-    // Global vertex numbering: block order, then owned edge order.
-    let mut base = Vec::with_capacity(keys.len() + 1);
+/// Joins block surfaces (from one or many tiles) into one mesh. Vertices are numbered in
+/// (z, y, x) block order, then by id within the block, whatever order the blocks come in,
+/// so the result is the same however the blocks were grouped into tiles.
+pub fn stitch(mut surfaces: Vec<BlockSurface>) -> (TriMesh, MarchingCubesStats) {
+    surfaces.sort_unstable_by_key(|s| [s.key[2], s.key[1], s.key[0]]);
+    let mut base = Vec::with_capacity(surfaces.len() + 1);
     base.push(0u32);
     for s in &surfaces {
         base.push(base.last().unwrap() + s.owned.len() as u32);
     }
-    let index_of: HashMap<BlockKey, usize> =
-        keys.iter().enumerate().map(|(i, k)| (*k, i)).collect();
+    let index_of: HashMap<BlockKey, usize> = surfaces
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (s.key, i))
+        .collect();
+    let (surfaces_ref, index_ref, base_ref) = (&surfaces, &index_of, &base);
     let triangles: Vec<[u32; 3]> = surfaces
         .par_iter()
-        .zip(keys.par_iter())
-        .flat_map_iter(|(s, key)| {
-            let resolve = |r: EdgeRef| -> u32 {
+        .flat_map_iter(|s| {
+            let key = s.key;
+            let resolve = move |r: EdgeRef| -> u32 {
                 let o = r >> 16;
                 let owner = [
                     key[0] + (o & 1) as i32,
                     key[1] + ((o >> 1) & 1) as i32,
                     key[2] + ((o >> 2) & 1) as i32,
                 ];
-                let bi = *index_of
+                let bi = *index_ref
                     .get(&owner)
                     .expect("the owner of a crossed edge is always visited");
                 let local = (r & 0xffff) as u16;
-                let pos = surfaces[bi]
+                let pos = surfaces_ref[bi]
                     .owned
                     .binary_search_by_key(&local, |e| e.0)
                     .expect("the owner of a crossed edge always creates its vertex");
-                base[bi] + pos as u32
+                base_ref[bi] + pos as u32
             };
             s.triangles.iter().map(move |t| t.map(resolve))
         })
@@ -121,7 +149,7 @@ pub fn extract_surface(field: &SparseField) -> (TriMesh, MarchingCubesStats) {
         positions.extend(s.owned.iter().map(|e| e.1));
     }
     let stats = MarchingCubesStats {
-        blocks_visited: keys.len(),
+        blocks_visited: surfaces.len(),
         vertices: positions.len(),
         triangles: triangles.len(),
     };
@@ -264,5 +292,9 @@ fn march_block(field: &SparseField, key: BlockKey, cube: &mut [f32]) -> BlockSur
         })
         .collect();
     owned.extend(centers);
-    BlockSurface { owned, triangles }
+    BlockSurface {
+        key,
+        owned,
+        triangles,
+    }
 }

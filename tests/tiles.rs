@@ -1,0 +1,160 @@
+//! Tiled reconstruction equals the untiled one bit for bit, for every shipped frame,
+//! several tile sizes (including tiles smaller than the influence radius) and thread
+//! counts.
+
+use glam::Vec3;
+use meniscus::field::FieldOptions;
+use meniscus::tiles::{reconstruct_tiled, TileOptions, TiledSurface};
+use std::path::PathBuf;
+
+fn xyz(rel: &str) -> Vec<Vec3> {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("datasets")
+        .join(rel);
+    let bytes = std::fs::read(&path).unwrap();
+    bytes
+        .chunks_exact(12)
+        .map(|c| {
+            let f = |k: usize| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap());
+            Vec3::new(f(0), f(1), f(2))
+        })
+        .collect()
+}
+
+fn run(
+    positions: &[Vec3],
+    options: &FieldOptions,
+    tile: Option<u32>,
+    threads: usize,
+) -> TiledSurface {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(|| {
+            reconstruct_tiled(
+                positions,
+                options,
+                Some(options.influence_radius_world() as f32),
+                &TileOptions {
+                    tile_size_cells: tile,
+                },
+                &|_, _| {},
+            )
+            .unwrap()
+        })
+}
+
+fn assert_same(a: &TiledSurface, b: &TiledSurface, what: &str) {
+    assert_eq!(
+        a.mesh.triangles.len(),
+        b.mesh.triangles.len(),
+        "{what}: triangle count"
+    );
+    assert!(
+        a.mesh.triangles == b.mesh.triangles,
+        "{what}: triangles differ"
+    );
+    assert!(
+        a.mesh.positions.len() == b.mesh.positions.len()
+            && a.mesh
+                .positions
+                .iter()
+                .zip(&b.mesh.positions)
+                .all(|(p, q)| p.to_array().map(f32::to_bits) == q.to_array().map(f32::to_bits)),
+        "{what}: vertex positions differ"
+    );
+    assert_eq!(a.isolated, b.isolated, "{what}: isolated particles");
+}
+
+#[test]
+fn tiled_runs_equal_the_untiled_run_on_every_frame() {
+    let frames: Vec<(String, f32)> = [1, 9, 17, 25, 31, 45]
+        .iter()
+        .map(|k| (format!("dambreak_small/ParticleData_Fluid_{k}.xyz"), 0.012))
+        .chain(
+            [1, 6, 9, 13, 20]
+                .iter()
+                .map(|k| (format!("double_dambreak/ParticleData_Fluid_{k}.xyz"), 0.025)),
+        )
+        .chain(
+            ["sphere", "box", "droplets", "sheet"]
+                .iter()
+                .map(|n| (format!("analytic/{n}.xyz"), 0.025)),
+        )
+        .collect();
+    for (rel, r) in frames {
+        let positions = xyz(&rel);
+        let options = FieldOptions::new(r);
+        let whole = run(&positions, &options, None, 2);
+        assert!(whole.mesh.triangles.len() > 1000, "{rel}");
+        let sizes: &[u32] = if positions.len() < 10_000 {
+            &[8, 24, 64]
+        } else {
+            &[24, 64]
+        };
+        for &tile in sizes {
+            assert_same(
+                &whole,
+                &run(&positions, &options, Some(tile), 2),
+                &format!("{rel}, tile {tile}"),
+            );
+        }
+    }
+}
+
+#[test]
+fn tiles_smaller_than_the_influence_radius_and_any_thread_count() {
+    // R = 8r at h = r/2 is 16 cells = 2 blocks, so one-block tiles are half of R.
+    let positions = xyz("double_dambreak/ParticleData_Fluid_13.xyz");
+    let options = FieldOptions {
+        cell_size: 0.5,
+        influence_radius: 8.0,
+        ..FieldOptions::new(0.025)
+    };
+    let whole = run(&positions, &options, None, 1);
+    assert!(whole.tiles.tiles == 1);
+    let small = run(&positions, &options, Some(8), 3);
+    assert!(small.tiles.tiles > 100, "{:?}", small.tiles);
+    assert_same(&whole, &small, "tile 8 cells, R = 16 cells");
+    assert_same(
+        &whole,
+        &run(&positions, &options, Some(40), 2),
+        "tile 40 cells, R = 16 cells",
+    );
+}
+
+#[test]
+fn particles_on_tile_boundaries_and_lattice_planes() {
+    // A slab of particles whose coordinates are exact multiples of the cell size, with
+    // planes of particles lying exactly on block and tile boundaries (8 and 16 cells).
+    let r = 0.5f32;
+    let h = r; // cell size 1 r
+    let mut positions = Vec::new();
+    for k in -6..=6 {
+        for j in -8..=8 {
+            for i in -10..=10 {
+                positions.push(Vec3::new(
+                    i as f32 * 2.0 * h,
+                    j as f32 * 2.0 * h,
+                    k as f32 * 2.0 * h,
+                ));
+            }
+        }
+    }
+    // A second body: a column right at +16 cells, touching tile planes.
+    for j in 0..10 {
+        positions.push(Vec3::new(16.0 * h, j as f32 * 2.0 * h + 20.0 * h, 16.0 * h));
+    }
+    let options = FieldOptions::new(r);
+    let whole = run(&positions, &options, None, 2);
+    let report = meniscus::mesh::validate(&whole.mesh);
+    assert!(report.is_closed_manifold(), "{report:?}");
+    for tile in [8, 16, 32] {
+        assert_same(
+            &whole,
+            &run(&positions, &options, Some(tile), 2),
+            &format!("lattice scene, tile {tile}"),
+        );
+    }
+}
