@@ -43,8 +43,36 @@ impl CellHash {
         }
     }
 
+    /// True when `stop(j)` holds for some particle `j` in the 27 cells around `p`; the
+    /// point's own cell is searched first and the search ends at the first hit.
+    pub fn any_candidate(&self, p: Vec3, mut stop: impl FnMut(u32) -> bool) -> bool {
+        let c = cell_of(p, 1.0 / self.cell_size);
+        let own = self.cells.get(&c).copied();
+        if let Some((s, e)) = own {
+            if self.order[s as usize..e as usize].iter().any(|&j| stop(j)) {
+                return true;
+            }
+        }
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    if (dx, dy, dz) == (0, 0, 0) {
+                        continue;
+                    }
+                    if let Some(&(s, e)) = self.cells.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
+                        if self.order[s as usize..e as usize].iter().any(|&j| stop(j)) {
+                            return true;
+                        }
+                    }
+                }
+            }
+        }
+        false
+    }
+
     /// Calls `visit(j)` for every particle `j` within the 27 cells around `p` (a superset of
-    /// the particles within one cell size of `p`).
+    /// the particles within one cell size of `p`), cells in (z, y, x) order, particles of a
+    /// cell in ascending index.
     pub fn for_each_candidate(&self, p: Vec3, mut visit: impl FnMut(u32)) {
         let c = cell_of(p, 1.0 / self.cell_size);
         for dz in -1..=1 {
@@ -86,13 +114,9 @@ pub fn find_isolated_where(positions: &[Vec3], radius: f32, wanted: &[bool]) -> 
             if !wanted[i] {
                 return false;
             }
-            let mut alone = true;
-            hash.for_each_candidate(p, |j| {
-                if alone && j as usize != i && (positions[j as usize] - p).length_squared() < r2 {
-                    alone = false;
-                }
-            });
-            alone
+            !hash.any_candidate(p, |j| {
+                j as usize != i && (positions[j as usize] - p).length_squared() < r2
+            })
         })
         .collect()
 }

@@ -12,7 +12,8 @@
 //!   its own blocks only, and every mesh vertex is owned by exactly one block;
 //! * a field block sums over the particles whose home block is within `reach` blocks
 //!   ([`crate::field::block_reach`]), in (home block, global index) order — the tile loads
-//!   every particle within `reach` of its field blocks ("zone 1") and keeps global order;
+//!   every particle within `reach` of its field blocks ("zone 1") in that order, which is
+//!   also the order every neighbour search of the tile sees;
 //! * isolation and coverage flags of a zone-1 particle depend on the particles within `R`
 //!   of it, so the tile also loads a second ghost ring of `reach` blocks ("zone 2");
 //! * [`crate::marching_cubes::stitch`] numbers vertices in global block order.
@@ -150,7 +151,8 @@ pub fn reconstruct_tiled(
         let zone1 = field_range.grown(reach, reach);
         let zone2 = zone1.grown(reach, reach);
 
-        // Load zone 2 from the bins of every tile it overlaps, in global order.
+        // Load zone 2 from the bins of every tile it overlaps, in the canonical order
+        // (home block, input index): spatially coherent, and the same in every tiling.
         let mut loaded: Vec<u32> = Vec::new();
         if tile_blocks.is_some() {
             let (tlo, thi) = (tile_of(zone2.lo), tile_of(zone2.hi));
@@ -167,10 +169,13 @@ pub fn reconstruct_tiled(
                     }
                 }
             }
-            loaded.par_sort_unstable();
         } else {
             loaded = (0..positions.len() as u32).collect();
         }
+        loaded.par_sort_unstable_by_key(|&i| {
+            let h = home[i as usize];
+            (h[2], h[1], h[0], i)
+        });
         stats.max_tile_particles = stats.max_tile_particles.max(loaded.len());
         let local: Vec<Vec3> = loaded.iter().map(|&i| positions[i as usize]).collect();
 

@@ -1,0 +1,86 @@
+//! Whole-pipeline benchmark over real datasets: per-stage wall time (median of several
+//! runs) and the peak resident memory of a process that reconstructs one frame.
+//!
+//! `cargo bench --bench pipeline` runs the shipped frames; `MENISCUS_BENCH_SCENES` adds
+//! more as `path:radius` pairs separated by commas (for example large scenes made by
+//! `cargo run --release --example tile_scene`). Every scene runs in a child process so that
+//! its peak RSS (Linux VmHWM) is its own.
+
+use meniscus::io::particles::read_particles;
+use meniscus::job::peak_rss_bytes;
+use meniscus::pipeline::{reconstruct, ReconstructOptions};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+const CHILD_ENV: &str = "MENISCUS_BENCH_CHILD";
+
+fn main() {
+    // Cargo passes `--bench`; criterion-style filters are ignored.
+    if let Ok(spec) = std::env::var(CHILD_ENV) {
+        let (path, radius) = spec.rsplit_once(':').expect("path:radius");
+        child(Path::new(path), radius.parse().expect("radius"));
+        return;
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets");
+    let mut scenes: Vec<(PathBuf, f32)> = vec![
+        (root.join("dambreak_small/ParticleData_Fluid_25.xyz"), 0.012),
+        (root.join("dambreak_small/ParticleData_Fluid_45.xyz"), 0.012),
+        (
+            root.join("double_dambreak/ParticleData_Fluid_13.xyz"),
+            0.025,
+        ),
+    ];
+    if let Ok(extra) = std::env::var("MENISCUS_BENCH_SCENES") {
+        for item in extra.split(',').filter(|s| !s.is_empty()) {
+            let (p, r) = item
+                .rsplit_once(':')
+                .expect("MENISCUS_BENCH_SCENES: path:radius,...");
+            scenes.push((PathBuf::from(p), r.parse().expect("radius")));
+        }
+    }
+    let exe = std::env::current_exe().expect("bench executable");
+    for (path, radius) in scenes {
+        let out = Command::new(&exe)
+            .env(CHILD_ENV, format!("{}:{radius}", path.display()))
+            .output()
+            .expect("run child");
+        print!("{}", String::from_utf8_lossy(&out.stdout));
+        if !out.status.success() {
+            eprintln!(
+                "{} failed: {}",
+                path.display(),
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+    }
+}
+
+fn child(path: &Path, radius: f32) {
+    let clock = Instant::now();
+    let particles = read_particles(path, None)
+        .expect("readable scene")
+        .positions;
+    let read = clock.elapsed().as_secs_f64();
+    let options = ReconstructOptions::new(radius);
+    let runs = if particles.len() > 2_000_000 { 1 } else { 5 };
+    let mut all = Vec::new();
+    for _ in 0..runs {
+        let (_, stats) = reconstruct(&particles, &options).expect("reconstruction");
+        all.push(stats);
+    }
+    let mut totals: Vec<f64> = all.iter().map(|s| s.total_seconds()).collect();
+    totals.sort_by(f64::total_cmp);
+    let median = &all[all
+        .iter()
+        .position(|s| s.total_seconds() == totals[totals.len() / 2])
+        .unwrap()];
+    println!(
+        "\n{} — {} particles, r = {radius}, read {:.1} ms, median of {runs} runs, peak RSS {:.1} MiB",
+        path.display(),
+        particles.len(),
+        read * 1e3,
+        peak_rss_bytes().unwrap_or(0) as f64 / (1 << 20) as f64
+    );
+    print!("{}", median.table());
+}
