@@ -125,12 +125,29 @@ fn oracle_phi(v: [f64; 3], pts: &[Vec3], r: f64, big_r: f64) -> Option<f64> {
     Some(d - r * f)
 }
 
-#[test]
-fn field_matches_direct_sum_at_random_vertices() {
+fn check_against_oracle(coverage: f32) {
     let r = 0.05f64;
     let mut rng = Lcg(2024);
     let pts = blob(r, &mut rng);
-    let options = FieldOptions::new(r as f32);
+    let options = FieldOptions {
+        particle_coverage: coverage,
+        ..FieldOptions::new(r as f32)
+    };
+    // Uncovered particles: their own oracle value is above −r/4.
+    let c = coverage as f64 * r;
+    let uncovered: Vec<[f64; 3]> = pts
+        .iter()
+        .map(|p| [p.x as f64, p.y as f64, p.z as f64])
+        .filter(|&x| {
+            coverage > 0.0 && oracle_phi(x, &pts, r, 4.0 * r).is_some_and(|phi| phi > -0.25 * r)
+        })
+        .collect();
+    if coverage > 0.0 {
+        assert!(
+            uncovered.len() >= 5,
+            "the blob's loose particles must be uncovered"
+        );
+    }
     let (field, stats) = compute_field(&pts, &options).unwrap();
     assert!(stats.vertices_in_band > 1000);
     let h = options.cell_size_world();
@@ -147,7 +164,16 @@ fn field_matches_direct_sum_at_random_vertices() {
         assert_eq!(split_coordinate(g[0]).0, key[0]);
         let value = field.value(g[0], g[1], g[2]) as f64;
         let v = g.map(|c| c as f64 * h);
-        match oracle_phi(v, &pts, r, 4.0 * r) {
+        let covered = |phi: f64| {
+            uncovered
+                .iter()
+                .map(|x| {
+                    ((v[0] - x[0]).powi(2) + (v[1] - x[1]).powi(2) + (v[2] - x[2]).powi(2)).sqrt()
+                        - c
+                })
+                .fold(phi, f64::min)
+        };
+        match oracle_phi(v, &pts, r, 4.0 * r).map(covered) {
             None => assert_eq!(
                 value as f32, field.outside_value,
                 "vertex {g:?} has no particle in range"
@@ -221,4 +247,14 @@ fn bad_options_are_rejected_with_the_option_name() {
         let err = compute_field(&pts, &options).unwrap_err().to_string();
         assert!(err.contains(name), "{err}");
     }
+}
+
+#[test]
+fn field_matches_direct_sum_at_random_vertices() {
+    check_against_oracle(0.0);
+}
+
+#[test]
+fn covered_field_matches_direct_sum_at_random_vertices() {
+    check_against_oracle(0.9);
 }
