@@ -26,8 +26,7 @@
 //! coordinates (in cells), which keeps them exact enough far from the origin.
 
 use crate::error::{Error, Result};
-use crate::grid::{BlockKey, SparseField, BLOCK_EDGE, BLOCK_VOLUME};
-use crate::neighbors::CellHash;
+use crate::grid::{local_index, split_coordinate, BlockKey, SparseField, BLOCK_EDGE, BLOCK_VOLUME};
 use glam::{DVec3, Vec3};
 use hashbrown::{HashMap, HashSet};
 use rayon::prelude::*;
@@ -47,11 +46,12 @@ pub struct FieldOptions {
     pub t_high: f32,
     /// Coverage radius `c`, multiples of `r`. The Solenthaler surface retreats inside
     /// particles at sharp convex corners and in one-particle films (`f → 0` there). A
-    /// particle whose own field value `phi(x_i)` is above `−r/4` is *uncovered*; around
-    /// every uncovered particle `phi ← min(phi, |v − x_i| − c·r)`, so the surface encloses
-    /// it. Covered particles (all of the bulk and of flat surfaces) leave the field exactly
-    /// the paper's. `c ≥ (√3/2)·h/r` puts a negative lattice vertex next to every
-    /// uncovered particle. 0 turns coverage off. Default 0.9.
+    /// particle where the field, trilinearly interpolated from its cell's eight lattice
+    /// vertices, is above `−r/4` is *uncovered*; around every uncovered particle
+    /// `phi ← min(phi, |v − x_i| − c·r)`, so the surface encloses it. Covered particles
+    /// (all of the bulk and of flat surfaces) leave the field exactly the paper's.
+    /// `c ≥ (√3/2)·h/r` puts a negative lattice vertex next to every uncovered particle;
+    /// `c·r` must not exceed `6h`. 0 turns coverage off. Default 0.9.
     pub particle_coverage: f32,
 }
 
@@ -113,6 +113,19 @@ impl FieldOptions {
                 message: format!(
                     "R = {} r spans more than 64 cells of {} r; raise --cell-size",
                     self.influence_radius, self.cell_size
+                ),
+            });
+        }
+        if !(self.particle_coverage.is_finite()
+            && self.particle_coverage >= 0.0
+            && self.particle_coverage <= 6.0 * self.cell_size)
+        {
+            return Err(Error::InvalidOption {
+                option: "--particle-coverage",
+                message: format!(
+                    "must be between 0 and 6 cells ({} r), got {}",
+                    6.0 * self.cell_size,
+                    self.particle_coverage
                 ),
             });
         }
@@ -213,17 +226,17 @@ pub fn compute_field(
 ) -> Result<(SparseField, FieldStats)> {
     options.validate()?;
     check_positions(positions, options)?;
-    let uncovered = find_uncovered(positions, options);
-    Ok(compute_blocks(positions, &uncovered, options, None))
+    let (mut field, mut stats) = compute_blocks(positions, options, None);
+    stats.uncovered_particles = apply_coverage(&mut field, positions, options, None);
+    Ok((field, stats))
 }
 
-/// Computes the blocks of the field within `range` (all blocks when `None`) from
-/// `positions` (which must include every particle within `R` of those blocks, in a
-/// subsequence of the global input order) and their coverage flags (see
-/// [`find_uncovered`]). Options must be valid.
+/// Computes the blocks of the pure Solenthaler field within `range` (all blocks when
+/// `None`) from `positions`, which must include every particle within `R` of those blocks,
+/// in a canonical order (the same relative order in every tiling). Coverage is applied
+/// afterwards by [`apply_coverage`]. Options must be valid.
 pub fn compute_blocks(
     positions: &[Vec3],
-    uncovered: &[bool],
     options: &FieldOptions,
     range: Option<BlockRange>,
 ) -> (SparseField, FieldStats) {
@@ -269,7 +282,6 @@ pub fn compute_blocks(
 
     let kernel = BlockKernel {
         positions,
-        uncovered,
         order: &order,
         home_ranges: &home_ranges,
         reach,
@@ -291,7 +303,6 @@ pub fn compute_blocks(
     let mut stats = FieldStats {
         particles: positions.len(),
         blocks: computed.len(),
-        uncovered_particles: uncovered.iter().filter(|u| **u).count(),
         ..FieldStats::default()
     };
     let mut blocks = HashMap::with_capacity(computed.len());
@@ -318,15 +329,12 @@ const ROW: usize = BLOCK_EDGE as usize;
 /// `[sum][row][x]` so that one particle updates whole rows with vector instructions.
 struct Accumulators {
     sums: Vec<[[f32; ROW]; BLOCK_VOLUME / ROW]>,
-    /// Squared distance (cells²) to the nearest uncovered particle.
-    nearest: Vec<[f32; ROW]>,
 }
 
 impl Accumulators {
     fn new() -> Self {
         Accumulators {
             sums: vec![[[0.0; ROW]; BLOCK_VOLUME / ROW]; SUMS],
-            nearest: vec![[f32::INFINITY; ROW]; BLOCK_VOLUME / ROW],
         }
     }
 
@@ -336,15 +344,11 @@ impl Accumulators {
                 *row = [0.0; ROW];
             }
         }
-        for row in self.nearest.iter_mut() {
-            *row = [f32::INFINITY; ROW];
-        }
     }
 }
 
 struct BlockKernel<'a> {
     positions: &'a [Vec3],
-    uncovered: &'a [bool],
     order: &'a [u32],
     home_ranges: &'a HashMap<BlockKey, (u32, u32)>,
     reach: i32,
@@ -405,12 +409,6 @@ impl BlockKernel<'_> {
                                     continue;
                                 }
                                 let row = (c * BLOCK_EDGE + b) as usize;
-                                if self.uncovered[pi as usize] {
-                                    let nearest = &mut acc.nearest[row];
-                                    for i in 0..ROW {
-                                        nearest[i] = nearest[i].min(rx2[i] + ryz2);
-                                    }
-                                }
                                 accumulate_row(
                                     &mut acc.sums,
                                     row,
@@ -434,7 +432,6 @@ impl BlockKernel<'_> {
         let mut in_band = 0;
         let r = self.options.particle_radius as f64;
         let (t_low, t_high) = (self.options.t_low as f64, self.options.t_high as f64);
-        let coverage = self.options.particle_coverage as f64 * r;
         for row in 0..BLOCK_VOLUME / ROW {
             for i in 0..ROW {
                 let sum = |k: usize| acc.sums[k][row][i] as f64;
@@ -468,12 +465,7 @@ impl BlockKernel<'_> {
                 }
                 let f = concavity_factor(largest_eigenvalue_real_part(&jac), t_low, t_high);
                 let dist_cells = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                let mut phi = dist_cells * self.h - r * f;
-                let nearest = acc.nearest[row][i];
-                if nearest.is_finite() {
-                    phi = phi.min((nearest as f64).sqrt() * self.h - coverage);
-                }
-                values[idx] = phi as f32;
+                values[idx] = (dist_cells * self.h - r * f) as f32;
             }
         }
         Some((values, in_band))
@@ -528,72 +520,94 @@ fn accumulate_row(
     }
 }
 
-/// Value, in multiples of `r`, below which a particle's own field value counts as covered.
+/// Value, in multiples of `r`, below which a particle's interpolated field value counts
+/// as covered.
 const UNCOVERED_MARGIN: f64 = 0.25;
 
-/// Marks the particles whose own Solenthaler value `phi(x_i)` is above `−r/4` (see
-/// [`FieldOptions::particle_coverage`]). Sums run over the cell hash in its canonical
-/// order, in f64. A particle's flag depends only on the particles within `R` of it.
-/// Returns all `false` when coverage is off.
-pub fn find_uncovered(positions: &[Vec3], options: &FieldOptions) -> Vec<bool> {
-    find_uncovered_where(positions, options, &vec![true; positions.len()])
-}
-
-/// [`find_uncovered`] evaluated only where `wanted` is true (`false` elsewhere).
-pub fn find_uncovered_where(
+/// Applies particle coverage (see [`FieldOptions::particle_coverage`]) to `field`: finds
+/// the uncovered particles among `positions` (those with all eight cell corners stored in
+/// `field`; a particle whose corners are not all stored is skipped) and lowers the stored
+/// values within `c·r` of them, only inside `range` when given. Returns the number of
+/// uncovered particles whose home block lies in `count_range` (all when `None`).
+///
+/// Taking a minimum is order-independent, so the result does not depend on the order of
+/// `positions` or on the thread count. Vertices within `c·r + h` are lowered (one ring
+/// beyond the sphere, so that its crossings interpolate the sphere on both ends). For
+/// exact tiling, `field` must hold every block within `c·r + 2h` of the blocks whose
+/// values are used.
+pub fn apply_coverage(
+    field: &mut SparseField,
     positions: &[Vec3],
     options: &FieldOptions,
-    wanted: &[bool],
-) -> Vec<bool> {
+    count_range: Option<BlockRange>,
+) -> usize {
     if options.particle_coverage <= 0.0 {
-        return vec![false; positions.len()];
+        return 0;
     }
-    let big_r = options.influence_radius_world();
+    let h = field.cell_size;
     let r = options.particle_radius as f64;
-    let hash = CellHash::new(positions, big_r as f32);
-    let inv_r2 = 1.0 / (big_r * big_r);
-    positions
+    let threshold = -UNCOVERED_MARGIN * r;
+    let uncovered: Vec<Vec3> = positions
         .par_iter()
-        .zip(wanted.par_iter())
-        .map(|(&p, &wanted)| {
-            if !wanted {
-                return false;
+        .filter(|p| {
+            let g = p.as_dvec3() / h;
+            let base = [g.x.floor(), g.y.floor(), g.z.floor()];
+            let t = [g.x - base[0], g.y - base[1], g.z - base[2]];
+            let b = base.map(|c| c as i32);
+            let mut value = 0.0;
+            for corner in 0..8 {
+                let o = [corner & 1, (corner >> 1) & 1, (corner >> 2) & 1];
+                let Some(v) = stored_value(field, [b[0] + o[0], b[1] + o[1], b[2] + o[2]]) else {
+                    return false;
+                };
+                let weight: f64 = (0..3)
+                    .map(|a| if o[a] == 1 { t[a] } else { 1.0 - t[a] })
+                    .product();
+                value += weight * v as f64;
             }
-            let v = p.as_dvec3();
-            let (mut w, mut wr, mut g) = (0.0, DVec3::ZERO, DVec3::ZERO);
-            let mut s = [0.0f64; 6];
-            hash.for_each_candidate(p, |j| {
-                let d = v - positions[j as usize].as_dvec3();
-                let q = 1.0 - d.length_squared() * inv_r2;
-                if q <= 0.0 {
-                    return;
-                }
-                let wi = q * q * q;
-                let gi = -6.0 * q * q * inv_r2;
-                w += wi;
-                wr += wi * d;
-                g += gi * d;
-                let gd = gi * d;
-                s[0] += gd.x * d.x;
-                s[1] += gd.x * d.y;
-                s[2] += gd.x * d.z;
-                s[3] += gd.y * d.y;
-                s[4] += gd.y * d.z;
-                s[5] += gd.z * d.z;
-            });
-            let dv = wr / w;
-            let sym = [s[0], s[1], s[2], s[1], s[3], s[4], s[2], s[4], s[5]];
-            let (dv, g) = (dv.to_array(), g.to_array());
-            let jac: [f64; 9] = std::array::from_fn(|k| (dv[k / 3] * g[k % 3] - sym[k]) / w);
-            let f = concavity_factor(
-                largest_eigenvalue_real_part(&jac),
-                options.t_low as f64,
-                options.t_high as f64,
-            );
-            let phi = DVec3::from_array(dv).length() - r * f;
-            phi > -UNCOVERED_MARGIN * r
+            value > threshold
         })
-        .collect()
+        .copied()
+        .collect();
+    let radius = options.particle_coverage as f64 * r;
+    let reach_cells = (radius / h).ceil() as i32 + 1;
+    let mut counted = 0;
+    for p in &uncovered {
+        let g = p.as_dvec3() / h;
+        let home = [g.x, g.y, g.z].map(|c| (c.floor() as i32).div_euclid(BLOCK_EDGE));
+        if count_range.is_none_or(|range| range.contains(home)) {
+            counted += 1;
+        }
+        let lo = [g.x, g.y, g.z].map(|c| c.floor() as i32 - reach_cells);
+        for k in lo[2]..=lo[2] + 2 * reach_cells + 1 {
+            for j in lo[1]..=lo[1] + 2 * reach_cells + 1 {
+                for i in lo[0]..=lo[0] + 2 * reach_cells + 1 {
+                    let d = (DVec3::new(i as f64, j as f64, k as f64) - g).length() * h;
+                    if d >= radius + h {
+                        continue;
+                    }
+                    let (bx, a) = split_coordinate(i);
+                    let (by, b) = split_coordinate(j);
+                    let (bz, c) = split_coordinate(k);
+                    if let Some(block) = field.blocks.get_mut(&[bx, by, bz]) {
+                        let slot = &mut block[local_index(a, b, c)];
+                        *slot = slot.min((d - radius) as f32);
+                    }
+                }
+            }
+        }
+    }
+    counted
+}
+
+fn stored_value(field: &SparseField, g: [i32; 3]) -> Option<f32> {
+    let (bx, a) = split_coordinate(g[0]);
+    let (by, b) = split_coordinate(g[1]);
+    let (bz, c) = split_coordinate(g[2]);
+    field
+        .blocks
+        .get(&[bx, by, bz])
+        .map(|block| block[local_index(a, b, c)])
 }
 
 /// The factor `f` of Solenthaler et al. 2007 for the largest eigenvalue `ev`.

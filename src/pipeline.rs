@@ -142,9 +142,20 @@ pub fn reconstruct(
     stats.field = tiled.field;
     stats.marching_cubes = tiled.marching_cubes;
     stats.tiles = tiled.tiles;
+    let t = &stats.tiles;
+    let untimed = clock.elapsed().as_secs_f64()
+        - (t.neighbour_seconds + t.field_seconds + t.marching_seconds + t.stitch_seconds);
+    let (neighbours, field, marching, stitching) = (
+        t.neighbour_seconds + untimed,
+        t.field_seconds,
+        t.marching_seconds,
+        t.stitch_seconds,
+    );
+    stats.push_stage("neighbours", neighbours, 0);
+    stats.push_stage("field", field, 0);
     stats.push_stage(
-        "field + marching cubes",
-        clock.elapsed().as_secs_f64(),
+        "marching cubes",
+        marching + stitching,
         fluid.triangle_count(),
     );
 

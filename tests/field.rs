@@ -133,14 +133,34 @@ fn check_against_oracle(coverage: f32) {
         particle_coverage: coverage,
         ..FieldOptions::new(r as f32)
     };
-    // Uncovered particles: their own oracle value is above −r/4.
+    // Uncovered particles: the oracle field, trilinearly interpolated from the particle's
+    // cell corners, is above −r/4.
     let c = coverage as f64 * r;
+    let h = r;
+    let interpolated = |x: [f64; 3]| -> Option<f64> {
+        let g = x.map(|v| v / h);
+        let base = g.map(f64::floor);
+        let mut value = 0.0;
+        for corner in 0..8 {
+            let o = [corner & 1, (corner >> 1) & 1, (corner >> 2) & 1].map(|b| b as f64);
+            let v = [0, 1, 2].map(|a| (base[a] + o[a]) * h);
+            let weight: f64 = (0..3)
+                .map(|a| {
+                    if o[a] == 1.0 {
+                        g[a] - base[a]
+                    } else {
+                        1.0 - (g[a] - base[a])
+                    }
+                })
+                .product();
+            value += weight * oracle_phi(v, &pts, r, 4.0 * r)?;
+        }
+        Some(value)
+    };
     let uncovered: Vec<[f64; 3]> = pts
         .iter()
         .map(|p| [p.x as f64, p.y as f64, p.z as f64])
-        .filter(|&x| {
-            coverage > 0.0 && oracle_phi(x, &pts, r, 4.0 * r).is_some_and(|phi| phi > -0.25 * r)
-        })
+        .filter(|&x| coverage > 0.0 && interpolated(x).is_some_and(|phi| phi > -0.25 * r))
         .collect();
     if coverage > 0.0 {
         assert!(
@@ -154,6 +174,7 @@ fn check_against_oracle(coverage: f32) {
     let keys = field.sorted_keys();
     let mut checked = 0;
     let mut inside = 0;
+    let mut lowered = 0;
     let mut tries = 0;
     while checked < 300 {
         tries += 1;
@@ -164,16 +185,20 @@ fn check_against_oracle(coverage: f32) {
         assert_eq!(split_coordinate(g[0]).0, key[0]);
         let value = field.value(g[0], g[1], g[2]) as f64;
         let v = g.map(|c| c as f64 * h);
+        // Coverage lowers vertices within c·r + h of an uncovered particle.
         let covered = |phi: f64| {
             uncovered
                 .iter()
                 .map(|x| {
                     ((v[0] - x[0]).powi(2) + (v[1] - x[1]).powi(2) + (v[2] - x[2]).powi(2)).sqrt()
-                        - c
                 })
+                .filter(|&d| d < c + h)
+                .map(|d| d - c)
                 .fold(phi, f64::min)
         };
-        match oracle_phi(v, &pts, r, 4.0 * r).map(covered) {
+        // Vertices near uncovered particles are sampled on purpose too.
+        let raw = oracle_phi(v, &pts, r, 4.0 * r);
+        match raw.map(covered) {
             None => assert_eq!(
                 value as f32, field.outside_value,
                 "vertex {g:?} has no particle in range"
@@ -186,8 +211,15 @@ fn check_against_oracle(coverage: f32) {
                 );
                 checked += 1;
                 inside += (phi < 0.0) as usize;
+                lowered += (phi < raw.unwrap()) as usize;
             }
         }
+    }
+    if coverage > 0.0 {
+        assert!(
+            lowered >= 3,
+            "only {lowered} sampled vertices are lowered by coverage"
+        );
     }
     assert!(
         inside > 20 && inside < 280,

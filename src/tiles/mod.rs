@@ -7,15 +7,18 @@
 //! the untiled run).
 //!
 //! Why the result does not depend on the tiling:
-//! * tile `t` owns blocks `T·t ..= T·t + T − 1` (`T` blocks per axis); it computes field
-//!   blocks one block further up (the +x/+y/+z cell layers of its last blocks), marches
-//!   its own blocks only, and every mesh vertex is owned by exactly one block;
+//! * tile `t` owns blocks `T·t ..= T·t + T − 1` (`T` blocks per axis); it marches its own
+//!   blocks only (reading the field one block further up), and every mesh vertex is owned
+//!   by exactly one block;
 //! * a field block sums over the particles whose home block is within `reach` blocks
 //!   ([`crate::field::block_reach`]), in (home block, global index) order — the tile loads
 //!   every particle within `reach` of its field blocks ("zone 1") in that order, which is
 //!   also the order every neighbour search of the tile sees;
-//! * isolation and coverage flags of a zone-1 particle depend on the particles within `R`
-//!   of it, so the tile also loads a second ghost ring of `reach` blocks ("zone 2");
+//! * the isolation flag of a zone-1 particle depends on the particles within `R` of it, so
+//!   the tile also loads a second ghost ring of `reach` blocks ("zone 2");
+//! * coverage ([`crate::field::apply_coverage`]) reads the field around particles within
+//!   `c·r + 2h` of the used blocks, so field blocks are computed one block further all
+//!   round;
 //! * [`crate::marching_cubes::stitch`] numbers vertices in global block order.
 //!
 //! Tiles run one after another, each parallel inside, so peak memory is one tile's field
@@ -23,7 +26,7 @@
 
 use crate::error::Result;
 use crate::field::{
-    block_reach, check_positions, compute_blocks, find_uncovered_where, home_blocks, BlockRange,
+    apply_coverage, block_reach, check_positions, compute_blocks, home_blocks, BlockRange,
     FieldOptions, FieldStats,
 };
 use crate::grid::{BlockKey, BLOCK_EDGE};
@@ -33,6 +36,7 @@ use crate::neighbors::find_isolated_where;
 use glam::Vec3;
 use hashbrown::{HashMap, HashSet};
 use rayon::prelude::*;
+use std::time::Instant;
 
 /// How the lattice is cut.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -63,6 +67,14 @@ pub struct TileStats {
     pub max_tile_field_bytes: usize,
     /// Bytes of the gathered block surfaces before stitching.
     pub surface_bytes: usize,
+    /// Seconds spent loading tile particles and finding isolated particles.
+    pub neighbour_seconds: f64,
+    /// Seconds spent computing field blocks (with coverage).
+    pub field_seconds: f64,
+    /// Seconds spent in marching cubes (per-block extraction).
+    pub marching_seconds: f64,
+    /// Seconds spent stitching block surfaces into one mesh.
+    pub stitch_seconds: f64,
 }
 
 /// The result of the field and marching-cubes stages over all tiles.
@@ -137,6 +149,7 @@ pub fn reconstruct_tiled(
     };
     for (n, &tile) in tiles.iter().enumerate() {
         on_tile(n, tiles.len());
+        let clock = Instant::now();
         let own = match tile_blocks {
             Some(t) => BlockRange {
                 lo: tile.map(|c| c * t),
@@ -147,7 +160,9 @@ pub fn reconstruct_tiled(
                 hi: [i32::MAX / 4; 3],
             },
         };
-        let field_range = own.grown(0, 1);
+        // Field blocks: the marching layer above, plus one block all round for coverage
+        // (uncovered particles within c·r + 2h of the blocks whose values are used).
+        let field_range = own.grown(1, 2);
         let zone1 = field_range.grown(reach, reach);
         let zone2 = zone1.grown(reach, reach);
 
@@ -188,9 +203,7 @@ pub fn reconstruct_tiled(
             Some(radius) => find_isolated_where(&local, radius, &in_zone1),
             None => vec![false; local.len()],
         };
-        let uncovered_all = find_uncovered_where(&local, field_options, &in_zone1);
         let mut field_particles = Vec::new();
-        let mut uncovered = Vec::new();
         for (k, &gi) in loaded.iter().enumerate() {
             let h = home[gi as usize];
             if isolated[k] {
@@ -199,28 +212,29 @@ pub fn reconstruct_tiled(
                 }
             } else if zone1.contains(h) {
                 field_particles.push(local[k]);
-                uncovered.push(uncovered_all[k]);
-                if uncovered_all[k] && own.contains(h) {
-                    field_stats.uncovered_particles += 1;
-                }
             }
         }
         drop(local);
-        let (field, fs) = compute_blocks(
-            &field_particles,
-            &uncovered,
-            field_options,
-            Some(field_range),
-        );
+        stats.neighbour_seconds += clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
+        let (mut field, fs) = compute_blocks(&field_particles, field_options, Some(field_range));
+        field_stats.uncovered_particles +=
+            apply_coverage(&mut field, &field_particles, field_options, Some(own));
         stats.max_tile_field_bytes = stats.max_tile_field_bytes.max(fs.block_bytes);
         field_stats.blocks += fs.blocks;
         field_stats.vertices_in_band += fs.vertices_in_band;
         field_stats.block_bytes = field_stats.block_bytes.max(fs.block_bytes);
+        stats.field_seconds += clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
         let tile_surfaces = march_blocks(&field, Some(own));
+        drop(field);
         surfaces.extend(tile_surfaces);
+        stats.marching_seconds += clock.elapsed().as_secs_f64();
     }
     stats.surface_bytes = surfaces.iter().map(|s| s.memory_bytes()).sum();
+    let clock = Instant::now();
     let (mesh, mc_stats) = stitch(surfaces);
+    stats.stitch_seconds = clock.elapsed().as_secs_f64();
 
     isolated_indices.sort_unstable();
     field_stats.particles = positions.len() - isolated_indices.len();
