@@ -26,7 +26,9 @@
 //! coordinates (in cells), which keeps them exact enough far from the origin.
 
 use crate::error::{Error, Result};
-use crate::grid::{local_index, split_coordinate, BlockKey, SparseField, BLOCK_EDGE, BLOCK_VOLUME};
+use crate::grid::{
+    local_index, split_coordinate, BlockKey, BlockValues, SparseField, BLOCK_EDGE, BLOCK_VOLUME,
+};
 use glam::{DVec3, Vec3};
 use hashbrown::{HashMap, HashSet};
 use rayon::prelude::*;
@@ -290,31 +292,34 @@ pub fn compute_blocks(
         h,
         options,
     };
-    let computed: Vec<(BlockKey, Box<[f32; BLOCK_VOLUME]>, usize)> = candidates
+    // Evaluate every candidate into one contiguous array, then compact away the
+    // candidates no particle reaches.
+    let mut values: Vec<BlockValues> = vec![[0.0; BLOCK_VOLUME]; candidates.len()];
+    let in_band: Vec<Option<usize>> = candidates
         .par_iter()
-        .map_init(Accumulators::new, |acc, &key| {
-            kernel
-                .evaluate(key, acc)
-                .map(|(values, n)| (key, values, n))
+        .zip(values.par_iter_mut())
+        .map_init(Accumulators::new, |acc, (&key, out)| {
+            kernel.evaluate(key, acc, out)
         })
-        .flatten()
         .collect();
-
     let mut stats = FieldStats {
         particles: positions.len(),
-        blocks: computed.len(),
         ..FieldStats::default()
     };
-    let mut blocks = HashMap::with_capacity(computed.len());
-    for (key, values, n) in computed {
-        stats.vertices_in_band += n;
-        blocks.insert(key, values);
+    let mut kept = 0;
+    let mut keys = Vec::with_capacity(candidates.len());
+    for (slot, (key, n)) in candidates.iter().zip(&in_band).enumerate() {
+        if let Some(n) = n {
+            stats.vertices_in_band += n;
+            values.swap(kept, slot);
+            keys.push(*key);
+            kept += 1;
+        }
     }
-    let field = SparseField {
-        cell_size: h,
-        outside_value: options.outside_value(),
-        blocks,
-    };
+    values.truncate(kept);
+    values.shrink_to_fit();
+    stats.blocks = kept;
+    let field = SparseField::from_parts(h, options.outside_value(), &keys, values);
     stats.block_bytes = field.memory_bytes();
     (field, stats)
 }
@@ -364,7 +369,8 @@ impl BlockKernel<'_> {
         &self,
         key: BlockKey,
         acc: &mut Accumulators,
-    ) -> Option<(Box<[f32; BLOCK_VOLUME]>, usize)> {
+        values: &mut BlockValues,
+    ) -> Option<usize> {
         acc.clear();
         let origin = [0, 1, 2].map(|a| key[a] as f64 * BLOCK_EDGE as f64);
         let rc = self.radius_cells;
@@ -428,7 +434,6 @@ impl BlockKernel<'_> {
         if !touched {
             return None;
         }
-        let mut values = Box::new([0.0f32; BLOCK_VOLUME]);
         let mut in_band = 0;
         let r = self.options.particle_radius as f64;
         let (t_low, t_high) = (self.options.t_low as f64, self.options.t_high as f64);
@@ -468,7 +473,7 @@ impl BlockKernel<'_> {
                 values[idx] = (dist_cells * self.h - r * f) as f32;
             }
         }
-        Some((values, in_band))
+        Some(in_band)
     }
 }
 
@@ -589,7 +594,7 @@ pub fn apply_coverage(
                     let (bx, a) = split_coordinate(i);
                     let (by, b) = split_coordinate(j);
                     let (bz, c) = split_coordinate(k);
-                    if let Some(block) = field.blocks.get_mut(&[bx, by, bz]) {
+                    if let Some(block) = field.block_mut(&[bx, by, bz]) {
                         let slot = &mut block[local_index(a, b, c)];
                         *slot = slot.min((d - radius) as f32);
                     }
@@ -605,8 +610,7 @@ fn stored_value(field: &SparseField, g: [i32; 3]) -> Option<f32> {
     let (by, b) = split_coordinate(g[1]);
     let (bz, c) = split_coordinate(g[2]);
     field
-        .blocks
-        .get(&[bx, by, bz])
+        .block(&[bx, by, bz])
         .map(|block| block[local_index(a, b, c)])
 }
 

@@ -31,7 +31,12 @@ pub fn split_coordinate(i: i32) -> (i32, i32) {
     (i.div_euclid(BLOCK_EDGE), i.rem_euclid(BLOCK_EDGE))
 }
 
-/// Values of a scalar field on the sparse lattice.
+/// The values of one block.
+pub type BlockValues = [f32; BLOCK_VOLUME];
+
+/// Values of a scalar field on the sparse lattice: block values in one contiguous array
+/// (one allocation, returned to the system when dropped), found through a hashbrown map
+/// keyed by block coordinate.
 ///
 /// Invariant: vertices of missing blocks, and vertices without any particle in range, hold
 /// [`SparseField::outside_value`] (a positive number: outside the fluid).
@@ -41,17 +46,85 @@ pub struct SparseField {
     pub cell_size: f64,
     /// Value of every vertex not stored (positive: outside).
     pub outside_value: f32,
-    /// Blocks of values, keyed by block coordinate.
-    pub blocks: HashMap<BlockKey, Box<[f32; BLOCK_VOLUME]>>,
+    index: HashMap<BlockKey, u32>,
+    values: Vec<BlockValues>,
 }
 
 impl SparseField {
+    /// A field holding `blocks` (key, values) pairs; later pairs win on duplicate keys.
+    pub fn from_blocks(
+        cell_size: f64,
+        outside_value: f32,
+        blocks: impl IntoIterator<Item = (BlockKey, BlockValues)>,
+    ) -> Self {
+        let mut field = SparseField {
+            cell_size,
+            outside_value,
+            index: HashMap::new(),
+            values: Vec::new(),
+        };
+        for (key, values) in blocks {
+            match field.index.get(&key) {
+                Some(&i) => field.values[i as usize] = values,
+                None => {
+                    field.index.insert(key, field.values.len() as u32);
+                    field.values.push(values);
+                }
+            }
+        }
+        field
+    }
+
+    /// A field from parallel arrays of distinct keys and their values (no copy).
+    pub fn from_parts(
+        cell_size: f64,
+        outside_value: f32,
+        keys: &[BlockKey],
+        values: Vec<BlockValues>,
+    ) -> Self {
+        assert_eq!(keys.len(), values.len(), "one key per block");
+        let index = keys
+            .iter()
+            .enumerate()
+            .map(|(i, k)| (*k, i as u32))
+            .collect();
+        SparseField {
+            cell_size,
+            outside_value,
+            index,
+            values,
+        }
+    }
+
+    /// Number of stored blocks.
+    pub fn block_count(&self) -> usize {
+        self.values.len()
+    }
+
+    /// The values of block `key`, if stored.
+    #[inline]
+    pub fn block(&self, key: &BlockKey) -> Option<&BlockValues> {
+        self.index.get(key).map(|&i| &self.values[i as usize])
+    }
+
+    /// The values of block `key` for writing, if stored.
+    pub fn block_mut(&mut self, key: &BlockKey) -> Option<&mut BlockValues> {
+        self.index.get(key).map(|&i| &mut self.values[i as usize])
+    }
+
+    /// Every stored block, in no particular order.
+    pub fn blocks(&self) -> impl Iterator<Item = (&BlockKey, &BlockValues)> {
+        self.index
+            .iter()
+            .map(|(k, &i)| (k, &self.values[i as usize]))
+    }
+
     /// The value at global vertex `(i, j, k)`.
     pub fn value(&self, i: i32, j: i32, k: i32) -> f32 {
         let (bx, a) = split_coordinate(i);
         let (by, b) = split_coordinate(j);
         let (bz, c) = split_coordinate(k);
-        match self.blocks.get(&[bx, by, bz]) {
+        match self.block(&[bx, by, bz]) {
             Some(block) => block[local_index(a, b, c)],
             None => self.outside_value,
         }
@@ -59,14 +132,15 @@ impl SparseField {
 
     /// Block keys in ascending (z, y, x) order: the canonical processing order.
     pub fn sorted_keys(&self) -> Vec<BlockKey> {
-        let mut keys: Vec<BlockKey> = self.blocks.keys().copied().collect();
+        let mut keys: Vec<BlockKey> = self.index.keys().copied().collect();
         keys.sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
         keys
     }
 
-    /// Bytes held by the block values (the dominant memory of the field stage).
+    /// Bytes held by the block values and their index (the dominant memory of the field
+    /// stage).
     pub fn memory_bytes(&self) -> usize {
-        self.blocks.len() * (BLOCK_VOLUME * 4 + 32)
+        self.values.capacity() * BLOCK_VOLUME * 4 + self.index.capacity() * 24
     }
 }
 

@@ -241,9 +241,9 @@ fn field_does_not_depend_on_thread_count() {
     };
     let one = run(1);
     let two = run(3);
-    assert_eq!(one.blocks.len(), two.blocks.len());
-    for (key, values) in &one.blocks {
-        let other = &two.blocks[key];
+    assert_eq!(one.block_count(), two.block_count());
+    for (key, values) in one.blocks() {
+        let other = two.block(key).unwrap();
         assert!(
             values
                 .iter()

@@ -24,25 +24,19 @@ fn field_from(
     h: f64,
     mut value: impl FnMut(i32, i32, i32) -> f32,
 ) -> SparseField {
-    let mut blocks: HashMap<[i32; 3], Box<[f32; BLOCK_VOLUME]>> = HashMap::new();
+    let mut blocks: HashMap<[i32; 3], [f32; BLOCK_VOLUME]> = HashMap::new();
     for k in lo..=hi {
         for j in lo..=hi {
             for i in lo..=hi {
                 let (bx, a) = split_coordinate(i);
                 let (by, b) = split_coordinate(j);
                 let (bz, c) = split_coordinate(k);
-                let block = blocks
-                    .entry([bx, by, bz])
-                    .or_insert_with(|| Box::new([1.0; BLOCK_VOLUME]));
+                let block = blocks.entry([bx, by, bz]).or_insert([1.0; BLOCK_VOLUME]);
                 block[local_index(a, b, c)] = value(i, j, k);
             }
         }
     }
-    SparseField {
-        cell_size: h,
-        outside_value: 1.0,
-        blocks,
-    }
+    SparseField::from_blocks(h, 1.0, blocks)
 }
 
 #[test]

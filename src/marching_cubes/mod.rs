@@ -80,7 +80,7 @@ pub fn march_blocks(field: &SparseField, range: Option<BlockRange>) -> Vec<Block
     // Blocks to visit: the block itself or one of its +x/+y/+z neighbours holds a negative
     // value.
     let mut visit: HashSet<BlockKey> = HashSet::new();
-    for (key, values) in &field.blocks {
+    for (key, values) in field.blocks() {
         if values.iter().any(|&v| v < 0.0) {
             for o in 0..8 {
                 let k = [
@@ -190,7 +190,7 @@ fn march_block(field: &SparseField, key: BlockKey, cube: &mut [f32]) -> BlockSur
     let mut neighbours = [None; 8];
     for (o, slot) in neighbours.iter_mut().enumerate() {
         let o = o as i32;
-        *slot = field.blocks.get(&[
+        *slot = field.block(&[
             key[0] + (o & 1),
             key[1] + ((o >> 1) & 1),
             key[2] + ((o >> 2) & 1),
