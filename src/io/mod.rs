@@ -5,5 +5,6 @@
 //! * [`mesh`]: mesh writers (glTF `.glb`/`.gltf`, PLY, OBJ, legacy VTK) behind
 //!   [`mesh::write_surface`]; every write is atomic (temporary file + rename).
 
+pub(crate) mod atomic;
 pub mod mesh;
 pub mod particles;
