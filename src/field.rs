@@ -616,7 +616,7 @@ fn stored_value(field: &SparseField, g: [i32; 3]) -> Option<f32> {
 
 /// The factor `f` of Solenthaler et al. 2007 for the largest eigenvalue `ev`.
 pub fn concavity_factor(ev: f64, t_low: f64, t_high: f64) -> f64 {
-    if !(ev >= t_low) {
+    if ev.is_nan() || ev < t_low {
         // Also catches NaN: treat an undefined eigenvalue as a flat neighbourhood.
         return 1.0;
     }

@@ -81,7 +81,12 @@ pub fn reconstruct_file(
 
 /// The frames of a job: a single file, or every frame of a `{}` pattern. The output must
 /// be a pattern exactly when the input is.
-pub fn plan_frames(input: &str, output: &str, start: Option<i64>, end: Option<i64>) -> Result<Vec<(Frame, PathBuf)>> {
+pub fn plan_frames(
+    input: &str,
+    output: &str,
+    start: Option<i64>,
+    end: Option<i64>,
+) -> Result<Vec<(Frame, PathBuf)>> {
     match (sequence::is_pattern(input), sequence::is_pattern(output)) {
         (true, true) => Ok(sequence::frames(input, start, end)?
             .into_iter()
@@ -108,7 +113,9 @@ pub fn plan_frames(input: &str, output: &str, start: Option<i64>, end: Option<i6
         }
         (true, false) => Err(Error::InvalidOption {
             option: "--output",
-            message: format!("INPUT {input:?} is a sequence pattern, so OUTPUT {output:?} needs a {{}} too"),
+            message: format!(
+                "INPUT {input:?} is a sequence pattern, so OUTPUT {output:?} needs a {{}} too"
+            ),
         }),
         (false, true) => Err(Error::InvalidOption {
             option: "--output",

@@ -24,6 +24,7 @@ pub mod field;
 pub mod grid;
 pub mod io;
 pub mod isolated;
+pub mod job;
 pub mod marching_cubes;
 pub mod mesh;
 pub mod neighbors;

@@ -34,6 +34,11 @@ pub struct ReconstructOptions {
 }
 
 impl ReconstructOptions {
+    /// Field, marching cubes and isolated spheres only: no mesh post-processing.
+    pub fn raw(particle_radius: f32) -> Self {
+        Self::new(particle_radius)
+    }
+
     /// The paper's defaults for particle radius `r` (world units).
     pub fn new(particle_radius: f32) -> Self {
         ReconstructOptions {

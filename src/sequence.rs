@@ -59,8 +59,7 @@ pub fn frames(pattern: &str, start: Option<i64>, end: Option<i64>) -> Result<Vec
         _ => PathBuf::from("."),
     };
     let mut found: Vec<Frame> = Vec::new();
-    if start.is_some() && end.is_some() {
-        let (s, e) = (start.unwrap(), end.unwrap());
+    if let (Some(s), Some(e)) = (start, end) {
         if s > e {
             return Err(Error::InvalidOption {
                 option: "--start/--end",

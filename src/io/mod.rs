@@ -8,3 +8,4 @@
 pub(crate) mod atomic;
 pub mod mesh;
 pub mod particles;
+pub(crate) mod text;

@@ -39,19 +39,11 @@ use rayon::prelude::*;
 use std::time::Instant;
 
 /// How the lattice is cut.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TileOptions {
     /// Tile edge in marching-cubes cells, rounded up to whole 8-cell blocks. `None`: one
     /// tile holds the whole scene. Default `None`.
     pub tile_size_cells: Option<u32>,
-}
-
-impl Default for TileOptions {
-    fn default() -> Self {
-        TileOptions {
-            tile_size_cells: None,
-        }
-    }
 }
 
 /// What the tiled run did.

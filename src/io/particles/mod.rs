@@ -13,7 +13,6 @@
 
 mod bgeo;
 mod ply;
-mod text;
 mod vtk;
 mod xyz;
 

@@ -3,10 +3,10 @@
 //! property as a 1-component attribute (`vx, vy, vz` or `velocity_x/y/z` become one
 //! 3-component `velocity`). Other elements are skipped, list properties included.
 
-use super::text::{Cursor, Scalar};
 use super::{Particles, PointAttribute};
 use crate::error::Result;
 use crate::io::atomic::write_atomically;
+use crate::io::text::{Cursor, Scalar};
 use glam::Vec3;
 use std::io::Write;
 use std::path::Path;
@@ -140,7 +140,7 @@ pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
                         Property::Scalar { ty, .. } => c.skip_values(1, *ty, binary)?,
                         Property::List { count, item } => {
                             let n = c.value(*count, binary)?;
-                            if !(n >= 0.0) {
+                            if n.is_nan() || n < 0.0 {
                                 return Err(c.error(format!("negative list length {n}")));
                             }
                             c.skip_values(n as usize, *item, binary)?;
@@ -176,10 +176,9 @@ fn group_attributes(
             .map(|t| names.iter().position(|n| n == t))
             .collect();
         if let [Some(a), Some(b), Some(c)] = idx[..] {
-            let n = columns[a].len();
-            let mut values = Vec::with_capacity(3 * n);
-            for i in 0..n {
-                values.extend([columns[a][i], columns[b][i], columns[c][i]]);
+            let mut values = Vec::with_capacity(3 * columns[a].len());
+            for ((x, y), z) in columns[a].iter().zip(&columns[b]).zip(&columns[c]) {
+                values.extend([*x, *y, *z]);
             }
             used[a] = true;
             used[b] = true;
@@ -209,16 +208,16 @@ pub(super) fn write(path: &Path, particles: &Particles) -> Result<()> {
         write!(w, "ply\nformat binary_little_endian 1.0\ncomment meniscus particles\nelement vertex {n}\nproperty float x\nproperty float y\nproperty float z\n")?;
         for a in &particles.attributes {
             if a.name == "velocity" && a.components == 3 {
-                write!(w, "property float vx\nproperty float vy\nproperty float vz\n")?;
+                writeln!(w, "property float vx\nproperty float vy\nproperty float vz")?;
             } else if a.components == 1 {
-                write!(w, "property float {}\n", a.name)?;
+                writeln!(w, "property float {}", a.name)?;
             } else {
                 for k in 0..a.components {
-                    write!(w, "property float {}_{k}\n", a.name)?;
+                    writeln!(w, "property float {}_{k}", a.name)?;
                 }
             }
         }
-        write!(w, "end_header\n")?;
+        writeln!(w, "end_header")?;
         for (i, p) in particles.positions.iter().enumerate() {
             for v in p.to_array() {
                 w.write_all(&v.to_le_bytes())?;

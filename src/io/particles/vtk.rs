@@ -2,10 +2,10 @@
 //! whose points come in a `POINTS n type` section. Cell sections are skipped;
 //! `POINT_DATA` SCALARS, VECTORS, NORMALS and FIELD arrays become attributes.
 
-use super::text::{Cursor, Scalar};
 use super::{Particles, PointAttribute};
 use crate::error::{Error, Result};
 use crate::io::atomic::write_atomically;
+use crate::io::text::{Cursor, Scalar};
 use glam::Vec3;
 use std::io::Write;
 use std::path::Path;
@@ -245,13 +245,13 @@ pub(super) fn write(path: &Path, particles: &Particles) -> Result<()> {
         }
         w.write_all(b"\n")?;
         if !particles.attributes.is_empty() {
-            write!(w, "POINT_DATA {n}\n")?;
+            writeln!(w, "POINT_DATA {n}")?;
             for a in &particles.attributes {
                 let name: String = a.name.chars().map(|ch| if ch.is_whitespace() { '_' } else { ch }).collect();
                 if a.components == 3 {
-                    write!(w, "VECTORS {name} float\n")?;
+                    writeln!(w, "VECTORS {name} float")?;
                 } else {
-                    write!(w, "SCALARS {name} float {}\nLOOKUP_TABLE default\n", a.components)?;
+                    writeln!(w, "SCALARS {name} float {}\nLOOKUP_TABLE default", a.components)?;
                 }
                 for v in &a.values {
                     w.write_all(&v.to_be_bytes())?;

@@ -6,7 +6,7 @@ use std::path::Path;
 
 /// Scalar types found in VTK and PLY files.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Scalar {
+pub(crate) enum Scalar {
     I8,
     U8,
     I16,
@@ -57,7 +57,7 @@ impl Scalar {
     }
 }
 
-pub(super) struct Cursor<'a> {
+pub(crate) struct Cursor<'a> {
     pub path: &'a Path,
     pub bytes: &'a [u8],
     pub pos: usize,

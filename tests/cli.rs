@@ -1,0 +1,157 @@
+//! The command line: single frames, sequences, statistics, and clear failures that leave
+//! no output behind.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn meniscus() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_meniscus"))
+}
+
+fn dataset(rel: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("datasets")
+        .join(rel)
+}
+
+fn run(args: &[&str]) -> (bool, String) {
+    let out = meniscus().args(args).output().unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn files_in(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn reconstructs_a_frame_with_stats() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s.glb");
+    let stats = dir.path().join("stats.json");
+    let input = dataset("double_dambreak/ParticleData_Fluid_9.vtk");
+    let (ok, err) = run(&[
+        "reconstruct",
+        input.to_str().unwrap(),
+        "--particle-radius",
+        "0.025",
+        "-o",
+        out.to_str().unwrap(),
+        "--stats",
+        stats.to_str().unwrap(),
+        "--threads",
+        "2",
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("marching cubes") && err.contains("total"),
+        "timing table: {err}"
+    );
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+    let frame = &json["frames"][0];
+    assert!(frame["reconstruction"]["fluid_triangles"].as_u64().unwrap() > 10_000);
+    assert!(frame["reconstruction"]["stages"].as_array().unwrap().len() >= 4);
+    assert!(json["peak_rss_bytes"].as_u64().unwrap() > 0);
+    assert!(std::fs::metadata(&out).unwrap().len() > 10_000);
+}
+
+#[test]
+fn reconstructs_a_sequence_and_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    for k in [1, 6, 13] {
+        std::fs::copy(
+            dataset(&format!("double_dambreak/ParticleData_Fluid_{k}.xyz")),
+            dir.path().join(format!("f_{k:03}.xyz")),
+        )
+        .unwrap();
+    }
+    let input = format!("{}/f_{{}}.xyz", dir.path().display());
+    let output = format!("{}/out/s_{{}}.ply", dir.path().display());
+    let (ok, err) = run(&["reconstruct", &input, "-r", "0.025", "-o", &output, "-q"]);
+    assert!(ok, "{err}");
+    assert_eq!(
+        files_in(&dir.path().join("out")),
+        ["s_001.ply", "s_006.ply", "s_013.ply"]
+    );
+    // A range that is partly missing fails and names the missing frame.
+    let (ok, err) = run(&[
+        "reconstruct",
+        &input,
+        "-r",
+        "0.025",
+        "-o",
+        &output,
+        "--start",
+        "1",
+        "--end",
+        "2",
+        "-q",
+    ]);
+    assert!(!ok && err.contains("missing"), "{err}");
+    // Resume: existing outputs are skipped.
+    std::fs::remove_file(dir.path().join("out/s_006.ply")).unwrap();
+    let (ok, err) = run(&[
+        "reconstruct",
+        &input,
+        "-r",
+        "0.025",
+        "-o",
+        &output,
+        "--skip-existing",
+    ]);
+    assert!(ok, "{err}");
+    assert!(err.contains("2 skipped"), "{err}");
+    assert!(dir.path().join("out/s_006.ply").exists());
+}
+
+#[test]
+fn bad_input_fails_clearly_without_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, bytes: &[u8]| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    };
+    let mut nan = Vec::new();
+    for v in [0.0f32, 0.0, 0.0, f32::NAN, 1.0, 1.0] {
+        nan.extend_from_slice(&v.to_le_bytes());
+    }
+    let cases: Vec<(PathBuf, &str, &str)> = vec![
+        (write("empty.xyz", b""), "0.1", "no particles"),
+        (write("cut.xyz", &[0u8; 13]), "0.1", "multiple of 12"),
+        (write("nan.xyz", &nan), "0.1", "non-finite"),
+        (
+            write("frame.abc", b"123"),
+            "0.1",
+            "unknown particle file extension",
+        ),
+        (dataset("analytic/box.xyz"), "0", "--particle-radius"),
+        (dataset("analytic/box.xyz"), "-0.5", "--particle-radius"),
+    ];
+    for (input, radius, expected) in cases {
+        let out = dir.path().join("out.glb");
+        let output = meniscus()
+            .args([
+                "reconstruct",
+                input.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+                "-q",
+            ])
+            .arg(format!("--particle-radius={radius}"))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&output.stderr);
+        assert!(!output.status.success(), "{}: must fail", input.display());
+        assert!(err.contains(expected), "{}: {err}", input.display());
+        assert!(!out.exists(), "{}: no output on failure", input.display());
+    }
+    assert!(files_in(dir.path()).iter().all(|f| !f.contains(".tmp-")));
+}
