@@ -19,6 +19,7 @@
 //! * [`pipeline`]: the whole reconstruction, stage by stage, with timings.
 #![deny(missing_docs)]
 
+pub mod decimation;
 pub mod error;
 pub mod field;
 pub mod grid;
@@ -30,6 +31,7 @@ pub mod mesh;
 pub mod neighbors;
 pub mod pipeline;
 pub mod sequence;
+pub mod subdivision;
 pub mod tiles;
 
 pub use error::{Error, Result};

@@ -3,10 +3,14 @@
 
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use meniscus::decimation::DecimateOptions;
 use meniscus::io::mesh::MeshWriteOptions;
 use meniscus::io::particles::ParticleFormat;
 use meniscus::job::{peak_rss_bytes, plan_frames, run_frames, FrameReport, JobOptions};
 use meniscus::pipeline::ReconstructOptions;
+
+/// Error bound of `--decimate adaptive`, multiples of r.
+const ADAPTIVE_ERROR: f32 = 0.05;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -54,6 +58,26 @@ struct ReconstructArgs {
     /// `off` to leave them in the field.
     #[arg(long, default_value = "2")]
     isolated_spheres: String,
+    /// Quadric decimation: fraction of triangles to remove (0.8 = the paper's), `adaptive`
+    /// (stop on an error bound of 0.05 r only: flat regions simplify, curved ones keep
+    /// their triangles), or `off`.
+    #[arg(long, default_value = "0.8")]
+    decimate: String,
+    /// Error bound of decimation, multiples of r (RMS distance of a collapse to the
+    /// original planes); with a fraction, whichever is reached first stops it.
+    #[arg(long)]
+    decimate_error: Option<f32>,
+    /// Loop subdivision steps after decimation (0 = off).
+    #[arg(long, default_value_t = 1)]
+    subdivide: u32,
+    /// Coverage radius c, multiples of r: particles the paper's surface would leave
+    /// outside are enclosed in a ball of c·r (0 = off, the pure Solenthaler field).
+    #[arg(long, default_value_t = 0.9)]
+    particle_coverage: f32,
+    /// Tile edge in marching-cubes cells (rounded up to 8-cell blocks); default one tile.
+    /// The marching-cubes mesh does not depend on it.
+    #[arg(long)]
+    tile_size: Option<u32>,
     /// Input format, overriding the extension (xyz, vtk, ply, bgeo).
     #[arg(long)]
     input_format: Option<ParticleFormat>,
@@ -109,7 +133,37 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, String> {
     options.field.cell_size = args.cell_size;
     options.field.t_low = args.t_low;
     options.field.t_high = args.t_high;
+    options.field.particle_coverage = args.particle_coverage;
     options.isolated_sphere_level = parse_level(&args.isolated_spheres, "--isolated-spheres")?;
+    options.tiles.tile_size_cells = args.tile_size;
+    options.subdivide.levels = args.subdivide;
+    let r = args.particle_radius;
+    let error = args.decimate_error.map(|e| e * r);
+    if let Some(e) = args.decimate_error {
+        if !(e.is_finite() && e > 0.0) {
+            return Err(format!(
+                "--decimate-error must be > 0 (multiples of r), got {e}"
+            ));
+        }
+    }
+    options.decimate = match args.decimate.as_str() {
+        "off" | "none" | "0" => None,
+        "adaptive" => Some(DecimateOptions {
+            target_reduction: None,
+            max_error: Some(error.unwrap_or(ADAPTIVE_ERROR * r)),
+        }),
+        fraction => {
+            let f: f32 = fraction
+                .parse()
+                .ok()
+                .filter(|f: &f32| (0.0..1.0).contains(f))
+                .ok_or_else(|| format!("--decimate takes a fraction in [0, 1), `adaptive` or `off`, got {fraction:?}"))?;
+            Some(DecimateOptions {
+                target_reduction: Some(f),
+                max_error: error,
+            })
+        }
+    };
     options.field.validate().map_err(|e| e.to_string())?;
     Ok(options)
 }

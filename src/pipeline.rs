@@ -12,11 +12,13 @@
 //!
 //! Every stage is timed; [`ReconstructionStats`] is the paper's Table 1 for one frame.
 
+use crate::decimation::{decimate, DecimateOptions, DecimateStats};
 use crate::error::Result;
 use crate::field::{FieldOptions, FieldStats};
 use crate::marching_cubes::MarchingCubesStats;
 use crate::mesh::{SphereInstances, Surface};
 use crate::neighbors::find_isolated;
+use crate::subdivision::{subdivide, SubdivideOptions};
 use crate::tiles::{reconstruct_tiled, TileOptions, TileStats};
 use glam::Vec3;
 use std::time::Instant;
@@ -31,12 +33,20 @@ pub struct ReconstructOptions {
     pub isolated_sphere_level: Option<u32>,
     /// How the lattice is cut into tiles. Default: one tile.
     pub tiles: TileOptions,
+    /// Quadric decimation, or `None` to skip it. Default: remove 80 % of the triangles.
+    pub decimate: Option<DecimateOptions>,
+    /// Loop subdivision steps after decimation. Default 1 (0 skips it).
+    pub subdivide: SubdivideOptions,
 }
 
 impl ReconstructOptions {
     /// Field, marching cubes and isolated spheres only: no mesh post-processing.
     pub fn raw(particle_radius: f32) -> Self {
-        Self::new(particle_radius)
+        ReconstructOptions {
+            decimate: None,
+            subdivide: SubdivideOptions { levels: 0 },
+            ..Self::new(particle_radius)
+        }
     }
 
     /// The paper's defaults for particle radius `r` (world units).
@@ -45,6 +55,8 @@ impl ReconstructOptions {
             field: FieldOptions::new(particle_radius),
             isolated_sphere_level: Some(2),
             tiles: TileOptions::default(),
+            decimate: Some(DecimateOptions::default()),
+            subdivide: SubdivideOptions::default(),
         }
     }
 }
@@ -73,6 +85,10 @@ pub struct ReconstructionStats {
     pub marching_cubes: MarchingCubesStats,
     /// Tiling figures.
     pub tiles: TileStats,
+    /// Decimation figures, when it ran.
+    pub decimation: Option<DecimateStats>,
+    /// Triangles straight out of marching cubes.
+    pub marching_cubes_triangles: usize,
     /// Per-stage wall times in pipeline order.
     pub stages: Vec<StageTiming>,
     /// Triangles of the final fluid surface.
@@ -156,6 +172,7 @@ pub fn reconstruct(
         t.marching_seconds,
         t.stitch_seconds,
     );
+    stats.marching_cubes_triangles = fluid.triangle_count();
     stats.push_stage("neighbours", neighbours, 0);
     stats.push_stage("field", field, 0);
     stats.push_stage(
@@ -163,6 +180,28 @@ pub fn reconstruct(
         marching + stitching,
         fluid.triangle_count(),
     );
+
+    // 4. Decimation.
+    if let Some(decimate_options) = &options.decimate {
+        let clock = Instant::now();
+        stats.decimation = Some(decimate(&mut fluid, decimate_options));
+        stats.push_stage(
+            "decimation",
+            clock.elapsed().as_secs_f64(),
+            fluid.triangle_count(),
+        );
+    }
+
+    // 5. Subdivision.
+    if options.subdivide.levels > 0 {
+        let clock = Instant::now();
+        subdivide(&mut fluid, &options.subdivide);
+        stats.push_stage(
+            "subdivision",
+            clock.elapsed().as_secs_f64(),
+            fluid.triangle_count(),
+        );
+    }
 
     // 6. Spheres.
     let clock = Instant::now();

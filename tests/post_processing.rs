@@ -1,0 +1,265 @@
+//! Decimation, subdivision and isolated spheres: topology kept on every shipped frame,
+//! refused collapses, boundaries kept, the paper's flat-region claim on the analytic box,
+//! droplets as one blob plus one sphere per isolated particle.
+
+use glam::Vec3;
+use meniscus::decimation::{decimate, DecimateOptions};
+use meniscus::io::particles::read_particles;
+use meniscus::isolated::icosphere;
+use meniscus::mesh::{triangle_components, validate, TriMesh};
+use meniscus::pipeline::{reconstruct, ReconstructOptions};
+use meniscus::subdivision::{subdivide, SubdivideOptions};
+use std::path::PathBuf;
+
+fn dataset(rel: &str) -> Vec<Vec3> {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("datasets")
+        .join(rel);
+    read_particles(&path, None).unwrap().positions
+}
+
+#[test]
+fn full_pipeline_keeps_every_frame_a_closed_manifold_and_reports_its_ratio() {
+    let frames: Vec<(String, f32)> = [1, 9, 17, 25, 31, 45]
+        .iter()
+        .map(|k| (format!("dambreak_small/ParticleData_Fluid_{k}.xyz"), 0.012))
+        .chain(
+            [1, 6, 9, 13, 20]
+                .iter()
+                .map(|k| (format!("double_dambreak/ParticleData_Fluid_{k}.xyz"), 0.025)),
+        )
+        .collect();
+    for (rel, r) in frames {
+        let (surface, stats) = reconstruct(&dataset(&rel), &ReconstructOptions::new(r)).unwrap();
+        let report = validate(&surface.fluid);
+        assert!(report.is_closed_manifold(), "{rel}: {report:?}");
+        assert!(surface.fluid.signed_volume() > 0.0, "{rel}");
+        let d = stats.decimation.as_ref().unwrap();
+        // 80 % removed (up to collapses refused near the end), then ×4 by one Loop step.
+        let kept = d.triangles_after as f64 / d.triangles_before as f64;
+        assert!(
+            (0.19..0.26).contains(&kept),
+            "{rel}: decimation kept {kept}"
+        );
+        let ratio = surface.fluid.triangle_count() as f64 / stats.marching_cubes_triangles as f64;
+        assert!(
+            (0.76..1.04).contains(&ratio),
+            "{rel}: final/raw ratio {ratio}"
+        );
+        println!(
+            "{rel}: marching cubes {} -> final {} ({ratio:.3})",
+            stats.marching_cubes_triangles,
+            surface.fluid.triangle_count()
+        );
+    }
+}
+
+fn noisy_sphere(level: u32, noise: f32) -> TriMesh {
+    let mut m = icosphere(level, 1.0);
+    let mut seed = 12345u64;
+    for p in &mut m.positions {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        let u = ((seed >> 40) as f32) / (1u64 << 24) as f32 - 0.5;
+        *p *= 1.0 + noise * u;
+    }
+    m
+}
+
+#[test]
+fn decimation_of_a_noisy_sphere_stays_outward_closed_and_close() {
+    let mut m = noisy_sphere(5, 0.01);
+    let stats = decimate(&mut m, &DecimateOptions::default());
+    let report = validate(&m);
+    assert!(report.is_closed_manifold(), "{report:?}");
+    assert_eq!(report.components, 1);
+    assert!(
+        stats.triangles_after <= (stats.triangles_before as f64 * 0.2).ceil() as usize + 2,
+        "{stats:?}"
+    );
+    // No flipped triangle: every face normal points away from the centre.
+    for t in &m.triangles {
+        let [a, b, c] = t.map(|i| m.positions[i as usize]);
+        assert!((b - a).cross(c - a).dot(a + b + c) > 0.0);
+    }
+    // Vertices stay within the noise band plus a small simplification error.
+    let dev = m
+        .positions
+        .iter()
+        .map(|p| (p.length() - 1.0).abs())
+        .fold(0.0f32, f32::max);
+    assert!(dev < 0.02, "max deviation {dev}");
+    // Deterministic.
+    let mut again = noisy_sphere(5, 0.01);
+    decimate(&mut again, &DecimateOptions::default());
+    assert_eq!(m, again);
+}
+
+#[test]
+fn collapses_that_would_pinch_or_fold_are_refused() {
+    // A tetrahedron: every collapse would leave two coincident triangles.
+    let mut tet = TriMesh {
+        positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z],
+        triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+        normals: vec![],
+    };
+    let stats = decimate(
+        &mut tet,
+        &DecimateOptions {
+            target_reduction: Some(0.9),
+            max_error: None,
+        },
+    );
+    assert_eq!(stats.collapses, 0);
+    assert_eq!(tet.triangle_count(), 4);
+    assert!(stats.refused_topology > 0);
+    // Simplifying a sphere as far as it goes: the collapses that would make it a
+    // tetrahedron's worth of doubled triangles are refused, and it stays a closed manifold.
+    let mut sphere = icosphere(2, 1.0);
+    let stats = decimate(
+        &mut sphere,
+        &DecimateOptions {
+            target_reduction: Some(0.999),
+            max_error: None,
+        },
+    );
+    let report = validate(&sphere);
+    assert!(report.is_closed_manifold(), "{report:?}");
+    assert!(sphere.triangle_count() >= 4, "{stats:?}");
+    assert!(stats.refused_topology > 0, "{stats:?}");
+}
+
+#[test]
+fn open_boundaries_are_neither_opened_nor_moved() {
+    // A bumpy 20×20 grid patch: its boundary vertices must survive unmoved.
+    let n = 21u32;
+    let mut positions = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let z = ((i * 7 + j * 13) % 5) as f32 * 0.01;
+            positions.push(Vec3::new(i as f32 * 0.1, j as f32 * 0.1, z));
+        }
+    }
+    let mut triangles = Vec::new();
+    for j in 0..n - 1 {
+        for i in 0..n - 1 {
+            let a = j * n + i;
+            triangles.push([a, a + 1, a + n + 1]);
+            triangles.push([a, a + n + 1, a + n]);
+        }
+    }
+    let boundary: Vec<Vec3> = positions
+        .iter()
+        .copied()
+        .filter(|p| {
+            p.x == 0.0 || p.y == 0.0 || (p.x - 2.0).abs() < 1e-6 || (p.y - 2.0).abs() < 1e-6
+        })
+        .collect();
+    let mut m = TriMesh {
+        positions,
+        triangles,
+        normals: vec![],
+    };
+    let before = validate(&m).boundary_edges;
+    decimate(&mut m, &DecimateOptions::default());
+    let report = validate(&m);
+    assert_eq!(report.boundary_edges, before, "{report:?}");
+    assert_eq!(
+        report.non_manifold_edges + report.non_manifold_vertices + report.inconsistent_edges,
+        0
+    );
+    for p in &boundary {
+        assert!(
+            m.positions.iter().any(|q| q == p),
+            "boundary vertex {p} moved or vanished"
+        );
+    }
+}
+
+#[test]
+fn subdivision_after_decimation_stays_closed() {
+    let mut m = noisy_sphere(4, 0.02);
+    decimate(&mut m, &DecimateOptions::default());
+    let t = m.triangle_count();
+    subdivide(&mut m, &SubdivideOptions { levels: 2 });
+    assert_eq!(m.triangle_count(), 16 * t);
+    assert!(validate(&m).is_closed_manifold());
+}
+
+/// Mean angle (degrees) between face normals and the box's face normal, over faces at
+/// least 3r from every box edge.
+fn flat_normal_error(mesh: &TriMesh, half: Vec3, r: f32) -> f64 {
+    let (mut sum, mut weight) = (0.0f64, 0.0f64);
+    for t in &mesh.triangles {
+        let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+        let centre = (a + b + c) / 3.0;
+        let m = half - centre.abs();
+        let mut s = [m.x, m.y, m.z];
+        s.sort_by(f32::total_cmp);
+        if s[1] < 3.0 * r {
+            continue;
+        }
+        let axis = if m.x == s[0] {
+            Vec3::X
+        } else if m.y == s[0] {
+            Vec3::Y
+        } else {
+            Vec3::Z
+        };
+        let n = (b - a).cross(c - a);
+        let area = n.length() as f64;
+        if area == 0.0 {
+            continue;
+        }
+        let cos = (n.dot(axis * centre.signum()) as f64 / area).clamp(-1.0, 1.0);
+        sum += cos.acos().to_degrees() * area;
+        weight += area;
+    }
+    sum / weight
+}
+
+#[test]
+fn on_the_box_the_pipeline_beats_finer_marching_cubes_with_fewer_triangles() {
+    let r = 0.025;
+    let particles = dataset("analytic/box.xyz");
+    let half = Vec3::new(0.5, 0.3, 0.2);
+    let (full, _) = reconstruct(&particles, &ReconstructOptions::new(r)).unwrap();
+    let mut fine_options = ReconstructOptions::raw(r);
+    fine_options.field.cell_size = 0.5;
+    let (fine, _) = reconstruct(&particles, &fine_options).unwrap();
+    let (e_full, e_fine) = (
+        flat_normal_error(&full.fluid, half, r),
+        flat_normal_error(&fine.fluid, half, r),
+    );
+    assert!(
+        e_full < e_fine,
+        "pipeline at h = r: {e_full}°, marching cubes at h = r/2: {e_fine}°"
+    );
+    assert!(full.fluid.triangle_count() < fine.fluid.triangle_count());
+    println!(
+        "box flat normal error: pipeline {e_full:.2}° ({} tris), MC h=r/2 {e_fine:.2}° ({} tris)",
+        full.fluid.triangle_count(),
+        fine.fluid.triangle_count()
+    );
+}
+
+#[test]
+fn droplets_are_one_blob_and_500_spheres_of_radius_r() {
+    let r = 0.025;
+    let particles = dataset("analytic/droplets.xyz");
+    let (surface, stats) = reconstruct(&particles, &ReconstructOptions::new(r)).unwrap();
+    assert_eq!(stats.isolated_particles, 500);
+    assert_eq!(triangle_components(&surface.fluid).1, 1);
+    let merged = surface.merged();
+    assert_eq!(triangle_components(&merged).1, 501);
+    for (k, c) in surface.spheres.centers.iter().enumerate() {
+        assert_eq!(*c, particles[280 + k], "sphere {k} sits on its particle");
+    }
+    let template = &surface.spheres.template;
+    assert!(template
+        .positions
+        .iter()
+        .all(|p| (p.length() - r).abs() < 1e-6));
+    assert_eq!(template.triangle_count(), 320);
+}
