@@ -1,6 +1,7 @@
 //! File-level jobs: read a particle file, reconstruct, write the surface; and whole
 //! sequences of frames. The CLI is a thin layer over [`run_frames`].
 
+use crate::archive::{ArchiveOptions, ArchiveWriter};
 use crate::error::{Error, Result};
 use crate::io::mesh::{write_surface, MeshWriteOptions};
 use crate::io::particles::{read_particles, ParticleFormat};
@@ -10,14 +11,17 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// What to do with the files of a job.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct JobOptions {
     /// Force an input format instead of choosing by extension.
     pub input_format: Option<ParticleFormat>,
     /// Mesh writer options.
     pub write: MeshWriteOptions,
-    /// Skip frames whose output file already exists (resume a sequence).
+    /// Skip frames whose output file already exists (resume a sequence); for a `.mseq`
+    /// output, frames the archive already holds.
     pub skip_existing: bool,
+    /// Error bound of `.mseq` outputs, world units.
+    pub archive_error_bound: f64,
 }
 
 /// The outcome of one frame.
@@ -41,13 +45,16 @@ pub struct FrameReport {
     pub output_bytes: u64,
 }
 
-/// Reads `input`, reconstructs it and writes `output`. `on_stage` is told when a phase
-/// starts ("read", "reconstruct", "write").
+/// Reads `input`, reconstructs it and writes `output` — or, with `archive`, appends it
+/// there as frame `frame_number` (fluid and spheres merged). `on_stage` is told when a
+/// phase starts ("read", "reconstruct", "write").
 pub fn reconstruct_file(
     input: &Path,
     output: &Path,
     options: &ReconstructOptions,
     job: &JobOptions,
+    archive: Option<&mut ArchiveWriter>,
+    frame_number: i64,
     on_stage: &mut dyn FnMut(&str),
 ) -> Result<FrameReport> {
     on_stage("read");
@@ -64,18 +71,21 @@ pub fn reconstruct_file(
     drop(particles);
     on_stage("write");
     let clock = Instant::now();
-    let written = write_surface(output, &surface, &job.write)?;
+    let written = match archive {
+        Some(writer) => writer.append(frame_number, &surface.merged())?,
+        None => write_surface(output, &surface, &job.write)?.bytes,
+    };
     let write_seconds = clock.elapsed().as_secs_f64();
     reconstruction.push_stage("write", write_seconds, reconstruction.fluid_triangles);
     Ok(FrameReport {
-        frame: 0,
+        frame: frame_number,
         input: input.to_path_buf(),
         output: output.to_path_buf(),
         skipped: false,
         read_seconds,
         reconstruction,
         write_seconds,
-        output_bytes: written.bytes,
+        output_bytes: written,
     })
 }
 
@@ -111,6 +121,10 @@ pub fn plan_frames(
                 PathBuf::from(output),
             )])
         }
+        (true, false) if is_archive(Path::new(output)) => Ok(sequence::frames(input, start, end)?
+            .into_iter()
+            .map(|f| (f, PathBuf::from(output)))
+            .collect()),
         (true, false) => Err(Error::InvalidOption {
             option: "--output",
             message: format!(
@@ -134,10 +148,43 @@ pub fn run_frames(
     on_stage: &mut dyn FnMut(&str),
     on_done: &mut dyn FnMut(&FrameReport),
 ) -> Result<Vec<FrameReport>> {
+    // A .mseq output collects every frame: appended to an existing archive, else new.
+    let mut archive = match plan.first() {
+        Some((_, out)) if is_archive(out) => {
+            if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+                std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+            }
+            let archive_options = ArchiveOptions::new(job.archive_error_bound);
+            Some(if out.exists() {
+                ArchiveWriter::open_append(out, &archive_options)?
+            } else {
+                ArchiveWriter::create(out, &archive_options)?
+            })
+        }
+        _ => None,
+    };
+    let archived: Vec<i64> = archive
+        .as_ref()
+        .map(|a| a.frame_numbers())
+        .unwrap_or_default();
     let mut reports = Vec::with_capacity(plan.len());
     for (i, (frame, output)) in plan.iter().enumerate() {
         on_frame(i, frame);
-        let report = if job.skip_existing && output.exists() {
+        let exists = match &archive {
+            Some(_) => archived.contains(&frame.number),
+            None => output.exists(),
+        };
+        if archive.is_some() && exists && !job.skip_existing {
+            return Err(Error::InvalidOption {
+                option: "--skip-existing",
+                message: format!(
+                    "{} already holds frame {}; pass --skip-existing to resume",
+                    output.display(),
+                    frame.number
+                ),
+            });
+        }
+        let report = if job.skip_existing && exists {
             FrameReport {
                 frame: frame.number,
                 input: frame.input.clone(),
@@ -152,14 +199,29 @@ pub fn run_frames(
             if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
                 std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
             }
-            let mut r = reconstruct_file(&frame.input, output, options, job, on_stage)?;
-            r.frame = frame.number;
-            r
+            reconstruct_file(
+                &frame.input,
+                output,
+                options,
+                job,
+                archive.as_mut(),
+                frame.number,
+                on_stage,
+            )?
         };
         on_done(&report);
         reports.push(report);
     }
+    if let Some(writer) = archive {
+        writer.finish()?;
+    }
     Ok(reports)
+}
+
+/// True when `path` names a `.mseq` archive.
+pub fn is_archive(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mseq"))
 }
 
 /// Peak resident memory of this process so far (Linux `VmHWM`), bytes.

@@ -19,6 +19,7 @@
 //! * [`pipeline`]: the whole reconstruction, stage by stage, with timings.
 #![deny(missing_docs)]
 
+pub mod archive;
 pub mod decimation;
 pub mod error;
 pub mod field;

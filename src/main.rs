@@ -3,10 +3,13 @@
 
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use meniscus::archive::{ArchiveOptions, ArchiveReader, ArchiveWriter};
 use meniscus::decimation::DecimateOptions;
 use meniscus::io::mesh::MeshWriteOptions;
+use meniscus::io::mesh::{read_mesh, write_surface};
 use meniscus::io::particles::ParticleFormat;
 use meniscus::job::{peak_rss_bytes, plan_frames, run_frames, FrameReport, JobOptions};
+use meniscus::mesh::Surface;
 use meniscus::pipeline::ReconstructOptions;
 
 /// Error bound of `--decimate adaptive`, multiples of r.
@@ -30,6 +33,56 @@ struct Cli {
 enum Command {
     /// Reconstruct the surface of one particle file or a `{}` sequence of them.
     Reconstruct(ReconstructArgs),
+    /// Inspect, check, extract from or fill a `.mseq` mesh-sequence archive.
+    #[command(subcommand)]
+    Archive(ArchiveCommand),
+}
+
+#[derive(Subcommand)]
+enum ArchiveCommand {
+    /// Summary: frames, triangles, bytes, bytes per triangle.
+    Info {
+        /// The archive.
+        file: PathBuf,
+    },
+    /// One line per frame.
+    List {
+        /// The archive.
+        file: PathBuf,
+    },
+    /// Decode every frame and check its checksum; non-zero exit when one is damaged.
+    Verify {
+        /// The archive.
+        file: PathBuf,
+    },
+    /// Write one frame as .glb, .gltf, .ply, .obj or .vtk.
+    Extract {
+        /// The archive.
+        file: PathBuf,
+        /// Frame number.
+        #[arg(long, allow_negative_numbers = true)]
+        frame: i64,
+        /// Output mesh file.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// Pack existing mesh files (`{}` pattern; PLY, OBJ, glTF) into an archive.
+    Pack {
+        /// Mesh files, a pattern with `{}` for the frame number.
+        input: String,
+        /// The archive to create or append to.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Error bound, world units.
+        #[arg(long)]
+        error_bound_world: f64,
+        /// First frame (inclusive).
+        #[arg(long, allow_negative_numbers = true)]
+        start: Option<i64>,
+        /// Last frame (inclusive).
+        #[arg(long, allow_negative_numbers = true)]
+        end: Option<i64>,
+    },
 }
 
 #[derive(Args)]
@@ -96,6 +149,9 @@ struct ReconstructArgs {
     /// Write per-frame, per-stage statistics as JSON to this file.
     #[arg(long)]
     stats: Option<PathBuf>,
+    /// Error bound of a `.mseq` output, multiples of r (each coordinate within it).
+    #[arg(long, default_value_t = 0.01)]
+    error_bound: f64,
     /// Do not write vertex normals.
     #[arg(long)]
     no_normals: bool,
@@ -107,14 +163,135 @@ struct ReconstructArgs {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
-        Command::Reconstruct(args) => match reconstruct(&args) {
-            Ok(()) => ExitCode::SUCCESS,
-            Err(message) => {
-                eprintln!("error: {message}");
-                ExitCode::FAILURE
-            }
-        },
+        Command::Reconstruct(args) => report(reconstruct(&args)),
+        Command::Archive(command) => report(archive(command)),
     }
+}
+
+fn report(result: Result<(), String>) -> ExitCode {
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(message) => {
+            eprintln!("error: {message}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn archive(command: ArchiveCommand) -> Result<(), String> {
+    let text = |e: meniscus::Error| e.to_string();
+    match command {
+        ArchiveCommand::Info { file } => {
+            let r = ArchiveReader::open(&file).map_err(text)?;
+            let bytes = std::fs::metadata(&file).map_err(|e| e.to_string())?.len();
+            let triangles: u64 = r.frames().iter().map(|f| f.triangles as u64).sum();
+            println!(
+                "{}: {} frames, {} triangles, {} bytes, {:.3} bytes/triangle{}",
+                file.display(),
+                r.frames().len(),
+                triangles,
+                bytes,
+                bytes as f64 / triangles.max(1) as f64,
+                if r.recovered_by_scan() {
+                    " (no index: recovered by scanning)"
+                } else {
+                    ""
+                }
+            );
+            if let (Some(first), Some(last)) = (r.frames().first(), r.frames().last()) {
+                println!(
+                    "frames {} .. {}, error bound {} (world units)",
+                    first.number,
+                    last.number,
+                    first.step / 2.0
+                );
+            }
+        }
+        ArchiveCommand::List { file } => {
+            let r = ArchiveReader::open(&file).map_err(text)?;
+            println!(
+                "{:>8} {:>10} {:>10} {:>12}",
+                "frame", "vertices", "triangles", "bytes"
+            );
+            for f in r.frames() {
+                println!(
+                    "{:>8} {:>10} {:>10} {:>12}",
+                    f.number,
+                    f.vertices,
+                    f.triangles,
+                    f.payload_bytes + 48
+                );
+            }
+        }
+        ArchiveCommand::Verify { file } => {
+            let r = ArchiveReader::open(&file).map_err(text)?;
+            let v = r.verify();
+            for (n, why) in &v.damaged {
+                println!("frame {n}: DAMAGED: {why}");
+            }
+            println!(
+                "{} frames good, {} damaged{}{}",
+                v.good.len(),
+                v.damaged.len(),
+                if v.recovered_by_scan {
+                    ", index missing (interrupted write): recovered by scanning"
+                } else {
+                    ""
+                },
+                if v.trailing_bytes > 0 {
+                    format!(
+                        ", {} trailing bytes of an incomplete frame",
+                        v.trailing_bytes
+                    )
+                } else {
+                    String::new()
+                }
+            );
+            if !v.damaged.is_empty() {
+                return Err(format!(
+                    "{}: {} damaged frame(s)",
+                    file.display(),
+                    v.damaged.len()
+                ));
+            }
+        }
+        ArchiveCommand::Extract {
+            file,
+            frame,
+            output,
+        } => {
+            let r = ArchiveReader::open(&file).map_err(text)?;
+            let mesh = r.read_frame(frame).map_err(text)?;
+            let surface = Surface {
+                fluid: mesh,
+                ..Default::default()
+            };
+            write_surface(&output, &surface, &MeshWriteOptions::default()).map_err(text)?;
+        }
+        ArchiveCommand::Pack {
+            input,
+            output,
+            error_bound_world,
+            start,
+            end,
+        } => {
+            let frames = meniscus::sequence::frames(&input, start, end).map_err(text)?;
+            let options = ArchiveOptions::new(error_bound_world);
+            let mut w = if output.exists() {
+                ArchiveWriter::open_append(&output, &options)
+            } else {
+                ArchiveWriter::create(&output, &options)
+            }
+            .map_err(text)?;
+            for f in &frames {
+                let mesh = read_mesh(&f.input).map_err(text)?;
+                w.append(f.number, &mesh).map_err(text)?;
+            }
+            w.finish().map_err(text)?;
+            eprintln!("{} frame(s) packed into {}", frames.len(), output.display());
+        }
+    }
+    Ok(())
 }
 
 fn parse_level(value: &str, option: &str) -> Result<Option<u32>, String> {
@@ -188,6 +365,7 @@ fn reconstruct(args: &ReconstructArgs) -> Result<(), String> {
             ..MeshWriteOptions::default()
         },
         skip_existing: args.skip_existing,
+        archive_error_bound: args.error_bound * args.particle_radius as f64,
     };
     let bar = if args.quiet {
         ProgressBar::hidden()

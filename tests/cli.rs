@@ -155,3 +155,80 @@ fn bad_input_fails_clearly_without_output() {
     }
     assert!(files_in(dir.path()).iter().all(|f| !f.contains(".tmp-")));
 }
+
+#[test]
+fn archives_collect_a_sequence_and_extract_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    for k in [1, 6, 13] {
+        std::fs::copy(
+            dataset(&format!("double_dambreak/ParticleData_Fluid_{k}.xyz")),
+            dir.path().join(format!("f_{k}.xyz")),
+        )
+        .unwrap();
+    }
+    let input = format!("{}/f_{{}}.xyz", dir.path().display());
+    let archive = dir.path().join("run.mseq");
+    let a = archive.to_str().unwrap();
+    let (ok, err) = run(&[
+        "reconstruct",
+        &input,
+        "-r",
+        "0.025",
+        "-o",
+        a,
+        "-q",
+        "--end",
+        "6",
+    ]);
+    assert!(ok, "{err}");
+    // Resume with the rest of the sequence.
+    let (ok, err) = run(&[
+        "reconstruct",
+        &input,
+        "-r",
+        "0.025",
+        "-o",
+        a,
+        "-q",
+        "--skip-existing",
+    ]);
+    assert!(ok, "{err}");
+    let out = meniscus().args(["archive", "list", a]).output().unwrap();
+    let listing = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(listing.lines().count(), 4, "{listing}");
+    let out = meniscus().args(["archive", "verify", a]).output().unwrap();
+    assert!(out.status.success());
+    let glb = dir.path().join("f6.glb");
+    let (ok, err) = run(&[
+        "archive",
+        "extract",
+        a,
+        "--frame",
+        "6",
+        "-o",
+        glb.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(std::fs::metadata(&glb).unwrap().len() > 1000);
+    // Pack the extracted mesh back into a second archive.
+    let packed = dir.path().join("packed.mseq");
+    let pattern = format!("{}/f{{}}.glb", dir.path().display());
+    let (ok, err) = run(&[
+        "archive",
+        "pack",
+        &pattern,
+        "-o",
+        packed.to_str().unwrap(),
+        "--error-bound-world",
+        "0.0005",
+    ]);
+    assert!(ok, "{err}");
+    // A damaged archive fails verification and names the frame.
+    let mut bytes = std::fs::read(&archive).unwrap();
+    let n = bytes.len();
+    bytes[n / 2] ^= 0x55;
+    std::fs::write(&archive, &bytes).unwrap();
+    let out = meniscus().args(["archive", "verify", a]).output().unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stdout).contains("DAMAGED"));
+}

@@ -1,0 +1,169 @@
+//! The frame codec: a triangle mesh to bytes and back.
+//!
+//! * Vertices are renumbered in order of first use by the triangle list (unreferenced
+//!   vertices are dropped); triangles keep their order and corner order.
+//! * Connectivity: for every triangle corner, `0` when it introduces the next new vertex,
+//!   else `next − index` (≥ 1) as an unsigned LEB128 varint.
+//! * Positions: quantized to the lattice `q = round(x / step)` with `step = 2·bound`, so
+//!   each coordinate is within `bound` of the original; each vertex is predicted by the
+//!   previous one in first-use order and the zigzag-coded difference written as a varint.
+//! * The two streams are concatenated (connectivity first) and compressed with zstd.
+//!
+//! Normals are not stored: decoders recompute area-weighted normals.
+
+use crate::mesh::TriMesh;
+use glam::Vec3;
+
+fn put_varint(out: &mut Vec<u8>, mut v: u64) {
+    while v >= 0x80 {
+        out.push((v as u8) | 0x80);
+        v >>= 7;
+    }
+    out.push(v as u8);
+}
+
+fn get_varint(bytes: &[u8], pos: &mut usize) -> Option<u64> {
+    let mut v = 0u64;
+    for shift in (0..64).step_by(7) {
+        let b = *bytes.get(*pos)?;
+        *pos += 1;
+        v |= ((b & 0x7f) as u64) << shift;
+        if b < 0x80 {
+            return Some(v);
+        }
+    }
+    None
+}
+
+fn zigzag(v: i64) -> u64 {
+    ((v << 1) ^ (v >> 63)) as u64
+}
+
+fn unzigzag(v: u64) -> i64 {
+    ((v >> 1) as i64) ^ -((v & 1) as i64)
+}
+
+/// The mesh reordered for coding: vertices in first-use order.
+pub(crate) fn reorder(mesh: &TriMesh) -> TriMesh {
+    let mut remap = vec![u32::MAX; mesh.positions.len()];
+    let mut positions = Vec::with_capacity(mesh.positions.len());
+    let triangles = mesh
+        .triangles
+        .iter()
+        .map(|t| {
+            t.map(|v| {
+                if remap[v as usize] == u32::MAX {
+                    remap[v as usize] = positions.len() as u32;
+                    positions.push(mesh.positions[v as usize]);
+                }
+                remap[v as usize]
+            })
+        })
+        .collect();
+    TriMesh {
+        positions,
+        triangles,
+        normals: Vec::new(),
+    }
+}
+
+/// Encodes `mesh` (already in first-use order, see [`reorder`]) with quantization step
+/// `step` (world units) and zstd `level`.
+pub(crate) fn encode(mesh: &TriMesh, step: f64, level: i32) -> std::io::Result<Vec<u8>> {
+    let mut raw = Vec::with_capacity(mesh.triangles.len() * 4 + mesh.positions.len() * 4);
+    let mut next = 0u32;
+    for t in &mesh.triangles {
+        for &v in t {
+            if v == next {
+                put_varint(&mut raw, 0);
+                next += 1;
+            } else {
+                put_varint(&mut raw, (next - v) as u64);
+            }
+        }
+    }
+    let mut prev = [0i64; 3];
+    for p in &mesh.positions {
+        for (k, c) in p.to_array().into_iter().enumerate() {
+            let q = (c as f64 / step).round() as i64;
+            put_varint(&mut raw, zigzag(q - prev[k]));
+            prev[k] = q;
+        }
+    }
+    zstd::bulk::compress(&raw, level)
+}
+
+/// Decodes a payload of `vertices` vertices and `triangles` triangles.
+pub(crate) fn decode(
+    payload: &[u8],
+    vertices: usize,
+    triangles: usize,
+    step: f64,
+) -> Result<TriMesh, String> {
+    let capacity = triangles * 3 * 5 + vertices * 30 + 64;
+    let raw = zstd::bulk::decompress(payload, capacity).map_err(|e| format!("zstd: {e}"))?;
+    let mut pos = 0;
+    let mut next = 0u32;
+    let mut tris = Vec::with_capacity(triangles);
+    for _ in 0..triangles {
+        let mut t = [0u32; 3];
+        for slot in &mut t {
+            let d = get_varint(&raw, &mut pos).ok_or("connectivity stream ends early")?;
+            *slot = if d == 0 {
+                next += 1;
+                next - 1
+            } else {
+                next.checked_sub(d as u32)
+                    .ok_or("connectivity refers before the first vertex")?
+            };
+        }
+        tris.push(t);
+    }
+    if next as usize != vertices {
+        return Err(format!(
+            "connectivity introduces {next} vertices, header says {vertices}"
+        ));
+    }
+    let mut prev = [0i64; 3];
+    let mut positions = Vec::with_capacity(vertices);
+    for _ in 0..vertices {
+        let mut p = [0f32; 3];
+        for k in 0..3 {
+            let d = get_varint(&raw, &mut pos).ok_or("position stream ends early")?;
+            prev[k] += unzigzag(d);
+            p[k] = (prev[k] as f64 * step) as f32;
+        }
+        positions.push(Vec3::from_array(p));
+    }
+    if pos != raw.len() {
+        return Err("trailing bytes after the position stream".into());
+    }
+    let mut mesh = TriMesh {
+        positions,
+        triangles: tris,
+        normals: Vec::new(),
+    };
+    mesh.compute_normals();
+    Ok(mesh)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn varints_and_zigzag_round_trip() {
+        let mut out = Vec::new();
+        let values = [0u64, 1, 127, 128, 300, u32::MAX as u64, u64::MAX];
+        for v in values {
+            put_varint(&mut out, v);
+        }
+        let mut pos = 0;
+        for v in values {
+            assert_eq!(get_varint(&out, &mut pos), Some(v));
+        }
+        for v in [0i64, -1, 1, -1000, 1 << 40, i64::MIN / 2] {
+            assert_eq!(unzigzag(zigzag(v)), v);
+        }
+    }
+}

@@ -1,0 +1,447 @@
+//! `.mseq`: one file for a whole sequence of meshes — quantized, compressed, randomly
+//! accessible, checked. Byte layout in `docs/archive-format.md`.
+//!
+//! **Write:** [`ArchiveWriter::create`] or [`ArchiveWriter::open_append`], then
+//! [`ArchiveWriter::append`] per frame and [`ArchiveWriter::finish`] (writes the index).
+//! Frames are self-delimiting records with CRC-32 checksums, appended after the earlier
+//! ones, which are never rewritten. **Read:** [`ArchiveReader::open`] uses the index, or —
+//! after an interrupted append — scans the records and keeps every complete frame;
+//! [`ArchiveReader::read_frame`] is O(1) by frame number; [`ArchiveReader::verify`]
+//! decodes everything and names damaged frames.
+//!
+//! Round trip: connectivity exactly, up to renumbering the vertices in order of first use
+//! (unreferenced vertices are dropped; triangle order and corner order are kept); every
+//! coordinate within the error bound; normals recomputed (area-weighted) on decoding.
+
+mod codec;
+
+use crate::error::{Error, Result};
+use crate::mesh::TriMesh;
+use std::fs::{File, OpenOptions};
+use std::io::{Read, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+const MAGIC: &[u8; 8] = b"MNSCMSEQ";
+const VERSION: u32 = 1;
+const HEADER_LEN: u64 = 16;
+const RECORD_MAGIC: &[u8; 4] = b"FRAM";
+const RECORD_HEADER_LEN: usize = 48;
+const INDEX_MAGIC: &[u8; 4] = b"INDX";
+const TRAILER_MAGIC: &[u8; 8] = b"MSEQEND!";
+
+/// Options of a new archive.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ArchiveOptions {
+    /// Largest error of any coordinate, world units (> 0). Positions are quantized with a
+    /// step of twice this bound.
+    pub error_bound: f64,
+    /// zstd level. Default 9.
+    pub zstd_level: i32,
+}
+
+impl ArchiveOptions {
+    /// Options with an error bound in world units and the default zstd level.
+    pub fn new(error_bound: f64) -> Self {
+        ArchiveOptions {
+            error_bound,
+            zstd_level: 9,
+        }
+    }
+}
+
+/// One frame as the archive lists it.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct FrameInfo {
+    /// Frame number.
+    pub number: i64,
+    /// Vertices stored.
+    pub vertices: u32,
+    /// Triangles stored.
+    pub triangles: u32,
+    /// Quantization step, world units (error bound = step / 2 per coordinate).
+    pub step: f64,
+    /// Byte offset of the record.
+    pub offset: u64,
+    /// Bytes of the compressed payload.
+    pub payload_bytes: u64,
+}
+
+/// What [`ArchiveReader::verify`] found.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct VerifyReport {
+    /// Frames that decode and match their checksums.
+    pub good: Vec<i64>,
+    /// Damaged frames with what is wrong.
+    pub damaged: Vec<(i64, String)>,
+    /// True when the index was missing or unreadable and the records were scanned.
+    pub recovered_by_scan: bool,
+    /// Bytes after the last complete record that belong to no frame.
+    pub trailing_bytes: u64,
+}
+
+fn archive_error(path: &Path, frame: Option<i64>, message: impl Into<String>) -> Error {
+    let location = match frame {
+        Some(n) => format!("frame {n}"),
+        None => "archive".to_string(),
+    };
+    Error::parse(path, location, message)
+}
+
+struct RecordHeader {
+    number: i64,
+    vertices: u32,
+    triangles: u32,
+    step: f64,
+    payload_len: u64,
+    payload_crc: u32,
+}
+
+impl RecordHeader {
+    fn to_bytes(&self) -> [u8; RECORD_HEADER_LEN] {
+        let mut b = [0u8; RECORD_HEADER_LEN];
+        b[0..4].copy_from_slice(RECORD_MAGIC);
+        b[4..12].copy_from_slice(&self.number.to_le_bytes());
+        b[12..16].copy_from_slice(&self.vertices.to_le_bytes());
+        b[16..20].copy_from_slice(&self.triangles.to_le_bytes());
+        b[20..28].copy_from_slice(&self.step.to_le_bytes());
+        b[28..36].copy_from_slice(&self.payload_len.to_le_bytes());
+        b[36..40].copy_from_slice(&self.payload_crc.to_le_bytes());
+        let crc = crc32fast::hash(&b[0..44]);
+        b[44..48].copy_from_slice(&crc.to_le_bytes());
+        b
+    }
+
+    fn parse(b: &[u8]) -> Option<RecordHeader> {
+        if b.len() < RECORD_HEADER_LEN || &b[0..4] != RECORD_MAGIC {
+            return None;
+        }
+        let crc = u32::from_le_bytes(b[44..48].try_into().ok()?);
+        if crc != crc32fast::hash(&b[0..44]) {
+            return None;
+        }
+        Some(RecordHeader {
+            number: i64::from_le_bytes(b[4..12].try_into().ok()?),
+            vertices: u32::from_le_bytes(b[12..16].try_into().ok()?),
+            triangles: u32::from_le_bytes(b[16..20].try_into().ok()?),
+            step: f64::from_le_bytes(b[20..28].try_into().ok()?),
+            payload_len: u64::from_le_bytes(b[28..36].try_into().ok()?),
+            payload_crc: u32::from_le_bytes(b[36..40].try_into().ok()?),
+        })
+    }
+}
+
+/// Reads an archive.
+pub struct ArchiveReader {
+    path: PathBuf,
+    bytes: Vec<u8>,
+    frames: Vec<FrameInfo>,
+    /// Payload CRCs, parallel to `frames`.
+    crcs: Vec<u32>,
+    recovered_by_scan: bool,
+    data_end: u64,
+}
+
+impl ArchiveReader {
+    /// Opens an archive: through its index, or by scanning its records when the index is
+    /// missing or damaged (an interrupted append).
+    pub fn open(path: &Path) -> Result<ArchiveReader> {
+        let mut bytes = Vec::new();
+        File::open(path)
+            .and_then(|mut f| f.read_to_end(&mut bytes))
+            .map_err(|e| Error::io(path, e))?;
+        if bytes.len() < HEADER_LEN as usize || &bytes[0..8] != MAGIC {
+            return Err(archive_error(
+                path,
+                None,
+                "not a meniscus .mseq archive (bad magic number)",
+            ));
+        }
+        let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
+        if version != VERSION {
+            return Err(Error::UnsupportedFormat {
+                path: path.to_path_buf(),
+                message: format!(".mseq version {version}; this build reads version {VERSION}"),
+            });
+        }
+        let mut reader = ArchiveReader {
+            path: path.to_path_buf(),
+            bytes,
+            frames: Vec::new(),
+            crcs: Vec::new(),
+            recovered_by_scan: false,
+            data_end: HEADER_LEN,
+        };
+        if !reader.read_index() {
+            reader.scan();
+        }
+        Ok(reader)
+    }
+
+    /// Reads the index through the trailer; false when there is none or it is damaged.
+    fn read_index(&mut self) -> bool {
+        let b = &self.bytes;
+        if b.len() < HEADER_LEN as usize + 16 || &b[b.len() - 8..] != TRAILER_MAGIC {
+            return false;
+        }
+        let index_offset =
+            u64::from_le_bytes(b[b.len() - 16..b.len() - 8].try_into().expect("8 bytes")) as usize;
+        if index_offset < HEADER_LEN as usize
+            || index_offset + 16 > b.len() - 16
+            || &b[index_offset..index_offset + 4] != INDEX_MAGIC
+        {
+            return false;
+        }
+        let count = u64::from_le_bytes(
+            b[index_offset + 4..index_offset + 12]
+                .try_into()
+                .expect("8 bytes"),
+        ) as usize;
+        let entries_end = index_offset + 12 + count.saturating_mul(16);
+        if entries_end + 4 != b.len() - 16 {
+            return false;
+        }
+        let crc = u32::from_le_bytes(b[entries_end..entries_end + 4].try_into().expect("4 bytes"));
+        if crc != crc32fast::hash(&b[index_offset..entries_end]) {
+            return false;
+        }
+        let mut frames = Vec::with_capacity(count);
+        let mut crcs = Vec::with_capacity(count);
+        for k in 0..count {
+            let e = index_offset + 12 + 16 * k;
+            let offset = u64::from_le_bytes(b[e + 8..e + 16].try_into().expect("8 bytes")) as usize;
+            let Some(h) = b
+                .get(offset..offset + RECORD_HEADER_LEN)
+                .and_then(RecordHeader::parse)
+            else {
+                return false;
+            };
+            frames.push(FrameInfo {
+                number: h.number,
+                vertices: h.vertices,
+                triangles: h.triangles,
+                step: h.step,
+                offset: offset as u64,
+                payload_bytes: h.payload_len,
+            });
+            crcs.push(h.payload_crc);
+        }
+        self.frames = frames;
+        self.crcs = crcs;
+        self.data_end = index_offset as u64;
+        true
+    }
+
+    /// Walks the records from the start; stops at the first record whose header is
+    /// damaged or whose payload is cut off.
+    fn scan(&mut self) {
+        self.recovered_by_scan = true;
+        let mut pos = HEADER_LEN as usize;
+        while let Some(h) = self
+            .bytes
+            .get(pos..pos + RECORD_HEADER_LEN)
+            .and_then(RecordHeader::parse)
+        {
+            let end = pos + RECORD_HEADER_LEN + h.payload_len as usize;
+            if end > self.bytes.len() {
+                break;
+            }
+            self.frames.push(FrameInfo {
+                number: h.number,
+                vertices: h.vertices,
+                triangles: h.triangles,
+                step: h.step,
+                offset: pos as u64,
+                payload_bytes: h.payload_len,
+            });
+            self.crcs.push(h.payload_crc);
+            pos = end;
+        }
+        self.data_end = pos as u64;
+    }
+
+    /// The frames, in file order.
+    pub fn frames(&self) -> &[FrameInfo] {
+        &self.frames
+    }
+
+    /// True when the index was missing or damaged and the frames come from a scan.
+    pub fn recovered_by_scan(&self) -> bool {
+        self.recovered_by_scan
+    }
+
+    /// Decodes frame `number`.
+    pub fn read_frame(&self, number: i64) -> Result<TriMesh> {
+        let k = self
+            .frames
+            .iter()
+            .position(|f| f.number == number)
+            .ok_or_else(|| {
+                archive_error(&self.path, Some(number), "no such frame in the archive")
+            })?;
+        self.decode(k)
+    }
+
+    fn decode(&self, k: usize) -> Result<TriMesh> {
+        let f = &self.frames[k];
+        let start = f.offset as usize + RECORD_HEADER_LEN;
+        let payload = self
+            .bytes
+            .get(start..start + f.payload_bytes as usize)
+            .ok_or_else(|| {
+                archive_error(
+                    &self.path,
+                    Some(f.number),
+                    "payload cut off (truncated archive)",
+                )
+            })?;
+        if crc32fast::hash(payload) != self.crcs[k] {
+            return Err(archive_error(
+                &self.path,
+                Some(f.number),
+                "checksum mismatch: the frame is damaged",
+            ));
+        }
+        codec::decode(payload, f.vertices as usize, f.triangles as usize, f.step)
+            .map_err(|m| archive_error(&self.path, Some(f.number), m))
+    }
+
+    /// Decodes every frame and reports the damaged ones.
+    pub fn verify(&self) -> VerifyReport {
+        let mut report = VerifyReport {
+            recovered_by_scan: self.recovered_by_scan,
+            ..Default::default()
+        };
+        for (k, f) in self.frames.iter().enumerate() {
+            match self.decode(k) {
+                Ok(_) => report.good.push(f.number),
+                Err(e) => report.damaged.push((f.number, e.to_string())),
+            }
+        }
+        if self.recovered_by_scan {
+            report.trailing_bytes = self.bytes.len() as u64 - self.data_end;
+        }
+        report
+    }
+}
+
+/// Appends frames to an archive.
+pub struct ArchiveWriter {
+    path: PathBuf,
+    file: File,
+    options: ArchiveOptions,
+    index: Vec<(i64, u64)>,
+    end: u64,
+}
+
+impl ArchiveWriter {
+    /// Creates a new archive (replacing any file at `path`).
+    pub fn create(path: &Path, options: &ArchiveOptions) -> Result<ArchiveWriter> {
+        if !(options.error_bound.is_finite() && options.error_bound > 0.0) {
+            return Err(Error::InvalidOption {
+                option: "--error-bound",
+                message: format!("must be > 0, got {}", options.error_bound),
+            });
+        }
+        let mut file = File::create(path).map_err(|e| Error::io(path, e))?;
+        let mut header = [0u8; HEADER_LEN as usize];
+        header[0..8].copy_from_slice(MAGIC);
+        header[8..12].copy_from_slice(&VERSION.to_le_bytes());
+        file.write_all(&header).map_err(|e| Error::io(path, e))?;
+        Ok(ArchiveWriter {
+            path: path.to_path_buf(),
+            file,
+            options: options.clone(),
+            index: Vec::new(),
+            end: HEADER_LEN,
+        })
+    }
+
+    /// Opens an archive for appending. Earlier frames are kept as they are; an
+    /// incomplete last record left by an interrupted append is cut off (that frame was
+    /// never complete). An archive with a damaged frame is refused.
+    pub fn open_append(path: &Path, options: &ArchiveOptions) -> Result<ArchiveWriter> {
+        let reader = ArchiveReader::open(path)?;
+        let report = reader.verify();
+        if let Some((n, why)) = report.damaged.first() {
+            return Err(archive_error(
+                path,
+                Some(*n),
+                format!("refusing to append to a damaged archive: {why}"),
+            ));
+        }
+        let file = OpenOptions::new()
+            .write(true)
+            .open(path)
+            .map_err(|e| Error::io(path, e))?;
+        // Drop the old index (and any incomplete record): everything before stays.
+        file.set_len(reader.data_end)
+            .map_err(|e| Error::io(path, e))?;
+        let mut writer = ArchiveWriter {
+            path: path.to_path_buf(),
+            file,
+            options: options.clone(),
+            index: reader.frames.iter().map(|f| (f.number, f.offset)).collect(),
+            end: reader.data_end,
+        };
+        writer
+            .file
+            .seek(SeekFrom::Start(writer.end))
+            .map_err(|e| Error::io(path, e))?;
+        Ok(writer)
+    }
+
+    /// Frame numbers already in the archive.
+    pub fn frame_numbers(&self) -> Vec<i64> {
+        self.index.iter().map(|e| e.0).collect()
+    }
+
+    /// Appends one frame; returns its bytes in the archive.
+    pub fn append(&mut self, number: i64, mesh: &TriMesh) -> Result<u64> {
+        if self.index.iter().any(|e| e.0 == number) {
+            return Err(archive_error(
+                &self.path,
+                Some(number),
+                "the archive already holds this frame",
+            ));
+        }
+        let ordered = codec::reorder(mesh);
+        let step = 2.0 * self.options.error_bound;
+        let payload = codec::encode(&ordered, step, self.options.zstd_level)
+            .map_err(|e| Error::io(&self.path, e))?;
+        let header = RecordHeader {
+            number,
+            vertices: ordered.positions.len() as u32,
+            triangles: ordered.triangles.len() as u32,
+            step,
+            payload_len: payload.len() as u64,
+            payload_crc: crc32fast::hash(&payload),
+        };
+        self.file
+            .write_all(&header.to_bytes())
+            .and_then(|_| self.file.write_all(&payload))
+            .map_err(|e| Error::io(&self.path, e))?;
+        self.index.push((number, self.end));
+        let bytes = (RECORD_HEADER_LEN + payload.len()) as u64;
+        self.end += bytes;
+        Ok(bytes)
+    }
+
+    /// Writes the index and trailer and closes the archive.
+    pub fn finish(mut self) -> Result<()> {
+        let mut index = Vec::with_capacity(12 + 16 * self.index.len() + 20);
+        index.extend_from_slice(INDEX_MAGIC);
+        index.extend_from_slice(&(self.index.len() as u64).to_le_bytes());
+        for (n, offset) in &self.index {
+            index.extend_from_slice(&n.to_le_bytes());
+            index.extend_from_slice(&offset.to_le_bytes());
+        }
+        let crc = crc32fast::hash(&index);
+        index.extend_from_slice(&crc.to_le_bytes());
+        index.extend_from_slice(&self.end.to_le_bytes());
+        index.extend_from_slice(TRAILER_MAGIC);
+        self.file
+            .write_all(&index)
+            .and_then(|_| self.file.sync_all())
+            .map_err(|e| Error::io(&self.path, e))
+    }
+}
