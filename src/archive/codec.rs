@@ -5,8 +5,10 @@
 //! * Connectivity: for every triangle corner, `0` when it introduces the next new vertex,
 //!   else `next − index` (≥ 1) as an unsigned LEB128 varint.
 //! * Positions: quantized to the lattice `q = round(x / step)` with `step = 2·bound`, so
-//!   each coordinate is within `bound` of the original; each vertex is predicted by the
-//!   previous one in first-use order and the zigzag-coded difference written as a varint.
+//!   each coordinate is within `bound` of the original; each vertex is predicted from the
+//!   vertices before it — the parallelogram `a + b − c` across an edge of the triangle that
+//!   introduces it (Touma & Gotsman 1998), else a corner of that triangle, else the
+//!   previous vertex — and the zigzag-coded residual written as a varint.
 //! * The two streams are concatenated (connectivity first) and compressed with zstd.
 //!
 //! Normals are not stored: decoders recompute area-weighted normals.
@@ -67,6 +69,79 @@ pub(crate) fn reorder(mesh: &TriMesh) -> TriMesh {
     }
 }
 
+/// How a vertex is predicted from vertices introduced before it.
+#[derive(Clone, Copy)]
+enum Prediction {
+    /// The first vertex: the origin.
+    Origin,
+    /// The previous vertex in order.
+    Previous(u32),
+    /// Another corner of the introducing triangle.
+    Corner(u32),
+    /// The parallelogram `a + b − c` across edge `ab` from the triangle `abc`.
+    Parallelogram(u32, u32, u32),
+}
+
+impl Prediction {
+    fn resolve(self, q: impl Fn(u32) -> [i64; 3]) -> [i64; 3] {
+        match self {
+            Prediction::Origin => [0; 3],
+            Prediction::Previous(v) | Prediction::Corner(v) => q(v),
+            Prediction::Parallelogram(a, b, c) => {
+                let (a, b, c) = (q(a), q(b), q(c));
+                [0, 1, 2].map(|k| a[k] + b[k] - c[k])
+            }
+        }
+    }
+}
+
+/// For every vertex (in first-use order), how it is predicted: by the parallelogram rule
+/// across an edge of its introducing triangle whose other triangle is already known,
+/// else by a known corner of that triangle, else by the previous vertex.
+fn prediction_plan(triangles: &[[u32; 3]], vertices: usize) -> Vec<Prediction> {
+    let mut plan = Vec::with_capacity(vertices);
+    // Directed edge (a, b) of a known triangle → its third vertex.
+    let mut opposite: hashbrown::HashMap<(u32, u32), u32> =
+        hashbrown::HashMap::with_capacity(triangles.len() * 3);
+    for t in triangles {
+        for k in 0..3 {
+            let v = t[k];
+            if v as usize != plan.len() {
+                continue;
+            }
+            let (a, b) = (t[(k + 1) % 3], t[(k + 2) % 3]);
+            let known = |w: u32| (w as usize) < plan.len();
+            let p = if known(a) && known(b) {
+                // The neighbour across (a, b) holds the directed edge (b, a).
+                match opposite.get(&(b, a)) {
+                    Some(&c) => Prediction::Parallelogram(a, b, c),
+                    None => Prediction::Corner(a),
+                }
+            } else if known(a) {
+                Prediction::Corner(a)
+            } else if known(b) {
+                Prediction::Corner(b)
+            } else if plan.is_empty() {
+                Prediction::Origin
+            } else {
+                Prediction::Previous(plan.len() as u32 - 1)
+            };
+            plan.push(p);
+        }
+        for k in 0..3 {
+            opposite.insert((t[k], t[(k + 1) % 3]), t[(k + 2) % 3]);
+        }
+    }
+    plan
+}
+
+fn predict(triangles: &[[u32; 3]], vertices: usize, q: impl Fn(u32) -> [i64; 3]) -> Vec<[i64; 3]> {
+    prediction_plan(triangles, vertices)
+        .into_iter()
+        .map(|p| p.resolve(&q))
+        .collect()
+}
+
 /// Encodes `mesh` (already in first-use order, see [`reorder`]) with quantization step
 /// `step` (world units) and zstd `level`.
 pub(crate) fn encode(mesh: &TriMesh, step: f64, level: i32) -> std::io::Result<Vec<u8>> {
@@ -82,12 +157,17 @@ pub(crate) fn encode(mesh: &TriMesh, step: f64, level: i32) -> std::io::Result<V
             }
         }
     }
-    let mut prev = [0i64; 3];
-    for p in &mesh.positions {
-        for (k, c) in p.to_array().into_iter().enumerate() {
-            let q = (c as f64 / step).round() as i64;
-            put_varint(&mut raw, zigzag(q - prev[k]));
-            prev[k] = q;
+    let quantized: Vec<[i64; 3]> = mesh
+        .positions
+        .iter()
+        .map(|p| p.to_array().map(|c| (c as f64 / step).round() as i64))
+        .collect();
+    let predictions = predict(&mesh.triangles, mesh.positions.len(), |v| {
+        quantized[v as usize]
+    });
+    for (q, pred) in quantized.iter().zip(&predictions) {
+        for k in 0..3 {
+            put_varint(&mut raw, zigzag(q[k] - pred[k]));
         }
     }
     zstd::bulk::compress(&raw, level)
@@ -124,17 +204,26 @@ pub(crate) fn decode(
             "connectivity introduces {next} vertices, header says {vertices}"
         ));
     }
-    let mut prev = [0i64; 3];
-    let mut positions = Vec::with_capacity(vertices);
+    // Residuals first, then predictions resolved in vertex order (each prediction reads
+    // only vertices introduced before).
+    let mut residuals = Vec::with_capacity(vertices);
     for _ in 0..vertices {
-        let mut p = [0f32; 3];
-        for k in 0..3 {
-            let d = get_varint(&raw, &mut pos).ok_or("position stream ends early")?;
-            prev[k] += unzigzag(d);
-            p[k] = (prev[k] as f64 * step) as f32;
+        let mut r = [0i64; 3];
+        for slot in &mut r {
+            *slot = unzigzag(get_varint(&raw, &mut pos).ok_or("position stream ends early")?);
         }
-        positions.push(Vec3::from_array(p));
+        residuals.push(r);
     }
+    let mut quantized: Vec<[i64; 3]> = Vec::with_capacity(vertices);
+    let plan = prediction_plan(&tris, vertices);
+    for (v, r) in residuals.iter().enumerate() {
+        let pred = plan[v].resolve(|w| quantized[w as usize]);
+        quantized.push([0, 1, 2].map(|k| pred[k] + r[k]));
+    }
+    let positions: Vec<Vec3> = quantized
+        .iter()
+        .map(|q| Vec3::from_array(q.map(|c| (c as f64 * step) as f32)))
+        .collect();
     if pos != raw.len() {
         return Err("trailing bytes after the position stream".into());
     }
