@@ -8,4 +8,5 @@
 pub(crate) mod atomic;
 pub mod mesh;
 pub mod particles;
+pub(crate) mod ply_header;
 pub(crate) mod text;

@@ -176,6 +176,43 @@ impl<'a> Cursor<'a> {
         }
     }
 
+    /// The next `count` values as exact non-negative integers (indices), binary or ASCII.
+    pub fn indices(
+        &mut self,
+        count: usize,
+        scalar: Scalar,
+        binary: Option<bool>,
+    ) -> Result<Vec<u32>> {
+        let mut out = Vec::with_capacity(count.min(1 << 20));
+        for _ in 0..count {
+            let v = match binary {
+                Some(big_endian) => {
+                    let size = scalar.size();
+                    if self.bytes.len() - self.pos < size {
+                        return Err(self.error(format!(
+                            "truncated: a {size}-byte index, {} bytes left",
+                            self.bytes.len() - self.pos
+                        )));
+                    }
+                    let v = scalar.decode(&self.bytes[self.pos..self.pos + size], big_endian);
+                    self.pos += size;
+                    v
+                }
+                None => {
+                    let token = self.token("an index")?;
+                    token
+                        .parse::<f64>()
+                        .map_err(|_| self.error(format!("expected an index, found {token:?}")))?
+                }
+            };
+            if !(0.0..=u32::MAX as f64).contains(&v) || v.fract() != 0.0 {
+                return Err(self.error(format!("bad vertex index {v}")));
+            }
+            out.push(v as u32);
+        }
+        Ok(out)
+    }
+
     /// Skips `count` values of type `scalar`, binary or ASCII.
     pub fn skip_values(
         &mut self,

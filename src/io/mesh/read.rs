@@ -4,7 +4,8 @@
 //! triangle primitive of the default scene, node transforms applied).
 
 use crate::error::{Error, Result};
-use crate::io::text::{Cursor, Scalar};
+use crate::io::ply_header;
+use crate::io::text::Cursor;
 use crate::mesh::TriMesh;
 use glam::{Mat4, Vec3};
 use std::path::Path;
@@ -43,124 +44,61 @@ pub fn read_mesh(path: &Path) -> Result<TriMesh> {
     Ok(mesh)
 }
 
-fn ply_scalar(name: &str) -> Option<Scalar> {
-    Some(match name {
-        "char" | "int8" => Scalar::I8,
-        "uchar" | "uint8" => Scalar::U8,
-        "short" | "int16" => Scalar::I16,
-        "ushort" | "uint16" => Scalar::U16,
-        "int" | "int32" => Scalar::I32,
-        "uint" | "uint32" => Scalar::U32,
-        "float" | "float32" => Scalar::F32,
-        "double" | "float64" => Scalar::F64,
-        _ => return None,
-    })
-}
-
 fn read_ply(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
     let mut c = Cursor::new(path, bytes);
-    if c.line()?.trim() != "ply" {
-        return Err(Error::parse(path, "line 1", "not a PLY file"));
-    }
-    let mut binary = None;
-    // (element name, count, properties: (name, scalar, list count type))
-    type Property = (String, Scalar, Option<Scalar>);
-    let mut elements: Vec<(String, usize, Vec<Property>)> = Vec::new();
-    loop {
-        if c.pos >= bytes.len() {
-            return Err(c.error("header has no end_header"));
-        }
-        let line = c.line()?;
-        let w: Vec<&str> = line.split_whitespace().collect();
-        match w.as_slice() {
-            ["format", f, _] => {
-                binary = Some(match *f {
-                    "ascii" => None,
-                    "binary_little_endian" => Some(false),
-                    "binary_big_endian" => Some(true),
-                    _ => return Err(c.error(format!("unknown format {f:?}"))),
-                })
-            }
-            ["element", name, n] => elements.push((
-                name.to_string(),
-                n.parse().map_err(|_| c.error("bad element count"))?,
-                Vec::new(),
-            )),
-            ["property", "list", ct, it, name] => {
-                let (Some(ct), Some(it)) = (ply_scalar(ct), ply_scalar(it)) else {
-                    return Err(c.error(format!("bad list property {line:?}")));
-                };
-                elements
-                    .last_mut()
-                    .ok_or_else(|| c.error("property before element"))?
-                    .2
-                    .push((name.to_string(), it, Some(ct)));
-            }
-            ["property", ty, name] => {
-                let ty = ply_scalar(ty).ok_or_else(|| c.error(format!("unknown type {ty:?}")))?;
-                elements
-                    .last_mut()
-                    .ok_or_else(|| c.error("property before element"))?
-                    .2
-                    .push((name.to_string(), ty, None));
-            }
-            ["end_header"] => break,
-            ["comment", ..] | ["obj_info", ..] | [] => {}
-            _ => return Err(c.error(format!("unexpected header line {line:?}"))),
-        }
-    }
-    let binary = binary.ok_or_else(|| c.error("no format line"))?;
+    let header = ply_header::parse(&mut c)?;
+    let binary = header.binary;
     let mut mesh = TriMesh::default();
-    for (name, count, props) in &elements {
-        let find = |n: &str| props.iter().position(|p| p.0 == n);
-        let xyz = (find("x"), find("y"), find("z"));
-        let nxyz = (find("nx"), find("ny"), find("nz"));
-        for _ in 0..*count {
-            let mut row = [0.0f32; 6];
-            for (k, (pname, scalar, list)) in props.iter().enumerate() {
-                match list {
-                    None => {
-                        let v = c.value(*scalar, binary)?;
-                        if name == "vertex" {
-                            for (slot, idx) in [xyz.0, xyz.1, xyz.2, nxyz.0, nxyz.1, nxyz.2]
-                                .iter()
-                                .enumerate()
-                            {
-                                if *idx == Some(k) {
-                                    row[slot] = v;
-                                }
-                            }
+    for element in &header.elements {
+        match element.name.as_str() {
+            "vertex" => {
+                let (Some(x), Some(y), Some(z)) =
+                    (element.find("x"), element.find("y"), element.find("z"))
+                else {
+                    return Err(c.error("vertex element without x, y, z"));
+                };
+                let normal = (element.find("nx"), element.find("ny"), element.find("nz"));
+                let mut row = vec![0.0f32; element.properties.len()];
+                for _ in 0..element.count {
+                    for (slot, p) in row.iter_mut().zip(&element.properties) {
+                        if p.list_count.is_some() {
+                            return Err(
+                                c.error("list properties in the vertex element are not supported")
+                            );
                         }
+                        *slot = c.value(p.scalar, binary)?;
                     }
-                    Some(ct) => {
-                        let n = c.value(*ct, binary)?;
+                    mesh.positions.push(Vec3::new(row[x], row[y], row[z]));
+                    if let (Some(a), Some(b), Some(cz)) = normal {
+                        mesh.normals.push(Vec3::new(row[a], row[b], row[cz]));
+                    }
+                }
+            }
+            "face" => {
+                for _ in 0..element.count {
+                    for p in &element.properties {
+                        let Some(count) = p.list_count else {
+                            c.skip_values(1, p.scalar, binary)?;
+                            continue;
+                        };
+                        let n = c.value(count, binary)?;
                         if !(0.0..=1e6).contains(&n) {
                             return Err(c.error(format!("bad list length {n}")));
                         }
-                        let items = c.values(n as usize, *scalar, binary)?;
-                        if name == "face" && (pname == "vertex_indices" || pname == "vertex_index")
-                        {
-                            if items.iter().any(|&i| i < 0.0) {
-                                return Err(c.error("negative vertex index"));
-                            }
+                        if p.name == "vertex_indices" || p.name == "vertex_index" {
+                            let items = c.indices(n as usize, p.scalar, binary)?;
                             for j in 1..items.len().saturating_sub(1) {
-                                mesh.triangles.push([
-                                    items[0] as u32,
-                                    items[j] as u32,
-                                    items[j + 1] as u32,
-                                ]);
+                                mesh.triangles.push([items[0], items[j], items[j + 1]]);
                             }
+                        } else {
+                            c.skip_values(n as usize, p.scalar, binary)?;
                         }
                     }
                 }
             }
-            if name == "vertex" {
-                if xyz.0.is_none() || xyz.1.is_none() || xyz.2.is_none() {
-                    return Err(c.error("vertex element without x, y, z"));
-                }
-                mesh.positions.push(Vec3::new(row[0], row[1], row[2]));
-                if nxyz.0.is_some() {
-                    mesh.normals.push(Vec3::new(row[3], row[4], row[5]));
+            _ => {
+                for _ in 0..element.count {
+                    ply_header::skip_row(&mut c, element, binary)?;
                 }
             }
         }
