@@ -5,7 +5,7 @@ use crate::archive::{ArchiveOptions, ArchiveWriter};
 use crate::error::{Error, Result};
 use crate::io::mesh::{write_surface, MeshWriteOptions};
 use crate::io::particles::{read_particles, ParticleFormat};
-use crate::pipeline::{reconstruct, ReconstructOptions, ReconstructionStats};
+use crate::pipeline::{reconstruct_with_progress, ReconstructOptions, ReconstructionStats};
 use crate::sequence::{self, Frame};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -67,7 +67,12 @@ pub fn reconstruct_file(
     }
     let read_seconds = clock.elapsed().as_secs_f64();
     on_stage("reconstruct");
-    let (surface, mut reconstruction) = reconstruct(&particles.positions, options)?;
+    let (surface, mut reconstruction) = {
+        let progress = std::cell::RefCell::new(&mut *on_stage);
+        reconstruct_with_progress(&particles.positions, options, &|stage| {
+            (progress.borrow_mut())(stage)
+        })?
+    };
     drop(particles);
     on_stage("write");
     let clock = Instant::now();

@@ -138,6 +138,15 @@ pub fn reconstruct(
     positions: &[Vec3],
     options: &ReconstructOptions,
 ) -> Result<(Surface, ReconstructionStats)> {
+    reconstruct_with_progress(positions, options, &|_| {})
+}
+
+/// [`reconstruct`], telling `progress` what it is doing ("tile 3/8", "decimation", ...).
+pub fn reconstruct_with_progress(
+    positions: &[Vec3],
+    options: &ReconstructOptions,
+    progress: &dyn Fn(&str),
+) -> Result<(Surface, ReconstructionStats)> {
     options.field.validate()?;
     let mut stats = ReconstructionStats {
         particles: positions.len(),
@@ -155,7 +164,16 @@ pub fn reconstruct(
         &options.field,
         isolation_radius,
         &options.tiles,
-        &|_, _| {},
+        &|tile, tiles| {
+            if tiles > 1 {
+                progress(&format!(
+                    "field + marching cubes, tile {}/{tiles}",
+                    tile + 1
+                ))
+            } else {
+                progress("field + marching cubes")
+            }
+        },
     )?;
     let mut fluid = tiled.mesh;
     let isolated_centers = tiled.isolated;
@@ -182,6 +200,7 @@ pub fn reconstruct(
     );
 
     // 4. Decimation.
+    progress("decimation");
     if let Some(decimate_options) = &options.decimate {
         let clock = Instant::now();
         stats.decimation = Some(decimate(&mut fluid, decimate_options));
@@ -193,6 +212,7 @@ pub fn reconstruct(
     }
 
     // 5. Subdivision.
+    progress("subdivision");
     if options.subdivide.levels > 0 {
         let clock = Instant::now();
         subdivide(&mut fluid, &options.subdivide);

@@ -90,7 +90,7 @@ pub fn reconstruct_tiled(
     field_options: &FieldOptions,
     isolation_radius: Option<f32>,
     tile_options: &TileOptions,
-    on_tile: &(dyn Fn(usize, usize) + Sync),
+    on_tile: &dyn Fn(usize, usize),
 ) -> Result<TiledSurface> {
     field_options.validate()?;
     check_positions(positions, field_options)?;
