@@ -7,7 +7,7 @@
 //!
 //! Steps: rescale to the unit box (conditioning) → per-vertex area-weighted plane quadrics
 //! → passes until the triangle target or the error bound is reached: cost every live edge
-//! (in parallel), find the cost of the (goal/2)-th cheapest, collapse every edge below it
+//! (in parallel), find the cost of the (2·goal)-th cheapest, collapse every edge below it
 //! in mesh order, each vertex at most once per pass (several passes approximate the
 //! greedy order of a heap, without the heap's cache misses) → compact.
 //!
@@ -205,8 +205,7 @@ pub fn decimate(mesh: &mut TriMesh, options: &DecimateOptions) -> DecimateStats 
             .filter(|&(u, v)| !s.locked[u as usize] && !s.locked[v as usize])
             .map(|(u, v)| s.candidate(u, v))
             .collect();
-        // Collapse every edge cheaper than the cost of the (goal/2)-th cheapest candidate
-        // (the goal-th near the end),
+        // Collapse every edge cheaper than the cost of the (2·goal)-th cheapest candidate,
         // walking the edges in mesh order (spatially coherent, so the walk stays in cache),
         // each vertex at most once per pass; several passes approximate the greedy order
         // of a heap. A pass that collapses nothing lifts the limit once.
@@ -215,14 +214,11 @@ pub fn decimate(mesh: &mut TriMesh, options: &DecimateOptions) -> DecimateStats 
             f64::INFINITY
         } else {
             let mut costs: Vec<f64> = candidates.iter().map(|c| c.cost).collect();
-            // Half the goal keeps the order greedy; near the end (goal under 5 % of the
-            // edges) the whole goal, so that the tail does not take many passes.
-            let k = if goal * 20 < costs.len() {
-                goal
-            } else {
-                goal / 2
-            };
-            let k = k.min(costs.len() - 1);
+            // Twice the goal: with each vertex moved at most once per pass, about half of
+            // the edges below the limit can collapse. Measured on frame 25 and the box:
+            // as good as half the goal (greedier) in 9 passes instead of 18; four times
+            // the goal takes 3 passes but raises the box's flat normal error by 25 %.
+            let k = (2 * goal).min(costs.len() - 1);
             *costs.select_nth_unstable_by(k, f64::total_cmp).1
         };
         let mut done = 0;
