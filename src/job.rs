@@ -229,10 +229,4 @@ pub fn is_archive(path: &Path) -> bool {
         .is_some_and(|e| e.eq_ignore_ascii_case("mseq"))
 }
 
-/// Peak resident memory of this process so far (Linux `VmHWM`), bytes.
-pub fn peak_rss_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
-}
+pub use crate::pipeline::peak_rss_bytes;

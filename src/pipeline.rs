@@ -70,6 +70,8 @@ pub struct StageTiming {
     pub seconds: f64,
     /// Triangles of the fluid surface after the stage (0 before marching cubes).
     pub triangles: usize,
+    /// Peak resident memory of the process at the end of the stage (Linux), bytes.
+    pub peak_rss_bytes: Option<u64>,
 }
 
 /// Everything measured while reconstructing one frame.
@@ -104,6 +106,7 @@ impl ReconstructionStats {
             stage: stage.to_string(),
             seconds,
             triangles,
+            peak_rss_bytes: peak_rss_bytes(),
         });
     }
 
@@ -114,13 +117,21 @@ impl ReconstructionStats {
 
     /// A plain-text table of the stages (the paper's Table 1 for one frame).
     pub fn table(&self) -> String {
-        let mut out = format!("{:<18} {:>10} {:>12}\n", "stage", "time [ms]", "triangles");
+        let mut out = format!(
+            "{:<18} {:>10} {:>12} {:>14}\n",
+            "stage", "time [ms]", "triangles", "peak RSS [MiB]"
+        );
         for s in &self.stages {
+            let rss = s
+                .peak_rss_bytes
+                .map(|b| format!("{:.1}", b as f64 / (1 << 20) as f64))
+                .unwrap_or_else(|| "-".into());
             out += &format!(
-                "{:<18} {:>10.1} {:>12}\n",
+                "{:<18} {:>10.1} {:>12} {:>14}\n",
                 s.stage,
                 s.seconds * 1e3,
-                s.triangles
+                s.triangles,
+                rss
             );
         }
         out += &format!(
@@ -250,6 +261,14 @@ pub fn reconstruct_with_progress(
     );
 
     Ok((Surface { fluid, spheres }, stats))
+}
+
+/// Peak resident memory of this process so far (Linux `VmHWM`), bytes.
+pub fn peak_rss_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
 }
 
 /// Splits `positions` into (particles with a neighbour closer than `radius`, isolated
