@@ -100,10 +100,23 @@ impl Prediction {
 /// else by a known corner of that triangle, else by the previous vertex.
 fn prediction_plan(triangles: &[[u32; 3]], vertices: usize) -> Vec<Prediction> {
     let mut plan = Vec::with_capacity(vertices);
-    // Directed edge (a, b) of a known triangle → its third vertex.
-    let mut opposite: hashbrown::HashMap<(u32, u32), u32> =
-        hashbrown::HashMap::with_capacity(triangles.len() * 3);
-    for t in triangles {
+    // The last two triangles seen at every vertex: the neighbour across an edge (a, b) is
+    // looked for among those of a and b (a bounded search that encoder and decoder
+    // repeat identically; a miss falls back to the corner prediction).
+    let mut recent: Vec<[u32; 2]> = vec![[u32::MAX; 2]; vertices];
+    let opposite = |a: u32, b: u32, recent: &[[u32; 2]]| -> Option<u32> {
+        recent[a as usize]
+            .iter()
+            .chain(&recent[b as usize])
+            .filter(|&&t| t != u32::MAX)
+            .find_map(|&t| {
+                let tri = triangles[t as usize];
+                (0..3)
+                    .find(|&k| tri[k] == b && tri[(k + 1) % 3] == a)
+                    .map(|k| tri[(k + 2) % 3])
+            })
+    };
+    for (ti, t) in triangles.iter().enumerate() {
         for k in 0..3 {
             let v = t[k];
             if v as usize != plan.len() {
@@ -113,8 +126,8 @@ fn prediction_plan(triangles: &[[u32; 3]], vertices: usize) -> Vec<Prediction> {
             let known = |w: u32| (w as usize) < plan.len();
             let p = if known(a) && known(b) {
                 // The neighbour across (a, b) holds the directed edge (b, a).
-                match opposite.get(&(b, a)) {
-                    Some(&c) => Prediction::Parallelogram(a, b, c),
+                match opposite(a, b, &recent) {
+                    Some(c) => Prediction::Parallelogram(a, b, c),
                     None => Prediction::Corner(a),
                 }
             } else if known(a) {
@@ -128,8 +141,9 @@ fn prediction_plan(triangles: &[[u32; 3]], vertices: usize) -> Vec<Prediction> {
             };
             plan.push(p);
         }
-        for k in 0..3 {
-            opposite.insert((t[k], t[(k + 1) % 3]), t[(k + 2) % 3]);
+        for &v in t {
+            let r = &mut recent[v as usize];
+            *r = [ti as u32, r[0]];
         }
     }
     plan
