@@ -1,20 +1,28 @@
 //! The frame codec: a triangle mesh to bytes and back.
 //!
-//! * Vertices are renumbered in order of first use by the triangle list (unreferenced
-//!   vertices are dropped); triangles keep their order and corner order.
-//! * Connectivity: for every triangle corner, `0` when it introduces the next new vertex,
-//!   else `next − index` (≥ 1) as an unsigned LEB128 varint.
-//! * Positions: quantized to the lattice `q = round(x / step)` with `step = 2·bound`, so
-//!   each coordinate is within `bound` of the original; each vertex is predicted from the
-//!   vertices before it — the parallelogram `a + b − c` across an edge of the triangle that
-//!   introduces it (Touma & Gotsman 1998), else a corner of that triangle, else the
-//!   previous vertex — and the zigzag-coded residual written as a varint.
-//! * The two streams are concatenated (connectivity first) and compressed with zstd.
+//! **Connectivity** is coded along a depth-first traversal over shared edges. Every coded
+//! triangle pushes its edges as *gates* on a stack; popping a gate `(x, y)` writes one
+//! flag — whether an uncoded triangle lies across it (holding the directed edge `(y, x)`)
+//! — and, if so, that triangle's third vertex: `0` for the next new vertex, else
+//! `next − index` as a varint. When the stack runs empty, the first uncoded triangle in
+//! input order starts a new traversal with its three vertices. Any triangle list round
+//! trips (non-manifold or inconsistently oriented parts simply start new traversals);
+//! triangles come back in traversal order with their corners rotated, vertices numbered in
+//! order of first use (unreferenced vertices are dropped).
 //!
-//! Normals are not stored: decoders recompute area-weighted normals.
+//! **Positions** are quantized to the lattice `q = round(x / step)`, `step = 2·bound`, so
+//! every coordinate is within `bound` of the original. A vertex introduced across a gate
+//! is predicted by the parallelogram `x + y − z` of the gate's triangle `(x, y, z)`
+//! (Touma & Gotsman 1998); a vertex of a traversal's first triangle by a known corner of
+//! it, else by the previous vertex. Residuals are zigzag varints.
+//!
+//! Three streams (flags, vertex codes, residuals), each prefixed by its byte length as a
+//! varint, compressed together with zstd. Normals are not stored: decoders recompute
+//! area-weighted normals.
 
 use crate::mesh::TriMesh;
 use glam::Vec3;
+use rayon::prelude::*;
 
 fn put_varint(out: &mut Vec<u8>, mut v: u64) {
     while v >= 0x80 {
@@ -45,146 +53,188 @@ fn unzigzag(v: u64) -> i64 {
     ((v >> 1) as i64) ^ -((v & 1) as i64)
 }
 
-/// The mesh reordered for coding: vertices in first-use order.
-pub(crate) fn reorder(mesh: &TriMesh) -> TriMesh {
-    let mut remap = vec![u32::MAX; mesh.positions.len()];
-    let mut positions = Vec::with_capacity(mesh.positions.len());
-    let triangles = mesh
-        .triangles
-        .iter()
-        .map(|t| {
-            t.map(|v| {
-                if remap[v as usize] == u32::MAX {
-                    remap[v as usize] = positions.len() as u32;
-                    positions.push(mesh.positions[v as usize]);
-                }
-                remap[v as usize]
-            })
-        })
-        .collect();
-    TriMesh {
-        positions,
-        triangles,
-        normals: Vec::new(),
-    }
-}
-
 /// How a vertex is predicted from vertices introduced before it.
 #[derive(Clone, Copy)]
 enum Prediction {
-    /// The first vertex: the origin.
     Origin,
-    /// The previous vertex in order.
-    Previous(u32),
-    /// Another corner of the introducing triangle.
-    Corner(u32),
-    /// The parallelogram `a + b − c` across edge `ab` from the triangle `abc`.
+    Vertex(u32),
     Parallelogram(u32, u32, u32),
 }
 
 impl Prediction {
-    fn resolve(self, q: impl Fn(u32) -> [i64; 3]) -> [i64; 3] {
+    fn resolve(self, q: &[[i64; 3]]) -> [i64; 3] {
         match self {
             Prediction::Origin => [0; 3],
-            Prediction::Previous(v) | Prediction::Corner(v) => q(v),
+            Prediction::Vertex(v) => q[v as usize],
             Prediction::Parallelogram(a, b, c) => {
-                let (a, b, c) = (q(a), q(b), q(c));
+                let (a, b, c) = (q[a as usize], q[b as usize], q[c as usize]);
                 [0, 1, 2].map(|k| a[k] + b[k] - c[k])
             }
         }
     }
 }
 
-/// For every vertex (in first-use order), how it is predicted: by the parallelogram rule
-/// across an edge of its introducing triangle whose other triangle is already known,
-/// else by a known corner of that triangle, else by the previous vertex.
-fn prediction_plan(triangles: &[[u32; 3]], vertices: usize) -> Vec<Prediction> {
-    let mut plan = Vec::with_capacity(vertices);
-    // The last two triangles seen at every vertex: the neighbour across an edge (a, b) is
-    // looked for among those of a and b (a bounded search that encoder and decoder
-    // repeat identically; a miss falls back to the corner prediction).
-    let mut recent: Vec<[u32; 2]> = vec![[u32::MAX; 2]; vertices];
-    let opposite = |a: u32, b: u32, recent: &[[u32; 2]]| -> Option<u32> {
-        recent[a as usize]
-            .iter()
-            .chain(&recent[b as usize])
-            .filter(|&&t| t != u32::MAX)
-            .find_map(|&t| {
-                let tri = triangles[t as usize];
-                (0..3)
-                    .find(|&k| tri[k] == b && tri[(k + 1) % 3] == a)
-                    .map(|k| tri[(k + 2) % 3])
-            })
+/// The shared bookkeeping of encoder and decoder: new vertex numbers and predictions.
+struct Numbering {
+    next: u32,
+    plan: Vec<Prediction>,
+}
+
+impl Numbering {
+    /// The prediction of a traversal's first-triangle corner: a known corner, else the
+    /// previous vertex.
+    fn root_prediction(&self, known_corner: Option<u32>) -> Prediction {
+        match known_corner {
+            Some(v) => Prediction::Vertex(v),
+            None if self.next == 0 => Prediction::Origin,
+            None => Prediction::Vertex(self.next - 1),
+        }
+    }
+}
+
+/// A gate: directed edge `(x, y)` of a coded triangle whose third vertex is `z` (new ids).
+type Gate = [u32; 3];
+
+fn push_gates(stack: &mut Vec<Gate>, t: [u32; 3], skip_first: bool) {
+    // Pushed in reverse so that the triangle's first edge is explored first.
+    for k in (0..3).rev() {
+        if skip_first && k == 0 {
+            continue;
+        }
+        stack.push([t[k], t[(k + 1) % 3], t[(k + 2) % 3]]);
+    }
+}
+
+/// Encodes `mesh` with quantization step `step` (world units) and zstd `level`. Returns
+/// the payload and the vertex and triangle counts it holds.
+pub(crate) fn encode(
+    mesh: &TriMesh,
+    step: f64,
+    level: i32,
+) -> std::io::Result<(Vec<u8>, u32, u32)> {
+    let tris = &mesh.triangles;
+    let n = tris.len();
+    // Half-edge h = 3t + k runs from corner k to corner k+1 of triangle t. `by_key` lists
+    // the half-edges sorted by their undirected edge, so that the half-edges of one edge
+    // (two on a manifold) are neighbours; `position[h]` is where h stands in it.
+    let half_edge = |h: usize| {
+        let t = tris[h / 3];
+        (t[h % 3], t[(h % 3 + 1) % 3])
     };
-    for (ti, t) in triangles.iter().enumerate() {
-        for k in 0..3 {
-            let v = t[k];
-            if v as usize != plan.len() {
-                continue;
-            }
-            let (a, b) = (t[(k + 1) % 3], t[(k + 2) % 3]);
-            let known = |w: u32| (w as usize) < plan.len();
-            let p = if known(a) && known(b) {
-                // The neighbour across (a, b) holds the directed edge (b, a).
-                match opposite(a, b, &recent) {
-                    Some(c) => Prediction::Parallelogram(a, b, c),
-                    None => Prediction::Corner(a),
-                }
-            } else if known(a) {
-                Prediction::Corner(a)
-            } else if known(b) {
-                Prediction::Corner(b)
-            } else if plan.is_empty() {
-                Prediction::Origin
-            } else {
-                Prediction::Previous(plan.len() as u32 - 1)
-            };
-            plan.push(p);
-        }
-        for &v in t {
-            let r = &mut recent[v as usize];
-            *r = [ti as u32, r[0]];
-        }
-    }
-    plan
-}
-
-fn predict(triangles: &[[u32; 3]], vertices: usize, q: impl Fn(u32) -> [i64; 3]) -> Vec<[i64; 3]> {
-    prediction_plan(triangles, vertices)
-        .into_iter()
-        .map(|p| p.resolve(&q))
-        .collect()
-}
-
-/// Encodes `mesh` (already in first-use order, see [`reorder`]) with quantization step
-/// `step` (world units) and zstd `level`.
-pub(crate) fn encode(mesh: &TriMesh, step: f64, level: i32) -> std::io::Result<Vec<u8>> {
-    let mut raw = Vec::with_capacity(mesh.triangles.len() * 4 + mesh.positions.len() * 4);
-    let mut next = 0u32;
-    for t in &mesh.triangles {
-        for &v in t {
-            if v == next {
-                put_varint(&mut raw, 0);
-                next += 1;
-            } else {
-                put_varint(&mut raw, (next - v) as u64);
-            }
-        }
-    }
-    let quantized: Vec<[i64; 3]> = mesh
-        .positions
-        .iter()
-        .map(|p| p.to_array().map(|c| (c as f64 / step).round() as i64))
+    let mut by_key: Vec<(u32, u32, u32)> = (0..3 * n)
+        .map(|h| {
+            let (a, b) = half_edge(h);
+            (a.min(b), a.max(b), h as u32)
+        })
         .collect();
-    let predictions = predict(&mesh.triangles, mesh.positions.len(), |v| {
-        quantized[v as usize]
-    });
-    for (q, pred) in quantized.iter().zip(&predictions) {
+    by_key.par_sort_unstable();
+    let mut position = vec![0u32; 3 * n];
+    for (i, e) in by_key.iter().enumerate() {
+        position[e.2 as usize] = i as u32;
+    }
+    let mut coded = vec![false; n];
+    let mut new_id = vec![u32::MAX; mesh.positions.len()];
+    let mut old_of_new: Vec<u32> = Vec::new();
+    let mut numbering = Numbering {
+        next: 0,
+        plan: Vec::new(),
+    };
+    let (mut flags, mut codes) = (Vec::with_capacity(2 * n), Vec::with_capacity(2 * n));
+    let mut emit =
+        |v: u32, prediction: Prediction, numbering: &mut Numbering, codes: &mut Vec<u8>| -> u32 {
+            let id = new_id[v as usize];
+            if id == u32::MAX {
+                new_id[v as usize] = numbering.next;
+                old_of_new.push(v);
+                numbering.plan.push(prediction);
+                numbering.next += 1;
+                put_varint(codes, 0);
+                numbering.next - 1
+            } else {
+                put_varint(codes, (numbering.next - id) as u64);
+                id
+            }
+        };
+    // The stack holds gates in new ids, and in parallel their half-edges.
+    let mut stack: Vec<Gate> = Vec::new();
+    let mut gate_edge: Vec<u32> = Vec::new();
+    let (mut done, mut cursor) = (0usize, 0usize);
+    while done < n {
+        if stack.is_empty() {
+            while coded[cursor] {
+                cursor += 1;
+            }
+            let t = tris[cursor];
+            coded[cursor] = true;
+            done += 1;
+            let mut ids = [0u32; 3];
+            for k in 0..3 {
+                let known = (0..k).map(|j| ids[j]).next();
+                let p = numbering.root_prediction(known);
+                ids[k] = emit(t[k], p, &mut numbering, &mut codes);
+            }
+            push_gates(&mut stack, ids, false);
+            for k in (0..3).rev() {
+                gate_edge.push((3 * cursor + k) as u32);
+            }
+            continue;
+        }
+        let [x, y, z] = stack.pop().expect("non-empty");
+        let h = gate_edge.pop().expect("parallel to the stack") as usize;
+        let (ox, oy) = half_edge(h);
+        let key = (ox.min(oy), ox.max(oy));
+        let mut first = position[h] as usize;
+        while first > 0 && (by_key[first - 1].0, by_key[first - 1].1) == key {
+            first -= 1;
+        }
+        let found = by_key[first..]
+            .iter()
+            .take_while(|e| (e.0, e.1) == key)
+            .map(|e| e.2)
+            .find(|&e| half_edge(e as usize) == (oy, ox) && !coded[e as usize / 3]);
+        let Some(e) = found else {
+            flags.push(0);
+            continue;
+        };
+        flags.push(1);
+        let t = e as usize / 3;
+        coded[t] = true;
+        done += 1;
+        // The triangle holds (oy, ox) at corner k = e % 3; its third corner follows.
+        let k = e as usize % 3;
+        let ow = tris[t][(k + 2) % 3];
+        let w = emit(
+            ow,
+            Prediction::Parallelogram(x, y, z),
+            &mut numbering,
+            &mut codes,
+        );
+        push_gates(&mut stack, [y, x, w], true);
+        // Gates (w, y) and (x, w) in push order: half-edges k+2 then k+1 of t.
+        gate_edge.push((3 * t + (k + 2) % 3) as u32);
+        gate_edge.push((3 * t + (k + 1) % 3) as u32);
+    }
+    let quantized: Vec<[i64; 3]> = old_of_new
+        .iter()
+        .map(|&v| {
+            mesh.positions[v as usize]
+                .to_array()
+                .map(|c| (c as f64 / step).round() as i64)
+        })
+        .collect();
+    let mut residuals = Vec::with_capacity(quantized.len() * 4);
+    for (v, q) in quantized.iter().enumerate() {
+        let pred = numbering.plan[v].resolve(&quantized);
         for k in 0..3 {
-            put_varint(&mut raw, zigzag(q[k] - pred[k]));
+            put_varint(&mut residuals, zigzag(q[k] - pred[k]));
         }
     }
-    zstd::bulk::compress(&raw, level)
+    let mut raw = Vec::with_capacity(flags.len() + codes.len() + residuals.len() + 16);
+    for stream in [&flags, &codes, &residuals] {
+        put_varint(&mut raw, stream.len() as u64);
+        raw.extend_from_slice(stream);
+    }
+    Ok((zstd::bulk::compress(&raw, level)?, numbering.next, n as u32))
 }
 
 /// Decodes a payload of `vertices` vertices and `triangles` triangles.
@@ -194,53 +244,89 @@ pub(crate) fn decode(
     triangles: usize,
     step: f64,
 ) -> Result<TriMesh, String> {
-    let capacity = triangles * 3 * 5 + vertices * 30 + 64;
+    let capacity = triangles * 8 + vertices * 30 + 64;
     let raw = zstd::bulk::decompress(payload, capacity).map_err(|e| format!("zstd: {e}"))?;
     let mut pos = 0;
-    let mut next = 0u32;
-    let mut tris = Vec::with_capacity(triangles);
-    for _ in 0..triangles {
-        let mut t = [0u32; 3];
-        for slot in &mut t {
-            let d = get_varint(&raw, &mut pos).ok_or("connectivity stream ends early")?;
-            *slot = if d == 0 {
-                next += 1;
-                next - 1
-            } else {
-                next.checked_sub(d as u32)
-                    .ok_or("connectivity refers before the first vertex")?
-            };
-        }
-        tris.push(t);
+    let mut streams: Vec<&[u8]> = Vec::with_capacity(3);
+    for name in ["flag", "vertex code", "position"] {
+        let len =
+            get_varint(&raw, &mut pos).ok_or(format!("{name} stream length missing"))? as usize;
+        let s = raw
+            .get(pos..pos + len)
+            .ok_or(format!("{name} stream cut off"))?;
+        streams.push(s);
+        pos += len;
     }
-    if next as usize != vertices {
+    if pos != raw.len() {
+        return Err("trailing bytes after the streams".into());
+    }
+    let (flags, codes, residual_bytes) = (streams[0], streams[1], streams[2]);
+    let (mut fpos, mut cpos) = (0usize, 0usize);
+    let mut numbering = Numbering {
+        next: 0,
+        plan: Vec::with_capacity(vertices),
+    };
+    let mut read = |prediction: Prediction, numbering: &mut Numbering| -> Result<u32, String> {
+        let d = get_varint(codes, &mut cpos).ok_or("vertex code stream ends early")?;
+        if d == 0 {
+            numbering.plan.push(prediction);
+            numbering.next += 1;
+            Ok(numbering.next - 1)
+        } else {
+            numbering
+                .next
+                .checked_sub(d as u32)
+                .ok_or_else(|| "vertex code refers before the first vertex".to_string())
+        }
+    };
+    let mut tris: Vec<[u32; 3]> = Vec::with_capacity(triangles);
+    let mut stack: Vec<Gate> = Vec::new();
+    while tris.len() < triangles {
+        match stack.pop() {
+            None => {
+                let mut ids = [0u32; 3];
+                for k in 0..3 {
+                    let known = (0..k).map(|j| ids[j]).next();
+                    let p = numbering.root_prediction(known);
+                    ids[k] = read(p, &mut numbering)?;
+                }
+                tris.push(ids);
+                push_gates(&mut stack, ids, false);
+            }
+            Some([x, y, z]) => {
+                let flag = *flags.get(fpos).ok_or("flag stream ends early")?;
+                fpos += 1;
+                if flag == 0 {
+                    continue;
+                }
+                let w = read(Prediction::Parallelogram(x, y, z), &mut numbering)?;
+                let ids = [y, x, w];
+                tris.push(ids);
+                push_gates(&mut stack, ids, true);
+            }
+        }
+    }
+    if numbering.next as usize != vertices {
         return Err(format!(
-            "connectivity introduces {next} vertices, header says {vertices}"
+            "connectivity introduces {} vertices, header says {vertices}",
+            numbering.next
         ));
     }
-    // Residuals first, then predictions resolved in vertex order (each prediction reads
-    // only vertices introduced before).
-    let mut residuals = Vec::with_capacity(vertices);
-    for _ in 0..vertices {
-        let mut r = [0i64; 3];
-        for slot in &mut r {
-            *slot = unzigzag(get_varint(&raw, &mut pos).ok_or("position stream ends early")?);
-        }
-        residuals.push(r);
-    }
     let mut quantized: Vec<[i64; 3]> = Vec::with_capacity(vertices);
-    let plan = prediction_plan(&tris, vertices);
-    for (v, r) in residuals.iter().enumerate() {
-        let pred = plan[v].resolve(|w| quantized[w as usize]);
-        quantized.push([0, 1, 2].map(|k| pred[k] + r[k]));
+    let mut rpos = 0;
+    for v in 0..vertices {
+        let pred = numbering.plan[v].resolve(&quantized);
+        let mut q = [0i64; 3];
+        for k in 0..3 {
+            let d = get_varint(residual_bytes, &mut rpos).ok_or("position stream ends early")?;
+            q[k] = pred[k] + unzigzag(d);
+        }
+        quantized.push(q);
     }
-    let positions: Vec<Vec3> = quantized
+    let positions = quantized
         .iter()
         .map(|q| Vec3::from_array(q.map(|c| (c as f64 * step) as f32)))
         .collect();
-    if pos != raw.len() {
-        return Err("trailing bytes after the position stream".into());
-    }
     let mut mesh = TriMesh {
         positions,
         triangles: tris,
@@ -268,5 +354,50 @@ mod tests {
         for v in [0i64, -1, 1, -1000, 1 << 40, i64::MIN / 2] {
             assert_eq!(unzigzag(zigzag(v)), v);
         }
+    }
+
+    #[test]
+    fn any_triangle_soup_round_trips() {
+        // Non-manifold edge (three triangles on 0-1), a flipped triangle, a repeated
+        // vertex, an isolated triangle and an unreferenced vertex.
+        let positions: Vec<Vec3> = (0..9)
+            .map(|i| Vec3::new(i as f32, (i * i % 5) as f32, (i % 3) as f32))
+            .collect();
+        let triangles = vec![
+            [0, 1, 2],
+            [1, 0, 3],
+            [0, 1, 4],
+            [2, 1, 3],
+            [3, 3, 4],
+            [6, 7, 8],
+        ];
+        let mesh = TriMesh {
+            positions: positions.clone(),
+            triangles: triangles.clone(),
+            normals: vec![],
+        };
+        let (payload, nv, nt) = encode(&mesh, 0.01, 3).unwrap();
+        assert_eq!((nv, nt), (8, 6));
+        let back = decode(&payload, nv as usize, nt as usize, 0.01).unwrap();
+        let canon = |m: &TriMesh| {
+            let mut set: Vec<[[i64; 3]; 3]> = m
+                .triangles
+                .iter()
+                .map(|t| {
+                    let c = t.map(|v| {
+                        m.positions[v as usize]
+                            .to_array()
+                            .map(|x| (x * 100.0).round() as i64)
+                    });
+                    (0..3)
+                        .map(|r| [c[r], c[(r + 1) % 3], c[(r + 2) % 3]])
+                        .min()
+                        .unwrap()
+                })
+                .collect();
+            set.sort();
+            set
+        };
+        assert_eq!(canon(&back), canon(&mesh));
     }
 }

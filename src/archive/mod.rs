@@ -9,9 +9,10 @@
 //! [`ArchiveReader::read_frame`] is O(1) by frame number; [`ArchiveReader::verify`]
 //! decodes everything and names damaged frames.
 //!
-//! Round trip: connectivity exactly, up to renumbering the vertices in order of first use
-//! (unreferenced vertices are dropped; triangle order and corner order are kept); every
-//! coordinate within the error bound; normals recomputed (area-weighted) on decoding.
+//! Round trip: connectivity exactly, up to a permutation of the triangles (traversal
+//! order), a rotation of each triangle's corners (orientation kept) and a renumbering of
+//! the vertices (order of first use; unreferenced vertices are dropped); every coordinate
+//! within the error bound; normals recomputed (area-weighted) on decoding.
 
 mod codec;
 
@@ -404,14 +405,13 @@ impl ArchiveWriter {
                 "the archive already holds this frame",
             ));
         }
-        let ordered = codec::reorder(mesh);
         let step = 2.0 * self.options.error_bound;
-        let payload = codec::encode(&ordered, step, self.options.zstd_level)
+        let (payload, vertices, triangles) = codec::encode(mesh, step, self.options.zstd_level)
             .map_err(|e| Error::io(&self.path, e))?;
         let header = RecordHeader {
             number,
-            vertices: ordered.positions.len() as u32,
-            triangles: ordered.triangles.len() as u32,
+            vertices,
+            triangles,
             step,
             payload_len: payload.len() as u64,
             payload_crc: crc32fast::hash(&payload),
