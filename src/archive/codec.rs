@@ -22,7 +22,6 @@
 
 use crate::mesh::TriMesh;
 use glam::Vec3;
-use rayon::prelude::*;
 
 fn put_varint(out: &mut Vec<u8>, mut v: u64) {
     while v >= 0x80 {
@@ -114,23 +113,28 @@ pub(crate) fn encode(
 ) -> std::io::Result<(Vec<u8>, u32, u32)> {
     let tris = &mesh.triangles;
     let n = tris.len();
-    // Half-edge h = 3t + k runs from corner k to corner k+1 of triangle t. `by_key` lists
-    // the half-edges sorted by their undirected edge, so that the half-edges of one edge
-    // (two on a manifold) are neighbours; `position[h]` is where h stands in it.
+    // Half-edge h = 3t + k runs from corner k to corner k+1 of triangle t. Half-edges are
+    // bucketed by the smaller vertex of their edge (a counting sort, ascending h within a
+    // bucket), so the half-edges of one edge are found among a handful of entries.
     let half_edge = |h: usize| {
         let t = tris[h / 3];
         (t[h % 3], t[(h % 3 + 1) % 3])
     };
-    let mut by_key: Vec<(u32, u32, u32)> = (0..3 * n)
-        .map(|h| {
-            let (a, b) = half_edge(h);
-            (a.min(b), a.max(b), h as u32)
-        })
-        .collect();
-    by_key.par_sort_unstable();
-    let mut position = vec![0u32; 3 * n];
-    for (i, e) in by_key.iter().enumerate() {
-        position[e.2 as usize] = i as u32;
+    let mut bucket_start = vec![0u32; mesh.positions.len() + 1];
+    for h in 0..3 * n {
+        let (a, b) = half_edge(h);
+        bucket_start[a.min(b) as usize + 1] += 1;
+    }
+    for v in 0..mesh.positions.len() {
+        bucket_start[v + 1] += bucket_start[v];
+    }
+    let mut fill = bucket_start.clone();
+    let mut bucket = vec![0u32; 3 * n];
+    for h in 0..3 * n {
+        let (a, b) = half_edge(h);
+        let slot = &mut fill[a.min(b) as usize];
+        bucket[*slot as usize] = h as u32;
+        *slot += 1;
     }
     let mut coded = vec![false; n];
     let mut new_id = vec![u32::MAX; mesh.positions.len()];
@@ -182,15 +186,10 @@ pub(crate) fn encode(
         let [x, y, z] = stack.pop().expect("non-empty");
         let h = gate_edge.pop().expect("parallel to the stack") as usize;
         let (ox, oy) = half_edge(h);
-        let key = (ox.min(oy), ox.max(oy));
-        let mut first = position[h] as usize;
-        while first > 0 && (by_key[first - 1].0, by_key[first - 1].1) == key {
-            first -= 1;
-        }
-        let found = by_key[first..]
+        let low = ox.min(oy) as usize;
+        let found = bucket[bucket_start[low] as usize..bucket_start[low + 1] as usize]
             .iter()
-            .take_while(|e| (e.0, e.1) == key)
-            .map(|e| e.2)
+            .copied()
             .find(|&e| half_edge(e as usize) == (oy, ox) && !coded[e as usize / 3]);
         let Some(e) = found else {
             flags.push(0);
