@@ -3,8 +3,9 @@
 
 use crate::archive::{ArchiveOptions, ArchiveWriter};
 use crate::error::{Error, Result};
-use crate::io::mesh::{write_surface, MeshWriteOptions};
+use crate::io::mesh::{write_sequence_gltf, write_surface, MeshWriteOptions};
 use crate::io::particles::{read_particles, ParticleFormat};
+use crate::mesh::TriMesh;
 use crate::pipeline::{reconstruct_with_progress, ReconstructOptions, ReconstructionStats};
 use crate::sequence::{self, Frame};
 use std::path::{Path, PathBuf};
@@ -22,6 +23,18 @@ pub struct JobOptions {
     pub skip_existing: bool,
     /// Error bound of `.mseq` outputs, world units.
     pub archive_error_bound: f64,
+    /// Playback rate of a sequence written into one glTF, frames per second.
+    pub fps: f32,
+}
+
+/// Where a reconstructed frame goes.
+pub enum Sink<'a> {
+    /// Its own mesh file.
+    File,
+    /// Appended to an open archive.
+    Archive(&'a mut ArchiveWriter),
+    /// Kept (fluid and spheres merged) for a sequence glTF written at the end.
+    Collect(&'a mut Vec<TriMesh>),
 }
 
 /// The outcome of one frame.
@@ -45,15 +58,15 @@ pub struct FrameReport {
     pub output_bytes: u64,
 }
 
-/// Reads `input`, reconstructs it and writes `output` — or, with `archive`, appends it
-/// there as frame `frame_number` (fluid and spheres merged). `on_stage` is told when a
-/// phase starts ("read", "reconstruct", "write").
+/// Reads `input`, reconstructs it and sends it to `sink`: the file `output`, an archive
+/// (as frame `frame_number`, fluid and spheres merged) or a collection. `on_stage` is told
+/// when a phase starts ("read", "reconstruct", "write").
 pub fn reconstruct_file(
     input: &Path,
     output: &Path,
     options: &ReconstructOptions,
     job: &JobOptions,
-    archive: Option<&mut ArchiveWriter>,
+    sink: Sink,
     frame_number: i64,
     on_stage: &mut dyn FnMut(&str),
 ) -> Result<FrameReport> {
@@ -76,9 +89,13 @@ pub fn reconstruct_file(
     drop(particles);
     on_stage("write");
     let clock = Instant::now();
-    let written = match archive {
-        Some(writer) => writer.append(frame_number, &surface.merged())?,
-        None => write_surface(output, &surface, &job.write)?.bytes,
+    let written = match sink {
+        Sink::Archive(writer) => writer.append(frame_number, &surface.merged())?,
+        Sink::Collect(frames) => {
+            frames.push(surface.merged());
+            0
+        }
+        Sink::File => write_surface(output, &surface, &job.write)?.bytes,
     };
     let write_seconds = clock.elapsed().as_secs_f64();
     reconstruction.push_stage("write", write_seconds, reconstruction.fluid_triangles);
@@ -126,14 +143,14 @@ pub fn plan_frames(
                 PathBuf::from(output),
             )])
         }
-        (true, false) if is_archive(Path::new(output)) => Ok(sequence::frames(input, start, end)?
+        (true, false) if is_archive(Path::new(output)) || is_gltf(Path::new(output)) => Ok(sequence::frames(input, start, end)?
             .into_iter()
             .map(|f| (f, PathBuf::from(output)))
             .collect()),
         (true, false) => Err(Error::InvalidOption {
             option: "--output",
             message: format!(
-                "INPUT {input:?} is a sequence pattern, so OUTPUT {output:?} needs a {{}} too"
+                "INPUT {input:?} is a sequence pattern, so OUTPUT {output:?} needs a {{}} too (or is one .mseq, .glb or .gltf for the whole sequence)"
             ),
         }),
         (false, true) => Err(Error::InvalidOption {
@@ -172,12 +189,17 @@ pub fn run_frames(
         .as_ref()
         .map(|a| a.frame_numbers())
         .unwrap_or_default();
+    // A pattern written into one .glb/.gltf: frames are kept and written together.
+    let sequence_gltf = plan.first().is_some_and(|(f, out)| {
+        !f.label.is_empty() && is_gltf(out) && plan.iter().all(|(_, o)| o == out)
+    });
+    let mut collected: Vec<TriMesh> = Vec::new();
     let mut reports = Vec::with_capacity(plan.len());
     for (i, (frame, output)) in plan.iter().enumerate() {
         on_frame(i, frame);
         let exists = match &archive {
             Some(_) => archived.contains(&frame.number),
-            None => output.exists(),
+            None => !sequence_gltf && output.exists(),
         };
         if archive.is_some() && exists && !job.skip_existing {
             return Err(Error::InvalidOption {
@@ -204,12 +226,17 @@ pub fn run_frames(
             if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
                 std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
             }
+            let sink = match archive.as_mut() {
+                Some(writer) => Sink::Archive(writer),
+                None if sequence_gltf => Sink::Collect(&mut collected),
+                None => Sink::File,
+            };
             reconstruct_file(
                 &frame.input,
                 output,
                 options,
                 job,
-                archive.as_mut(),
+                sink,
                 frame.number,
                 on_stage,
             )?
@@ -220,7 +247,20 @@ pub fn run_frames(
     if let Some(writer) = archive {
         writer.finish()?;
     }
+    if sequence_gltf {
+        let (_, out) = &plan[0];
+        let written = write_sequence_gltf(out, &collected, job.fps, &job.write)?;
+        if let Some(last) = reports.last_mut() {
+            last.output_bytes = written.bytes;
+        }
+    }
     Ok(reports)
+}
+
+/// True when `path` names a glTF file (`.glb`, `.gltf`).
+pub fn is_gltf(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("glb") || e.eq_ignore_ascii_case("gltf"))
 }
 
 /// True when `path` names a `.mseq` archive.

@@ -152,6 +152,9 @@ struct ReconstructArgs {
     /// Error bound of a `.mseq` output, multiples of r (each coordinate within it).
     #[arg(long, default_value_t = 0.01)]
     error_bound: f64,
+    /// Playback rate of a sequence written into one .glb/.gltf, frames per second.
+    #[arg(long, default_value_t = 24.0)]
+    fps: f32,
     /// Do not write vertex normals.
     #[arg(long)]
     no_normals: bool,
@@ -366,7 +369,11 @@ fn reconstruct(args: &ReconstructArgs) -> Result<(), String> {
         },
         skip_existing: args.skip_existing,
         archive_error_bound: args.error_bound * args.particle_radius as f64,
+        fps: args.fps,
     };
+    if !(args.fps.is_finite() && args.fps > 0.0) {
+        return Err(format!("--fps must be > 0, got {}", args.fps));
+    }
     let bar = if args.quiet {
         ProgressBar::hidden()
     } else {

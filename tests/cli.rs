@@ -232,3 +232,49 @@ fn archives_collect_a_sequence_and_extract_frames() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stdout).contains("DAMAGED"));
 }
+
+#[test]
+fn a_sequence_into_one_gltf_plays_frame_by_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    for k in [1, 6, 13] {
+        std::fs::copy(
+            dataset(&format!("double_dambreak/ParticleData_Fluid_{k}.xyz")),
+            dir.path().join(format!("f_{k}.xyz")),
+        )
+        .unwrap();
+    }
+    let input = format!("{}/f_{{}}.xyz", dir.path().display());
+    let out = dir.path().join("seq.glb");
+    let (ok, err) = run(&[
+        "reconstruct",
+        &input,
+        "-r",
+        "0.025",
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+        "--fps",
+        "10",
+    ]);
+    assert!(ok, "{err}");
+    let gltf = gltf::Gltf::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    assert_eq!(gltf.nodes().count(), 3);
+    assert_eq!(gltf.meshes().count(), 3);
+    let animation = gltf.animations().next().expect("one animation");
+    assert_eq!(animation.channels().count(), 3);
+    for (i, channel) in animation.channels().enumerate() {
+        assert_eq!(channel.target().node().index(), i);
+        assert_eq!(
+            channel.target().property(),
+            gltf::animation::Property::Scale
+        );
+        assert_eq!(
+            channel.sampler().interpolation(),
+            gltf::animation::Interpolation::Step
+        );
+        assert_eq!(channel.sampler().input().count(), 3);
+    }
+    // Only the first frame is visible before the animation starts.
+    let scales: Vec<[f32; 3]> = gltf.nodes().map(|n| n.transform().decomposed().2).collect();
+    assert_eq!(scales, [[1.0; 3], [0.0; 3], [0.0; 3]]);
+}

@@ -36,6 +36,18 @@ impl Builder {
         self.views.len() - 1
     }
 
+    /// A buffer view without a target (animation data).
+    fn push_view_untargeted(&mut self, bytes: &[u8]) -> usize {
+        while self.bin.len() % 4 != 0 {
+            self.bin.push(0);
+        }
+        let offset = self.bin.len();
+        self.bin.extend_from_slice(bytes);
+        self.views
+            .push(json!({"buffer": 0, "byteOffset": offset, "byteLength": bytes.len()}));
+        self.views.len() - 1
+    }
+
     fn push_accessor(&mut self, value: Value) -> usize {
         self.accessors.push(value);
         self.accessors.len() - 1
@@ -134,6 +146,80 @@ pub(super) fn build(surface: &Surface, normals: bool) -> Document {
         json["accessors"] = json!(b.accessors);
         json["bufferViews"] = json!(b.views);
         json["buffers"] = json!([{"byteLength": b.bin.len()}]);
+    }
+    Document {
+        json,
+        bin: b.bin,
+        vertices,
+    }
+}
+
+/// A sequence: one node per frame (fluid and spheres merged into one mesh), shown in turn
+/// by a step-interpolated scale animation (scale 1 during its frame, 0 otherwise) at
+/// `fps` frames per second.
+pub(super) fn build_sequence(frames: &[TriMesh], fps: f32, normals: bool) -> Document {
+    let mut b = Builder {
+        bin: Vec::new(),
+        views: Vec::new(),
+        accessors: Vec::new(),
+    };
+    let mut meshes = Vec::new();
+    let mut nodes = Vec::new();
+    let mut vertices = 0;
+    let n = frames.len();
+    for (i, mesh) in frames.iter().enumerate() {
+        let mut node = json!({"name": format!("frame_{i}"), "scale": if i == 0 { [1.0, 1.0, 1.0] } else { [0.0, 0.0, 0.0] }});
+        if mesh.triangle_count() > 0 {
+            let p = b.primitive(mesh, normals);
+            meshes.push(json!({"name": format!("frame_{i}"), "primitives": [p]}));
+            node["mesh"] = json!(meshes.len() - 1);
+            vertices += mesh.vertex_count();
+        }
+        nodes.push(node);
+    }
+    // Shared key times, then one scale track per node.
+    let mut times = Vec::with_capacity(n * 4);
+    for k in 0..n {
+        times.extend_from_slice(&(k as f32 / fps).to_le_bytes());
+    }
+    let view = b.push_view_untargeted(&times);
+    let input = b.push_accessor(json!({
+        "bufferView": view, "componentType": FLOAT, "count": n, "type": "SCALAR",
+        "min": [0.0], "max": [(n.saturating_sub(1)) as f32 / fps]
+    }));
+    let mut samplers = Vec::with_capacity(n);
+    let mut channels = Vec::with_capacity(n);
+    for i in 0..n {
+        let mut scales = Vec::with_capacity(n * 12);
+        for k in 0..n {
+            let v: f32 = if k == i { 1.0 } else { 0.0 };
+            for _ in 0..3 {
+                scales.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        let view = b.push_view_untargeted(&scales);
+        let output = b.push_accessor(json!({
+            "bufferView": view, "componentType": FLOAT, "count": n, "type": "VEC3"
+        }));
+        samplers.push(json!({"input": input, "output": output, "interpolation": "STEP"}));
+        channels.push(json!({"sampler": i, "target": {"node": i, "path": "scale"}}));
+    }
+    while b.bin.len() % 4 != 0 {
+        b.bin.push(0);
+    }
+    let roots: Vec<usize> = (0..n).collect();
+    let mut json = json!({
+        "asset": {"version": "2.0", "generator": concat!("meniscus ", env!("CARGO_PKG_VERSION"))},
+        "scene": 0,
+        "scenes": [{"nodes": roots}],
+        "nodes": nodes,
+        "accessors": b.accessors,
+        "bufferViews": b.views,
+        "buffers": [{"byteLength": b.bin.len()}],
+        "animations": [{"name": "sequence", "samplers": samplers, "channels": channels}],
+    });
+    if !meshes.is_empty() {
+        json["meshes"] = json!(meshes);
     }
     Document {
         json,

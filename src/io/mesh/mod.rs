@@ -19,7 +19,7 @@ pub use read::read_mesh;
 
 use crate::error::{Error, Result};
 use crate::io::atomic::write_atomically;
-use crate::mesh::Surface;
+use crate::mesh::{Surface, TriMesh};
 use std::path::Path;
 
 /// Mesh file formats.
@@ -95,6 +95,42 @@ pub struct MeshWriteStats {
     pub vertices: usize,
     /// Triangles represented (fluid plus every sphere instance).
     pub triangles: usize,
+}
+
+/// Writes a whole sequence as one glTF (`.glb` or `.gltf`), atomically: one node per frame
+/// (fluid and spheres merged), shown in turn by a step-interpolated scale animation at
+/// `fps` frames per second, which Blender and three.js play back. Every frame is held in
+/// memory; for long sequences prefer a `.mseq` archive.
+pub fn write_sequence_gltf(
+    path: &Path,
+    frames: &[TriMesh],
+    fps: f32,
+    options: &MeshWriteOptions,
+) -> Result<MeshWriteStats> {
+    let format = match options.format {
+        Some(f) => f,
+        None => MeshFormat::from_path(path)?,
+    };
+    if !matches!(format, MeshFormat::Glb | MeshFormat::Gltf) {
+        return Err(Error::UnsupportedFormat {
+            path: path.to_path_buf(),
+            message: "a sequence in one file needs .glb, .gltf or .mseq; use a {} pattern for one file per frame".into(),
+        });
+    }
+    let doc = gltf_writer::build_sequence(frames, fps, options.normals);
+    let vertices = doc.vertices;
+    let bytes = write_atomically(path, |w| {
+        if format == MeshFormat::Glb {
+            doc.write_glb(w)
+        } else {
+            doc.write_gltf(w)
+        }
+    })?;
+    Ok(MeshWriteStats {
+        bytes,
+        vertices,
+        triangles: frames.iter().map(|f| f.triangle_count()).sum(),
+    })
 }
 
 /// Writes `surface` to `path`, atomically.
