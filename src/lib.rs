@@ -15,8 +15,24 @@
 //! * [`field`]: the Solenthaler et al. 2007 scalar field on the sparse lattice.
 //! * [`marching_cubes`]: surface extraction with globally keyed vertices.
 //! * [`mesh`]: the indexed triangle mesh, normals and topology validation.
+//! * [`neighbors`]: the cell hash behind isolation checks.
+//! * [`tiles`]: field and marching cubes tile by tile, stitched bit-identically.
 //! * [`decimation`], [`subdivision`], [`isolated`]: the post-processing stages.
-//! * [`pipeline`]: the whole reconstruction, stage by stage, with timings.
+//! * [`pipeline`]: the whole reconstruction of one frame, stage by stage, with timings.
+//! * [`job`], [`sequence`]: files and `{}` frame sequences, as the CLI runs them.
+//! * [`archive`]: the `.mseq` container for whole mesh sequences.
+//!
+//! ```no_run
+//! use meniscus::io::particles::read_particles;
+//! use meniscus::pipeline::{reconstruct, ReconstructOptions};
+//! # fn main() -> meniscus::Result<()> {
+//! let particles = read_particles("frame.bgeo".as_ref(), None)?;
+//! let (surface, stats) = reconstruct(&particles.positions, &ReconstructOptions::new(0.01))?;
+//! assert!(meniscus::mesh::validate(&surface.fluid).is_closed_manifold());
+//! print!("{}", stats.table());
+//! # Ok(())
+//! # }
+//! ```
 #![deny(missing_docs)]
 
 pub mod archive;

@@ -8,12 +8,12 @@
 //! * Ambiguous faces are resolved with the asymptotic decider (Nielson & Hamann 1991): the
 //!   inside corners are connected when the bilinear interpolant's saddle value
 //!   `(v00·v11 − v10·v01) / (v00 + v11 − v10 − v01)` is negative. It reads only the face's
-//!   four values in a canonical order, so both cubes of a face agree; see [`table`] for why
+//!   four values in a canonical order, so both cubes of a face agree; see `marching_cubes/table.rs` for why
 //!   this yields a closed, consistently oriented 2-manifold for every field in which the
 //!   region with values `< 0` is bounded.
 //! * Every mesh vertex is identified by its global lattice edge (lower endpoint + axis) and
 //!   computed once, by the block owning the lower endpoint, from the two endpoint values
-//!   only (the rare loops that need a centre vertex, see [`table`], key it by their cell): `t = v_lo / (v_lo − v_hi)`, clamped to `[2⁻¹⁰, 1 − 2⁻¹⁰]` so that vertices of
+//!   only (the rare loops that need a centre vertex, see `table.rs`, key it by their cell): `t = v_lo / (v_lo − v_hi)`, clamped to `[2⁻¹⁰, 1 − 2⁻¹⁰]` so that vertices of
 //!   distinct edges never coincide.
 //! * Output order: blocks in ascending (z, y, x), vertices by owned edge within a block,
 //!   triangles by cell. It depends only on the field, never on the thread count.
