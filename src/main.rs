@@ -13,7 +13,7 @@ use meniscus::mesh::Surface;
 use meniscus::pipeline::ReconstructOptions;
 
 /// Error bound of `--decimate adaptive`, multiples of r.
-const ADAPTIVE_ERROR: f32 = 0.05;
+const ADAPTIVE_ERROR: f32 = 0.1;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -112,7 +112,7 @@ struct ReconstructArgs {
     #[arg(long, default_value = "2")]
     isolated_spheres: String,
     /// Quadric decimation: fraction of triangles to remove (0.8 = the paper's), `adaptive`
-    /// (stop on an error bound of 0.05 r only: flat regions simplify, curved ones keep
+    /// (stop on an error bound of 0.1 r only: flat regions simplify, curved ones keep
     /// their triangles), or `off`.
     #[arg(long, default_value = "0.8")]
     decimate: String,

@@ -296,3 +296,37 @@ fn on_the_sphere_post_processing_stays_as_close_as_marching_cubes() {
     );
     println!("sphere |d| in r: raw max {raw_max:.3} mean {raw_mean:.3}; full max {full_max:.3} mean {full_mean:.3}");
 }
+
+#[test]
+fn an_error_bound_beats_the_fixed_fraction_on_the_box() {
+    // The adaptive rule (`--decimate adaptive`): no triangle target, stop when a collapse
+    // would move the surface more than 0.1 r (RMS to the original planes). Flat faces then
+    // simplify much further than 80 % while edges keep their triangles.
+    let r = 0.025;
+    let particles = dataset("analytic/box.xyz");
+    let half = Vec3::new(0.5, 0.3, 0.2);
+    let (fixed, _) = reconstruct(&particles, &ReconstructOptions::new(r)).unwrap();
+    let adaptive_options = ReconstructOptions {
+        decimate: Some(DecimateOptions {
+            target_reduction: None,
+            max_error: Some(0.1 * r),
+        }),
+        ..ReconstructOptions::new(r)
+    };
+    let (adaptive, _) = reconstruct(&particles, &adaptive_options).unwrap();
+    assert!(validate(&adaptive.fluid).is_closed_manifold());
+    let (e_fixed, e_adaptive) = (
+        flat_normal_error(&fixed.fluid, half, r),
+        flat_normal_error(&adaptive.fluid, half, r),
+    );
+    assert!(
+        e_adaptive < e_fixed,
+        "adaptive {e_adaptive}° vs fixed {e_fixed}°"
+    );
+    assert!(adaptive.fluid.triangle_count() < fixed.fluid.triangle_count());
+    println!(
+        "box: fixed 80 % {e_fixed:.2}° ({} tris), adaptive {e_adaptive:.2}° ({} tris)",
+        fixed.fluid.triangle_count(),
+        adaptive.fluid.triangle_count()
+    );
+}
