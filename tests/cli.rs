@@ -22,6 +22,24 @@ fn run(args: &[&str]) -> (bool, String) {
     )
 }
 
+/// Copies double dam break frames 1, 6 and 13 to `dir` as `f_<k>.xyz` (zero-padded to
+/// three digits when `padded`) and returns the `{}` pattern naming them.
+fn sequence_in(dir: &Path, padded: bool) -> String {
+    for k in [1, 6, 13] {
+        let name = if padded {
+            format!("f_{k:03}.xyz")
+        } else {
+            format!("f_{k}.xyz")
+        };
+        std::fs::copy(
+            dataset(&format!("double_dambreak/ParticleData_Fluid_{k}.xyz")),
+            dir.join(name),
+        )
+        .unwrap();
+    }
+    format!("{}/f_{{}}.xyz", dir.display())
+}
+
 fn files_in(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> = std::fs::read_dir(dir)
         .unwrap()
@@ -65,14 +83,7 @@ fn reconstructs_a_frame_with_stats() {
 #[test]
 fn reconstructs_a_sequence_and_resumes() {
     let dir = tempfile::tempdir().unwrap();
-    for k in [1, 6, 13] {
-        std::fs::copy(
-            dataset(&format!("double_dambreak/ParticleData_Fluid_{k}.xyz")),
-            dir.path().join(format!("f_{k:03}.xyz")),
-        )
-        .unwrap();
-    }
-    let input = format!("{}/f_{{}}.xyz", dir.path().display());
+    let input = sequence_in(dir.path(), true);
     let output = format!("{}/out/s_{{}}.ply", dir.path().display());
     let (ok, err) = run(&["reconstruct", &input, "-r", "0.025", "-o", &output, "-q"]);
     assert!(ok, "{err}");
@@ -159,14 +170,7 @@ fn bad_input_fails_clearly_without_output() {
 #[test]
 fn archives_collect_a_sequence_and_extract_frames() {
     let dir = tempfile::tempdir().unwrap();
-    for k in [1, 6, 13] {
-        std::fs::copy(
-            dataset(&format!("double_dambreak/ParticleData_Fluid_{k}.xyz")),
-            dir.path().join(format!("f_{k}.xyz")),
-        )
-        .unwrap();
-    }
-    let input = format!("{}/f_{{}}.xyz", dir.path().display());
+    let input = sequence_in(dir.path(), false);
     let archive = dir.path().join("run.mseq");
     let a = archive.to_str().unwrap();
     let (ok, err) = run(&[
@@ -236,14 +240,7 @@ fn archives_collect_a_sequence_and_extract_frames() {
 #[test]
 fn a_sequence_into_one_gltf_plays_frame_by_frame() {
     let dir = tempfile::tempdir().unwrap();
-    for k in [1, 6, 13] {
-        std::fs::copy(
-            dataset(&format!("double_dambreak/ParticleData_Fluid_{k}.xyz")),
-            dir.path().join(format!("f_{k}.xyz")),
-        )
-        .unwrap();
-    }
-    let input = format!("{}/f_{{}}.xyz", dir.path().display());
+    let input = sequence_in(dir.path(), false);
     let out = dir.path().join("seq.glb");
     let (ok, err) = run(&[
         "reconstruct",

@@ -17,6 +17,7 @@ pub(super) struct Document {
     pub vertices: usize,
 }
 
+#[derive(Default)]
 struct Builder {
     bin: Vec<u8>,
     views: Vec<Value>,
@@ -100,12 +101,12 @@ impl Builder {
     }
 }
 
+fn asset() -> Value {
+    json!({"version": "2.0", "generator": concat!("meniscus ", env!("CARGO_PKG_VERSION"))})
+}
+
 pub(super) fn build(surface: &Surface, normals: bool) -> Document {
-    let mut b = Builder {
-        bin: Vec::new(),
-        views: Vec::new(),
-        accessors: Vec::new(),
-    };
+    let mut b = Builder::default();
     let mut meshes = Vec::new();
     let mut nodes = Vec::new();
     let mut roots = Vec::new();
@@ -136,7 +137,7 @@ pub(super) fn build(surface: &Surface, normals: bool) -> Document {
         b.bin.push(0);
     }
     let mut json = json!({
-        "asset": {"version": "2.0", "generator": concat!("meniscus ", env!("CARGO_PKG_VERSION"))},
+        "asset": asset(),
         "scene": 0,
         "scenes": [{"nodes": roots}],
         "nodes": nodes,
@@ -158,11 +159,7 @@ pub(super) fn build(surface: &Surface, normals: bool) -> Document {
 /// by a step-interpolated scale animation (scale 1 during its frame, 0 otherwise) at
 /// `fps` frames per second.
 pub(super) fn build_sequence(frames: &[TriMesh], fps: f32, normals: bool) -> Document {
-    let mut b = Builder {
-        bin: Vec::new(),
-        views: Vec::new(),
-        accessors: Vec::new(),
-    };
+    let mut b = Builder::default();
     let mut meshes = Vec::new();
     let mut nodes = Vec::new();
     let mut vertices = 0;
@@ -209,7 +206,7 @@ pub(super) fn build_sequence(frames: &[TriMesh], fps: f32, normals: bool) -> Doc
     }
     let roots: Vec<usize> = (0..n).collect();
     let mut json = json!({
-        "asset": {"version": "2.0", "generator": concat!("meniscus ", env!("CARGO_PKG_VERSION"))},
+        "asset": asset(),
         "scene": 0,
         "scenes": [{"nodes": roots}],
         "nodes": nodes,

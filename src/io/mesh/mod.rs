@@ -118,18 +118,21 @@ pub fn write_sequence_gltf(
         });
     }
     let doc = gltf_writer::build_sequence(frames, fps, options.normals);
-    let vertices = doc.vertices;
-    let bytes = write_atomically(path, |w| {
+    Ok(MeshWriteStats {
+        bytes: write_document(path, &doc, format)?,
+        vertices: doc.vertices,
+        triangles: frames.iter().map(|f| f.triangle_count()).sum(),
+    })
+}
+
+/// Writes a glTF document as `.glb` or `.gltf`, atomically; returns the bytes written.
+fn write_document(path: &Path, doc: &gltf_writer::Document, format: MeshFormat) -> Result<u64> {
+    write_atomically(path, |w| {
         if format == MeshFormat::Glb {
             doc.write_glb(w)
         } else {
             doc.write_gltf(w)
         }
-    })?;
-    Ok(MeshWriteStats {
-        bytes,
-        vertices,
-        triangles: frames.iter().map(|f| f.triangle_count()).sum(),
     })
 }
 
@@ -148,15 +151,7 @@ pub fn write_surface(
     let (bytes, vertices) = match format {
         MeshFormat::Glb | MeshFormat::Gltf => {
             let doc = gltf_writer::build(surface, options.normals);
-            let vertices = doc.vertices;
-            let bytes = write_atomically(path, |w| {
-                if format == MeshFormat::Glb {
-                    doc.write_glb(w)
-                } else {
-                    doc.write_gltf(w)
-                }
-            })?;
-            (bytes, vertices)
+            (write_document(path, &doc, format)?, doc.vertices)
         }
         other => {
             let mesh = surface.merged();
