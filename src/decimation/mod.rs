@@ -11,6 +11,16 @@
 //! in mesh order, each vertex at most once per pass (several passes approximate the
 //! greedy order of a heap, without the heap's cache misses) → compact.
 //!
+//! **Parallel walk.** The triangles are cut into fixed chunks of [`CHUNK_TRIANGLES`] in
+//! mesh order (spatially coherent: marching cubes emits them block by block). At the start
+//! of a pass every vertex is owned by the chunk of its lowest-numbered triangle. The chunks
+//! then walk their own candidates in parallel, each taking only collapses whose two closed
+//! one-rings are owned by the chunk, so no two chunks ever read or write the same vertex or
+//! triangle; each chunk may do its share of the pass's goal (in proportion to its
+//! candidates below the limit). A sequential walk over all candidates in mesh order then
+//! takes the collapses across chunk borders. Chunking does not depend on the thread count,
+//! so neither does the output.
+//!
 //! **Placement:** the quadric optimum when `A` is well conditioned and the optimum lies
 //! within one edge length of the edge's midpoint; otherwise the quadric minimum on the
 //! segment (the paper's choice).
@@ -31,7 +41,7 @@
 mod quadric;
 
 use crate::mesh::TriMesh;
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use quadric::Quadric;
 use rayon::prelude::*;
 
@@ -77,7 +87,12 @@ pub struct DecimateStats {
     pub passes: u32,
 }
 
+/// Triangles per chunk of the parallel walk. Fixed, so the output does not depend on the
+/// number of threads.
+pub const CHUNK_TRIANGLES: usize = 16 * 1024;
+
 /// An edge collapse candidate of one pass; the placement is recomputed when it is taken.
+/// `u == u32::MAX` marks a candidate the parallel walk has already decided.
 #[derive(Clone, Copy)]
 struct Candidate {
     cost: f64,
@@ -85,21 +100,18 @@ struct Candidate {
     v: u32,
 }
 
-struct State {
-    pos: Vec<DVec3>,
-    quadric: Vec<Quadric>,
-    tris: Vec<[u32; 3]>,
-    /// Unit normal of every triangle in the input (zero for a degenerate one): a
-    /// triangle may never turn far from it, however many collapses touch it.
-    reference_normal: Vec<glam::Vec3>,
-    tri_alive: Vec<bool>,
-    vert_tris: Vec<Vec<u32>>,
-    locked: Vec<bool>,
-    alive: Vec<bool>,
-}
-
 const MIN_NORMAL_DOT: f64 = 0.5;
 const MIN_QUALITY: f64 = 0.02;
+
+/// Counters of one walk.
+#[derive(Default)]
+struct WalkTally {
+    collapses: usize,
+    removed_triangles: usize,
+    refused_topology: usize,
+    refused_geometry: usize,
+    max_error: f64,
+}
 
 /// Decimates `mesh` in place.
 pub fn decimate(mesh: &mut TriMesh, options: &DecimateOptions) -> DecimateStats {
@@ -120,63 +132,14 @@ pub fn decimate(mesh: &mut TriMesh, options: &DecimateOptions) -> DecimateStats 
         });
     let centre = (lo + hi) * 0.5;
     let scale = ((hi - lo).max_element() * 0.5).max(f64::MIN_POSITIVE);
-    let nv = mesh.positions.len();
-    // The state takes the mesh's arrays over, so that they are not held twice.
-    let input_positions = std::mem::take(&mut mesh.positions);
     mesh.normals = Vec::new();
-    let mut s = State {
-        pos: input_positions
-            .iter()
-            .map(|p| (p.as_dvec3() - centre) / scale)
-            .collect(),
-        quadric: vec![Quadric::default(); nv],
-        tris: std::mem::take(&mut mesh.triangles),
-        reference_normal: Vec::new(),
-        tri_alive: vec![true; before],
-        vert_tris: vec![Vec::new(); nv],
-        locked: vec![false; nv],
-        alive: vec![true; nv],
-    };
-    s.reference_normal = s
-        .tris
-        .iter()
-        .map(|t| {
-            let [a, b, c] = t.map(|v| s.pos[v as usize]);
-            (b - a).cross(c - a).normalize_or_zero().as_vec3()
-        })
-        .collect();
-    drop(input_positions);
-    for (t, tri) in s.tris.iter().enumerate() {
-        let q = Quadric::from_triangle(
-            s.pos[tri[0] as usize],
-            s.pos[tri[1] as usize],
-            s.pos[tri[2] as usize],
-        );
-        for &v in tri {
-            s.quadric[v as usize] += q;
-            s.vert_tris[v as usize].push(t as u32);
-        }
-    }
-    // Edges with one or more than two triangles lock their endpoints: around a vertex
-    // every neighbour appears on exactly two of its triangles when all its edges are
-    // shared by two triangles.
-    let locked: Vec<bool> = (0..nv)
-        .into_par_iter()
-        .map_init(Vec::new, |scratch: &mut Vec<u32>, v| {
-            scratch.clear();
-            for &t in &s.vert_tris[v] {
-                scratch.extend(
-                    s.tris[t as usize]
-                        .iter()
-                        .copied()
-                        .filter(|&w| w as usize != v),
-                );
-            }
-            scratch.sort_unstable();
-            scratch.chunk_by(|a, b| a == b).any(|run| run.len() != 2)
-        })
-        .collect();
-    s.locked = locked;
+    let mut s = State::new(
+        std::mem::take(&mut mesh.positions),
+        std::mem::take(&mut mesh.triangles),
+        centre,
+        scale,
+    );
+    let nv = s.pos.len();
 
     let target = options
         .target_reduction
@@ -184,77 +147,120 @@ pub fn decimate(mesh: &mut TriMesh, options: &DecimateOptions) -> DecimateStats 
         .unwrap_or(0);
     let max_cost_error = options.max_error.map(|e| e as f64 / scale);
     let mut alive_tris = before;
-    let mut touched = vec![0u32; nv];
     let mut pass = 0u32;
     let mut stalled = false;
+    // Multiple of the pass goal that sets the cost limit; grows when passes stall.
+    let mut limit_factor = 2usize;
     while alive_tris > target {
         pass += 1;
         // Candidates: every live interior edge once (as the directed side u → v, u < v),
-        // costed in parallel, sorted by (cost, u, v).
-        let candidates: Vec<Candidate> = s
+        // costed in parallel, in mesh order, per chunk.
+        let mut chunks: Vec<Vec<Candidate>> = s
             .tris
-            .par_iter()
-            .zip(s.tri_alive.par_iter())
-            .filter(|(_, alive)| **alive)
-            .flat_map_iter(|(tri, _)| {
-                (0..3).filter_map(move |k| {
-                    let (u, v) = (tri[k], tri[(k + 1) % 3]);
-                    (u < v).then_some((u, v))
-                })
+            .par_chunks(CHUNK_TRIANGLES)
+            .zip(s.tri_alive.par_chunks(CHUNK_TRIANGLES))
+            .map(|(tris, alive)| {
+                let mut out = Vec::with_capacity(tris.len() * 3 / 2);
+                for (tri, _) in tris.iter().zip(alive).filter(|(_, a)| **a) {
+                    for k in 0..3 {
+                        let (u, v) = (tri[k], tri[(k + 1) % 3]);
+                        if u < v && !s.locked[u as usize] && !s.locked[v as usize] {
+                            out.push(s.candidate(u, v));
+                        }
+                    }
+                }
+                out
             })
-            .filter(|&(u, v)| !s.locked[u as usize] && !s.locked[v as usize])
-            .map(|(u, v)| s.candidate(u, v))
             .collect();
+        let candidate_count: usize = chunks.iter().map(Vec::len).sum();
         // Collapse every edge cheaper than the cost of the (2·goal)-th cheapest candidate,
         // walking the edges in mesh order (spatially coherent, so the walk stays in cache),
         // each vertex at most once per pass; several passes approximate the greedy order
         // of a heap. A pass that collapses nothing lifts the limit once.
         let goal = (alive_tris - target).div_ceil(2).max(1);
-        let cost_limit = if stalled || candidates.is_empty() {
+        let cost_limit = if stalled || candidate_count == 0 {
             f64::INFINITY
         } else {
-            let mut costs: Vec<f32> = candidates.iter().map(|c| c.cost as f32).collect();
+            let mut costs: Vec<f32> = chunks
+                .iter()
+                .flat_map(|c| c.iter().map(|c| c.cost as f32))
+                .collect();
             // Twice the goal: with each vertex moved at most once per pass, about half of
             // the edges below the limit can collapse. Measured on frame 25 and the box:
             // as good as half the goal (greedier) in 9 passes instead of 18; four times
             // the goal takes 3 passes but raises the box's flat normal error by 25 %.
-            let k = (2 * goal).min(costs.len() - 1);
+            let k = (limit_factor * goal).min(costs.len() - 1);
             // The limit in f32 (half the memory), rounded up to keep every f64 cost equal
             // to it below it.
             costs.select_nth_unstable_by(k, f32::total_cmp).1.next_up() as f64
         };
+
+        // Parallel walk inside chunks, then the sequential walk over what is left.
         let mut done = 0;
-        for c in &candidates {
-            if done >= goal || alive_tris <= target {
-                break;
+        if chunks.len() > 1 && alive_tris > target + 2 {
+            s.assign_owners();
+            let below: Vec<usize> = chunks
+                .par_iter()
+                .map(|c| c.iter().filter(|c| c.cost <= cost_limit).count())
+                .collect();
+            let below_total: usize = below.iter().sum::<usize>().max(1);
+            // Each collapse removes at most two triangles, and the chunks' shares add up
+            // to at most the goal, so the parallel walk cannot overshoot the target.
+            let budget = goal.min((alive_tris - target) / 2);
+            let view = s.view();
+            let tallies: Vec<WalkTally> = chunks
+                .par_iter_mut()
+                .zip(below)
+                .enumerate()
+                .map(|(chunk, (candidates, below))| {
+                    let share = (budget as u128 * below as u128 / below_total as u128) as usize;
+                    // SAFETY: the chunk takes only collapses whose closed one-rings it owns
+                    // (see `walk_chunk`), and ownership is fixed during the walk, so no
+                    // two chunks touch the same vertex, triangle or vertex list.
+                    unsafe {
+                        view.walk_chunk(
+                            chunk as u32,
+                            candidates,
+                            cost_limit,
+                            share,
+                            pass,
+                            max_cost_error,
+                        )
+                    }
+                })
+                .collect();
+            for t in tallies {
+                done += t.collapses;
+                alive_tris -= t.removed_triangles;
+                stats.collapses += t.collapses;
+                stats.refused_topology += t.refused_topology;
+                stats.refused_geometry += t.refused_geometry;
+                stats.max_error = stats.max_error.max((t.max_error * scale) as f32);
             }
-            if c.cost > cost_limit {
-                continue;
-            }
-            let (u, v) = (c.u as usize, c.v as usize);
-            if !s.alive[u] || !s.alive[v] || touched[u] == pass || touched[v] == pass {
-                continue;
-            }
-            let error = s.error(c);
-            if max_cost_error.is_some_and(|m| error > m) {
-                continue;
-            }
-            if !s.link_ok(c.u, c.v) {
-                stats.refused_topology += 1;
-                continue;
-            }
-            let (target_point, _) = s.placement(c.u, c.v);
-            if !s.geometry_ok(c.u, c.v, target_point) {
-                stats.refused_geometry += 1;
-                continue;
-            }
-            alive_tris -= s.collapse(c.u, c.v, target_point);
-            touched[u] = pass;
-            touched[v] = pass;
-            done += 1;
-            stats.collapses += 1;
-            stats.max_error = stats.max_error.max((error * scale) as f32);
         }
+        let view = s.view();
+        'walk: for candidates in &chunks {
+            for c in candidates {
+                if done >= goal || alive_tris <= target {
+                    break 'walk;
+                }
+                if c.u == u32::MAX || c.cost > cost_limit {
+                    continue;
+                }
+                let mut tally = WalkTally::default();
+                // SAFETY: one thread; `view` is the only access to the state.
+                let collapsed = unsafe { view.try_collapse(c, pass, max_cost_error, &mut tally) };
+                stats.refused_topology += tally.refused_topology;
+                stats.refused_geometry += tally.refused_geometry;
+                if collapsed {
+                    alive_tris -= tally.removed_triangles;
+                    done += 1;
+                    stats.collapses += 1;
+                    stats.max_error = stats.max_error.max((tally.max_error * scale) as f32);
+                }
+            }
+        }
+        drop(chunks);
         if done == 0 {
             if stalled {
                 break;
@@ -262,6 +268,11 @@ pub fn decimate(mesh: &mut TriMesh, options: &DecimateOptions) -> DecimateStats 
             stalled = true;
         } else {
             stalled = false;
+        }
+        // A pass that reached under a quarter of its goal spent a full costing for little:
+        // widen the limit so the tail of the decimation takes few passes.
+        if done * 4 < goal {
+            limit_factor = limit_factor.saturating_mul(4);
         }
     }
     stats.passes = pass;
@@ -292,11 +303,270 @@ pub fn decimate(mesh: &mut TriMesh, options: &DecimateOptions) -> DecimateStats 
     stats
 }
 
+/// The decimation state, in unit-box coordinates.
+struct State {
+    pos: Vec<DVec3>,
+    quadric: Vec<Quadric>,
+    tris: Vec<[u32; 3]>,
+    /// Unit normal of every triangle in the input (zero for a degenerate one): a
+    /// triangle may never turn far from it, however many collapses touch it.
+    reference_normal: Vec<Vec3>,
+    tri_alive: Vec<bool>,
+    vert_tris: Vec<Vec<u32>>,
+    locked: Vec<bool>,
+    alive: Vec<bool>,
+    /// Pass in which the vertex last moved (each vertex moves at most once per pass).
+    touched: Vec<u32>,
+    /// Chunk owning the vertex during the parallel walk of a pass.
+    owner: Vec<u32>,
+}
+
 impl State {
-    /// Where the collapse of edge `(u, v)` puts the merged vertex, and its quadric cost.
-    fn placement(&self, u: u32, v: u32) -> (DVec3, f64) {
-        let (pu, pv) = (self.pos[u as usize], self.pos[v as usize]);
-        let q = self.quadric[u as usize] + self.quadric[v as usize];
+    /// Builds the state in parallel; `positions` are world units, rescaled by
+    /// `(p - centre) / scale`.
+    fn new(positions: Vec<Vec3>, tris: Vec<[u32; 3]>, centre: DVec3, scale: f64) -> State {
+        let nv = positions.len();
+        let pos: Vec<DVec3> = positions
+            .par_iter()
+            .map(|p| (p.as_dvec3() - centre) / scale)
+            .collect();
+        drop(positions);
+        let reference_normal: Vec<Vec3> = tris
+            .par_iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| pos[v as usize]);
+                (b - a).cross(c - a).normalize_or_zero().as_vec3()
+            })
+            .collect();
+        // Vertex → triangles, through a counting sort (triangles in increasing order).
+        let mut start = vec![0u32; nv + 1];
+        for tri in &tris {
+            for &v in tri {
+                start[v as usize + 1] += 1;
+            }
+        }
+        for i in 0..nv {
+            start[i + 1] += start[i];
+        }
+        let mut flat = vec![0u32; start[nv] as usize];
+        let mut fill = start.clone();
+        for (t, tri) in tris.iter().enumerate() {
+            for &v in tri {
+                flat[fill[v as usize] as usize] = t as u32;
+                fill[v as usize] += 1;
+            }
+        }
+        drop(fill);
+        let vert_tris: Vec<Vec<u32>> = (0..nv)
+            .into_par_iter()
+            .map(|v| {
+                let mut list = Vec::with_capacity(8);
+                list.extend_from_slice(&flat[start[v] as usize..start[v + 1] as usize]);
+                list
+            })
+            .collect();
+        drop(flat);
+        drop(start);
+        // Quadrics, summed per vertex over its triangles in increasing order
+        // (deterministic); edges with one or more than two triangles lock their endpoints:
+        // around a vertex every neighbour appears on exactly two of its triangles when all
+        // its edges are shared by two triangles.
+        let (quadric, locked): (Vec<Quadric>, Vec<bool>) = (0..nv)
+            .into_par_iter()
+            .map_init(Vec::new, |scratch: &mut Vec<u32>, v| {
+                let mut q = Quadric::default();
+                scratch.clear();
+                for &t in &vert_tris[v] {
+                    let tri = tris[t as usize];
+                    q += Quadric::from_triangle(
+                        pos[tri[0] as usize],
+                        pos[tri[1] as usize],
+                        pos[tri[2] as usize],
+                    );
+                    scratch.extend(tri.iter().copied().filter(|&w| w as usize != v));
+                }
+                scratch.sort_unstable();
+                let locked = scratch.chunk_by(|a, b| a == b).any(|run| run.len() != 2);
+                (q, locked)
+            })
+            .unzip();
+        State {
+            pos,
+            quadric,
+            tri_alive: vec![true; tris.len()],
+            tris,
+            reference_normal,
+            vert_tris,
+            locked,
+            alive: vec![true; nv],
+            touched: vec![0; nv],
+            owner: vec![u32::MAX; nv],
+        }
+    }
+
+    /// Every live vertex goes to the chunk of its lowest-numbered live triangle.
+    fn assign_owners(&mut self) {
+        let vert_tris = &self.vert_tris;
+        self.owner.par_iter_mut().enumerate().for_each(|(v, o)| {
+            *o = vert_tris[v]
+                .iter()
+                .min()
+                .map_or(u32::MAX, |&t| (t as usize / CHUNK_TRIANGLES) as u32);
+        });
+    }
+
+    fn candidate(&self, u: u32, v: u32) -> Candidate {
+        let (_, cost) = placement(&self.pos, &self.quadric, u, v);
+        Candidate { cost, u, v }
+    }
+
+    fn view(&mut self) -> View {
+        View {
+            pos: self.pos.as_mut_ptr(),
+            quadric: self.quadric.as_mut_ptr(),
+            tris: self.tris.as_mut_ptr(),
+            reference_normal: self.reference_normal.as_ptr(),
+            tri_alive: self.tri_alive.as_mut_ptr(),
+            vert_tris: self.vert_tris.as_mut_ptr(),
+            alive: self.alive.as_mut_ptr(),
+            touched: self.touched.as_mut_ptr(),
+            owner: self.owner.as_ptr(),
+        }
+    }
+}
+
+/// Where the collapse of edge `(u, v)` puts the merged vertex, and its quadric cost.
+fn placement(pos: &[DVec3], quadric: &[Quadric], u: u32, v: u32) -> (DVec3, f64) {
+    let (pu, pv) = (pos[u as usize], pos[v as usize]);
+    let q = quadric[u as usize] + quadric[v as usize];
+    let mid = (pu + pv) * 0.5;
+    let target = match q.optimum() {
+        Some(p) if (p - mid).length() <= (pv - pu).length() => p,
+        _ => q.segment_minimum(pu, pv),
+    };
+    (target, q.evaluate(target))
+}
+
+/// Raw access to the state's arrays, shared by the chunks of a parallel walk.
+///
+/// Every method is `unsafe`: the caller guarantees that no other thread reads or writes
+/// the elements it touches, which are those of the closed one-rings of the edge's two
+/// vertices (their positions, quadrics, vertex lists, flags and incident triangles).
+#[derive(Clone, Copy)]
+struct View {
+    pos: *mut DVec3,
+    quadric: *mut Quadric,
+    tris: *mut [u32; 3],
+    reference_normal: *const Vec3,
+    tri_alive: *mut bool,
+    vert_tris: *mut Vec<u32>,
+    alive: *mut bool,
+    touched: *mut u32,
+    owner: *const u32,
+}
+
+// SAFETY: a `View` is only dereferenced under the ownership discipline described on it.
+unsafe impl Send for View {}
+unsafe impl Sync for View {}
+
+impl View {
+    unsafe fn pos(&self, v: u32) -> DVec3 {
+        *self.pos.add(v as usize)
+    }
+    unsafe fn tri(&self, t: u32) -> [u32; 3] {
+        *self.tris.add(t as usize)
+    }
+    unsafe fn vert_tris(&self, v: u32) -> &Vec<u32> {
+        &*self.vert_tris.add(v as usize)
+    }
+    #[allow(clippy::mut_from_ref)]
+    unsafe fn vert_tris_mut(&self, v: u32) -> &mut Vec<u32> {
+        &mut *self.vert_tris.add(v as usize)
+    }
+    unsafe fn alive(&self, v: u32) -> bool {
+        *self.alive.add(v as usize)
+    }
+    unsafe fn touched(&self, v: u32) -> u32 {
+        *self.touched.add(v as usize)
+    }
+    unsafe fn owner(&self, v: u32) -> u32 {
+        *self.owner.add(v as usize)
+    }
+
+    /// Walks one chunk's candidates, taking at most `share` collapses whose closed
+    /// one-rings the chunk owns; marks every candidate it decided.
+    unsafe fn walk_chunk(
+        &self,
+        chunk: u32,
+        candidates: &mut [Candidate],
+        cost_limit: f64,
+        share: usize,
+        pass: u32,
+        max_cost_error: Option<f64>,
+    ) -> WalkTally {
+        let mut tally = WalkTally::default();
+        for c in candidates.iter_mut() {
+            if tally.collapses >= share {
+                break;
+            }
+            if c.cost > cost_limit || !self.owns_rings(chunk, c.u, c.v) {
+                continue;
+            }
+            let candidate = *c;
+            c.u = u32::MAX;
+            self.try_collapse(&candidate, pass, max_cost_error, &mut tally);
+        }
+        tally
+    }
+
+    /// Whether `chunk` owns `u`, `v` and every vertex of their triangles.
+    unsafe fn owns_rings(&self, chunk: u32, u: u32, v: u32) -> bool {
+        if self.owner(u) != chunk || self.owner(v) != chunk {
+            return false;
+        }
+        [u, v].iter().all(|&x| {
+            self.vert_tris(x)
+                .iter()
+                .all(|&t| self.tri(t).iter().all(|&w| self.owner(w) == chunk))
+        })
+    }
+
+    /// Collapses the candidate if it is still valid and allowed; counts what happened.
+    unsafe fn try_collapse(
+        &self,
+        c: &Candidate,
+        pass: u32,
+        max_cost_error: Option<f64>,
+        tally: &mut WalkTally,
+    ) -> bool {
+        let (u, v) = (c.u, c.v);
+        if !self.alive(u) || !self.alive(v) || self.touched(u) == pass || self.touched(v) == pass {
+            return false;
+        }
+        let (target_point, cost) = self.placement(u, v);
+        let error = self.error(u, v, cost);
+        if max_cost_error.is_some_and(|m| error > m) {
+            return false;
+        }
+        if !self.link_ok(u, v) {
+            tally.refused_topology += 1;
+            return false;
+        }
+        if !self.geometry_ok(u, v, target_point) {
+            tally.refused_geometry += 1;
+            return false;
+        }
+        tally.removed_triangles += self.collapse(u, v, target_point);
+        *self.touched.add(u as usize) = pass;
+        *self.touched.add(v as usize) = pass;
+        tally.collapses += 1;
+        tally.max_error = tally.max_error.max(error);
+        true
+    }
+
+    unsafe fn placement(&self, u: u32, v: u32) -> (DVec3, f64) {
+        let (pu, pv) = (self.pos(u), self.pos(v));
+        let q = *self.quadric.add(u as usize) + *self.quadric.add(v as usize);
         let mid = (pu + pv) * 0.5;
         let target = match q.optimum() {
             Some(p) if (p - mid).length() <= (pv - pu).length() => p,
@@ -305,34 +575,27 @@ impl State {
         (target, q.evaluate(target))
     }
 
-    fn candidate(&self, u: u32, v: u32) -> Candidate {
-        let (_, cost) = self.placement(u, v);
-        Candidate { cost, u, v }
-    }
-
-    /// RMS distance (unit-box units) of a candidate: √(cost / area weight).
-    fn error(&self, c: &Candidate) -> f64 {
-        let w = self.quadric[c.u as usize].weight + self.quadric[c.v as usize].weight;
+    /// RMS distance (unit-box units) of a collapse: √(cost / area weight).
+    unsafe fn error(&self, u: u32, v: u32, cost: f64) -> f64 {
+        let w = (*self.quadric.add(u as usize)).weight + (*self.quadric.add(v as usize)).weight;
         if w > 0.0 {
-            (c.cost / w).sqrt()
+            (cost / w).sqrt()
         } else {
             0.0
         }
     }
 
-    fn is_neighbour(&self, a: u32, b: u32) -> bool {
-        self.vert_tris[a as usize]
-            .iter()
-            .any(|&t| self.tris[t as usize].contains(&b))
+    unsafe fn is_neighbour(&self, a: u32, b: u32) -> bool {
+        self.vert_tris(a).iter().any(|&t| self.tri(t).contains(&b))
     }
 
     /// The link condition: the common neighbours of `u` and `v` are exactly the opposite
     /// vertices of the two triangles on the edge, each of valence above 3.
-    fn link_ok(&self, u: u32, v: u32) -> bool {
+    unsafe fn link_ok(&self, u: u32, v: u32) -> bool {
         let mut opposite = [u32::MAX; 2];
         let mut shared = 0;
-        for &t in &self.vert_tris[u as usize] {
-            let tri = self.tris[t as usize];
+        for &t in self.vert_tris(u) {
+            let tri = self.tri(t);
             if tri.contains(&v) {
                 if shared == 2 {
                     return false;
@@ -347,34 +610,26 @@ impl State {
         if shared != 2 || opposite[0] == opposite[1] {
             return false;
         }
-        for &t in &self.vert_tris[u as usize] {
-            for &w in &self.tris[t as usize] {
+        for &t in self.vert_tris(u) {
+            for &w in &self.tri(t) {
                 if w != u && w != v && !opposite.contains(&w) && self.is_neighbour(v, w) {
                     return false;
                 }
             }
         }
-        opposite
-            .iter()
-            .all(|&w| self.vert_tris[w as usize].len() > 3)
+        opposite.iter().all(|&w| self.vert_tris(w).len() > 3)
     }
 
     /// No surviving triangle around `u` or `v` flips or degenerates when both move to `p`.
-    fn geometry_ok(&self, u: u32, v: u32, p: DVec3) -> bool {
+    unsafe fn geometry_ok(&self, u: u32, v: u32, p: DVec3) -> bool {
         for &x in &[u, v] {
-            for &t in &self.vert_tris[x as usize] {
-                let tri = self.tris[t as usize];
+            for &t in self.vert_tris(x) {
+                let tri = self.tri(t);
                 if tri.contains(&u) && tri.contains(&v) {
                     continue;
                 }
-                let old = tri.map(|w| self.pos[w as usize]);
-                let new = tri.map(|w| {
-                    if w == u || w == v {
-                        p
-                    } else {
-                        self.pos[w as usize]
-                    }
-                });
+                let old = tri.map(|w| self.pos(w));
+                let new = tri.map(|w| if w == u || w == v { p } else { self.pos(w) });
                 let n0 = (old[1] - old[0]).cross(old[2] - old[0]);
                 let n1 = (new[1] - new[0]).cross(new[2] - new[0]);
                 let (l0, l1) = (n0.length(), n1.length());
@@ -384,7 +639,8 @@ impl State {
                 if l0 > 0.0 && n0.dot(n1) < MIN_NORMAL_DOT * l0 * l1 {
                     return false;
                 }
-                if n1.dot(self.reference_normal[t as usize].as_dvec3()) < MIN_NORMAL_DOT * l1 {
+                let reference = (*self.reference_normal.add(t as usize)).as_dvec3();
+                if n1.dot(reference) < MIN_NORMAL_DOT * l1 {
                     return false;
                 }
                 let edges2 = (new[1] - new[0]).length_squared()
@@ -400,18 +656,18 @@ impl State {
     }
 
     /// Collapses `v` into `u` at `p`; returns the number of triangles removed.
-    fn collapse(&mut self, u: u32, v: u32, p: DVec3) -> usize {
-        let (ui, vi) = (u as usize, v as usize);
+    unsafe fn collapse(&self, u: u32, v: u32, p: DVec3) -> usize {
         let mut removed = 0;
-        let v_tris = std::mem::take(&mut self.vert_tris[vi]);
+        let v_tris = std::mem::take(self.vert_tris_mut(v));
         for &t in &v_tris {
-            let tri = &mut self.tris[t as usize];
+            let tri = &mut *self.tris.add(t as usize);
             if tri.contains(&u) {
-                self.tri_alive[t as usize] = false;
+                *self.tri_alive.add(t as usize) = false;
                 removed += 1;
-                for &w in tri.iter() {
+                let tri = *tri;
+                for &w in &tri {
                     if w != v {
-                        self.vert_tris[w as usize].retain(|&x| x != t);
+                        self.vert_tris_mut(w).retain(|&x| x != t);
                     }
                 }
             } else {
@@ -420,13 +676,13 @@ impl State {
                         *w = u;
                     }
                 }
-                self.vert_tris[ui].push(t);
+                self.vert_tris_mut(u).push(t);
             }
         }
-        self.pos[ui] = p;
-        let q = self.quadric[vi];
-        self.quadric[ui] += q;
-        self.alive[vi] = false;
+        *self.pos.add(u as usize) = p;
+        let q = *self.quadric.add(v as usize);
+        *self.quadric.add(u as usize) += q;
+        *self.alive.add(v as usize) = false;
         removed
     }
 }
