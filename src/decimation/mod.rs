@@ -21,6 +21,14 @@
 //! takes the collapses across chunk borders. Chunking does not depend on the thread count,
 //! so neither does the output.
 //!
+//! **Order:** edges are ranked by the collapse's RMS distance to the original planes,
+//! `Q(p) / area` (the quadric cost normalised by the area it stands for), not by the raw
+//! area-weighted cost `Q(p)`: the raw cost grows with the area merged into a vertex, so it
+//! protects large flat regions, which are exactly where the paper wants the particle bumps
+//! gone. On `dambreak_small` frame 25 at the same 80 % this takes the flat-region
+//! bumpiness (`shared/eval/meshq.py`) from 0.0099 r to 0.0079 r and the largest collapse
+//! error from 0.0020 to 0.0007 world units.
+//!
 //! **Placement:** the quadric optimum when `A` is well conditioned and the optimum lies
 //! within one edge length of the edge's midpoint; otherwise the quadric minimum on the
 //! segment (the paper's choice).
@@ -415,8 +423,11 @@ impl State {
         });
     }
 
+    /// The candidate ranked by its squared RMS distance, `Q(p) / area`.
     fn candidate(&self, u: u32, v: u32) -> Candidate {
         let (_, cost) = placement(&self.pos, &self.quadric, u, v);
+        let w = self.quadric[u as usize].weight + self.quadric[v as usize].weight;
+        let cost = if w > 0.0 { cost / w } else { 0.0 };
         Candidate { cost, u, v }
     }
 
