@@ -331,6 +331,7 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, String> {
         "adaptive" => Some(DecimateOptions {
             target_reduction: None,
             max_error: Some(error.unwrap_or(ADAPTIVE_ERROR * r)),
+            ..Default::default()
         }),
         fraction => {
             let f: f32 = fraction
@@ -341,6 +342,7 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, String> {
             Some(DecimateOptions {
                 target_reduction: Some(f),
                 max_error: error,
+                ..Default::default()
             })
         }
     };

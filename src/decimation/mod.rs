@@ -21,6 +21,19 @@
 //! takes the collapses across chunk borders. Chunking does not depend on the thread count,
 //! so neither does the output.
 //!
+//! **Regions (memory follows the region, not the mesh).** A mesh with more than twice
+//! [`DecimateOptions::region_triangles`] triangles is first cut into regions: runs of
+//! `region_triangles / 2` vertices in Morton order of position (compact pieces of
+//! surface). Triangles with vertices in two regions are seam triangles; their vertices are
+//! locked. Each region is decimated on its own, to the same fraction (or error bound), with
+//! only its own state in memory, and replaced by its result; then one final pass over the
+//! whole, much smaller mesh takes the seams and reaches the overall target. Seam vertices
+//! keep their exact input positions until that pass. On a 4M-particle scene (10.8 M raw
+//! triangles, 11 regions) this keeps decimation under the field's memory peak (whole
+//! mesh at once: +0.9 GB) and makes it faster (5.8 s instead of 7.6 s), since each region's
+//! state stays in cache. The regions depend only on the mesh and the option, never on the
+//! thread count.
+//!
 //! **Order:** edges are ranked by the collapse's RMS distance to the original planes,
 //! `Q(p) / area` (the quadric cost normalised by the area it stands for), not by the raw
 //! area-weighted cost `Q(p)`: the raw cost grows with the area merged into a vertex, so it
@@ -63,6 +76,15 @@ pub struct DecimateOptions {
     /// the quadric's area weight (an RMS distance to the original planes). `None`: no
     /// bound. Default `None`.
     pub max_error: Option<f32>,
+    /// Region size, triangles: a mesh with more than twice this many is decimated region
+    /// by region first (see the module docs), so that the decimation state follows the
+    /// region, not the mesh. `0` never splits. Default `1 << 20` (about a million).
+    #[serde(default = "default_region_triangles")]
+    pub region_triangles: usize,
+}
+
+fn default_region_triangles() -> usize {
+    1 << 20
 }
 
 impl Default for DecimateOptions {
@@ -70,6 +92,7 @@ impl Default for DecimateOptions {
         DecimateOptions {
             target_reduction: Some(0.8),
             max_error: None,
+            region_triangles: default_region_triangles(),
         }
     }
 }
@@ -91,8 +114,10 @@ pub struct DecimateStats {
     pub refused_geometry: usize,
     /// Largest error of a performed collapse, world units.
     pub max_error: f32,
-    /// Sorted passes over the edges.
+    /// Sorted passes over the edges (summed over the regions and the final pass).
     pub passes: u32,
+    /// Regions decimated before the final pass over the whole mesh (0: not split).
+    pub regions: usize,
 }
 
 /// Triangles per chunk of the parallel walk. Fixed, so the output does not depend on the
@@ -123,6 +148,182 @@ struct WalkTally {
 
 /// Decimates `mesh` in place.
 pub fn decimate(mesh: &mut TriMesh, options: &DecimateOptions) -> DecimateStats {
+    let target = options
+        .target_reduction
+        .map(|f| ((1.0 - f.clamp(0.0, 1.0) as f64) * mesh.triangle_count() as f64).ceil() as usize)
+        .unwrap_or(0);
+    if options.region_triangles > 0 && mesh.triangle_count() > 2 * options.region_triangles {
+        decimate_by_regions(mesh, options, target)
+    } else {
+        decimate_locked(mesh, target, options.max_error, &[]).0
+    }
+}
+
+/// Decimates region by region, seams locked, then the whole mesh to `target` triangles.
+fn decimate_by_regions(
+    mesh: &mut TriMesh,
+    options: &DecimateOptions,
+    target: usize,
+) -> DecimateStats {
+    let before = mesh.triangle_count();
+    let nv = mesh.vertex_count();
+    // Regions: runs of `region_triangles / 2` vertices in Morton order of position (a
+    // closed surface has about two triangles per vertex), so each is a compact piece.
+    let (lo, hi) = bounds(&mesh.positions);
+    let extent = (hi - lo).max_element().max(f64::MIN_POSITIVE);
+    let mut order: Vec<(u32, u32)> = mesh
+        .positions
+        .par_iter()
+        .enumerate()
+        .map(|(v, p)| {
+            let q =
+                ((p.as_dvec3() - lo) / extent * 1023.0).clamp(DVec3::ZERO, DVec3::splat(1023.0));
+            (morton3(q.x as u32, q.y as u32, q.z as u32), v as u32)
+        })
+        .collect();
+    order.par_sort_unstable();
+    let region_vertices = (options.region_triangles / 2).max(1);
+    let mut region_of = vec![0u32; nv];
+    for (rank, &(_, v)) in order.iter().enumerate() {
+        region_of[v as usize] = (rank / region_vertices) as u32;
+    }
+    drop(order);
+    let regions = nv.div_ceil(region_vertices);
+    // Triangles with all three vertices in one region are that region's; the others are
+    // seam triangles, and their vertices stay locked until the final pass.
+    let mut region_tris: Vec<Vec<u32>> = vec![Vec::new(); regions];
+    let mut seam_tris = Vec::new();
+    let mut on_seam = vec![false; nv];
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        let r = region_of[tri[0] as usize];
+        if tri.iter().all(|&v| region_of[v as usize] == r) {
+            region_tris[r as usize].push(t as u32);
+        } else {
+            seam_tris.push(t as u32);
+            for &v in tri {
+                on_seam[v as usize] = true;
+            }
+        }
+    }
+    drop(region_of);
+
+    let mut stats = DecimateStats {
+        triangles_before: before,
+        regions,
+        ..Default::default()
+    };
+    let mut positions: Vec<Vec3> = Vec::new();
+    let mut triangles: Vec<[u32; 3]> = Vec::new();
+    // Output index of each seam vertex, once placed.
+    let mut seam_index = vec![u32::MAX; nv];
+    let mut local_index = vec![u32::MAX; nv];
+    for tris in &mut region_tris {
+        let tris = std::mem::take(tris);
+        if tris.is_empty() {
+            continue;
+        }
+        let mut local = TriMesh::default();
+        let mut global_of: Vec<u32> = Vec::new();
+        local.triangles = tris
+            .iter()
+            .map(|&t| {
+                mesh.triangles[t as usize].map(|v| {
+                    if local_index[v as usize] == u32::MAX {
+                        local_index[v as usize] = global_of.len() as u32;
+                        global_of.push(v);
+                        local.positions.push(mesh.positions[v as usize]);
+                    }
+                    local_index[v as usize]
+                })
+            })
+            .collect();
+        drop(tris);
+        for &g in &global_of {
+            local_index[g as usize] = u32::MAX;
+        }
+        let locked: Vec<bool> = global_of.iter().map(|&g| on_seam[g as usize]).collect();
+        let region_target = options
+            .target_reduction
+            .map(|f| {
+                ((1.0 - f.clamp(0.0, 1.0) as f64) * local.triangle_count() as f64).ceil() as usize
+            })
+            .unwrap_or(0);
+        let (region_stats, remap) =
+            decimate_locked(&mut local, region_target, options.max_error, &locked);
+        stats.collapses += region_stats.collapses;
+        stats.refused_topology += region_stats.refused_topology;
+        stats.refused_geometry += region_stats.refused_geometry;
+        stats.max_error = stats.max_error.max(region_stats.max_error);
+        stats.passes += region_stats.passes;
+        // Seam vertices keep their identity (and their exact input position); the
+        // region's other surviving vertices are new.
+        let mut output_of = vec![u32::MAX; local.vertex_count()];
+        for (old, &new) in remap.iter().enumerate() {
+            let g = global_of[old] as usize;
+            if new != u32::MAX && on_seam[g] {
+                if seam_index[g] == u32::MAX {
+                    seam_index[g] = positions.len() as u32;
+                    positions.push(mesh.positions[g]);
+                }
+                output_of[new as usize] = seam_index[g];
+            }
+        }
+        for (new, p) in local.positions.iter().enumerate() {
+            if output_of[new] == u32::MAX {
+                output_of[new] = positions.len() as u32;
+                positions.push(*p);
+            }
+        }
+        triangles.extend(
+            local
+                .triangles
+                .iter()
+                .map(|t| t.map(|v| output_of[v as usize])),
+        );
+    }
+    for &t in &seam_tris {
+        let tri = mesh.triangles[t as usize].map(|v| {
+            if seam_index[v as usize] == u32::MAX {
+                seam_index[v as usize] = positions.len() as u32;
+                positions.push(mesh.positions[v as usize]);
+            }
+            seam_index[v as usize]
+        });
+        triangles.push(tri);
+    }
+    *mesh = TriMesh {
+        positions,
+        triangles,
+        normals: Vec::new(),
+    };
+    let (last, _) = decimate_locked(mesh, target, options.max_error, &[]);
+    stats.collapses += last.collapses;
+    stats.refused_topology += last.refused_topology;
+    stats.refused_geometry += last.refused_geometry;
+    stats.refused_boundary = last.refused_boundary;
+    stats.max_error = stats.max_error.max(last.max_error);
+    stats.passes += last.passes;
+    stats.triangles_after = last.triangles_after;
+    stats
+}
+
+fn bounds(positions: &[Vec3]) -> (DVec3, DVec3) {
+    positions
+        .iter()
+        .fold((DVec3::MAX, DVec3::MIN), |(l, h), p| {
+            (l.min(p.as_dvec3()), h.max(p.as_dvec3()))
+        })
+}
+
+/// Decimates to `target` triangles or the error bound, with the `extra_locked` vertices
+/// (indexed like the mesh's; may be empty) never moving; returns the stats and the new
+/// index of every input vertex (`u32::MAX` when it was removed).
+fn decimate_locked(
+    mesh: &mut TriMesh,
+    target: usize,
+    max_error: Option<f32>,
+    extra_locked: &[bool],
+) -> (DecimateStats, Vec<u32>) {
     let before = mesh.triangle_count();
     let mut stats = DecimateStats {
         triangles_before: before,
@@ -130,14 +331,9 @@ pub fn decimate(mesh: &mut TriMesh, options: &DecimateOptions) -> DecimateStats 
         ..Default::default()
     };
     if before == 0 {
-        return stats;
+        return (stats, (0..mesh.vertex_count() as u32).collect());
     }
-    let (lo, hi) = mesh
-        .positions
-        .iter()
-        .fold((DVec3::MAX, DVec3::MIN), |(l, h), p| {
-            (l.min(p.as_dvec3()), h.max(p.as_dvec3()))
-        });
+    let (lo, hi) = bounds(&mesh.positions);
     let centre = (lo + hi) * 0.5;
     let scale = ((hi - lo).max_element() * 0.5).max(f64::MIN_POSITIVE);
     mesh.normals = Vec::new();
@@ -147,13 +343,12 @@ pub fn decimate(mesh: &mut TriMesh, options: &DecimateOptions) -> DecimateStats 
         centre,
         scale,
     );
+    for (locked, &extra) in s.locked.iter_mut().zip(extra_locked) {
+        *locked |= extra;
+    }
     let nv = s.pos.len();
 
-    let target = options
-        .target_reduction
-        .map(|f| ((1.0 - f.clamp(0.0, 1.0) as f64) * before as f64).ceil() as usize)
-        .unwrap_or(0);
-    let max_cost_error = options.max_error.map(|e| e as f64 / scale);
+    let max_cost_error = max_error.map(|e| e as f64 / scale);
     let mut alive_tris = before;
     let mut pass = 0u32;
     let mut stalled = false;
@@ -308,7 +503,7 @@ pub fn decimate(mesh: &mut TriMesh, options: &DecimateOptions) -> DecimateStats 
         normals: Vec::new(),
     };
     stats.triangles_after = mesh.triangle_count();
-    stats
+    (stats, remap)
 }
 
 /// The decimation state, in unit-box coordinates.
@@ -444,6 +639,18 @@ impl State {
             owner: self.owner.as_ptr(),
         }
     }
+}
+
+/// Interleaves the bits of three 10-bit coordinates.
+fn morton3(x: u32, y: u32, z: u32) -> u32 {
+    fn spread(mut v: u32) -> u32 {
+        v &= 0x3ff;
+        v = (v | (v << 16)) & 0x0300_00ff;
+        v = (v | (v << 8)) & 0x0300_f00f;
+        v = (v | (v << 4)) & 0x030c_30c3;
+        (v | (v << 2)) & 0x0924_9249
+    }
+    spread(x) | (spread(y) << 1) | (spread(z) << 2)
 }
 
 /// Where the collapse of edge `(u, v)` puts the merged vertex, and its quadric cost.
