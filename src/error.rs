@@ -44,6 +44,25 @@ pub enum Error {
         /// Why the value is rejected.
         message: String,
     },
+    /// The spill file of a tiled run could not be created, written or read.
+    #[error("spill file {path}: {source} (choose another directory with --temp-dir)")]
+    Spill {
+        /// The temporary directory or file.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// The memory budget cannot hold what the run needs.
+    #[error("memory budget of {budget_mib} MiB is too small: {message}")]
+    MemoryBudget {
+        /// The budget, MiB.
+        budget_mib: u64,
+        /// What does not fit, and what would.
+        message: String,
+    },
+    /// The run was interrupted (Ctrl-C); nothing was written.
+    #[error("interrupted")]
+    Interrupted,
     /// The input holds no particles.
     #[error("{path}: the file holds no particles")]
     EmptyInput {

@@ -196,21 +196,28 @@ pub fn block_reach(options: &FieldOptions) -> i32 {
 /// The home block (lattice block containing the point) of every position.
 pub fn home_blocks(positions: &[Vec3], options: &FieldOptions) -> Vec<BlockKey> {
     let inv_h = 1.0 / options.cell_size_world();
-    positions
-        .par_iter()
-        .map(|p| {
-            let c = p.as_dvec3() * inv_h;
-            [c.x, c.y, c.z].map(|v| (v.floor() as i32).div_euclid(BLOCK_EDGE))
-        })
-        .collect()
+    positions.par_iter().map(|p| home_block(*p, inv_h)).collect()
+}
+
+/// The home block of one position, `inv_h` = 1 / cell size (world units).
+#[inline]
+pub fn home_block(p: Vec3, inv_h: f64) -> BlockKey {
+    let c = p.as_dvec3() * inv_h;
+    [c.x, c.y, c.z].map(|v| (v.floor() as i32).div_euclid(BLOCK_EDGE))
 }
 
 /// Checks that every position is finite and within the lattice's coordinate range.
 pub fn check_positions(positions: &[Vec3], options: &FieldOptions) -> Result<()> {
+    check_positions_from(0, positions, options)
+}
+
+/// [`check_positions`] for a chunk whose first particle has input index `first`.
+pub fn check_positions_from(first: usize, positions: &[Vec3], options: &FieldOptions) -> Result<()> {
     let inv_h = 1.0 / options.cell_size_world();
     if let Some((i, p)) = positions.iter().enumerate().find(|(_, p)| {
         !p.is_finite() || (p.as_dvec3() * inv_h).abs().max_element() > MAX_CELL_COORDINATE
     }) {
+        let i = first + i;
         return Err(Error::InvalidOption {
             option: "--cell-size",
             message: format!(

@@ -6,10 +6,17 @@ use crate::error::{Error, Result};
 use crate::io::mesh::{write_sequence_gltf, write_surface, MeshWriteOptions};
 use crate::io::particles::{read_particles, ParticleFormat};
 use crate::mesh::TriMesh;
-use crate::pipeline::{reconstruct_with_progress, ReconstructOptions, ReconstructionStats};
+use crate::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
+use crate::tiles::MappedXyz;
 use crate::sequence::{self, Frame};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+/// A frame's particles as the job hands them to the pipeline.
+enum Input {
+    Mapped(MappedXyz),
+    Parsed(Vec<glam::Vec3>),
+}
 
 /// What to do with the files of a job.
 #[derive(Clone, Debug)]
@@ -72,21 +79,34 @@ pub fn reconstruct_file(
 ) -> Result<FrameReport> {
     on_stage("read");
     let clock = Instant::now();
-    let particles = read_particles(input, job.input_format)?;
-    if particles.positions.is_empty() {
-        return Err(Error::EmptyInput {
-            path: input.to_path_buf(),
-        });
-    }
+    // Raw .xyz is mapped window by window; other formats are parsed into memory and handed
+    // over, so a tiled run can drop them once they are spilled.
+    let format = match job.input_format {
+        Some(f) => f,
+        None => ParticleFormat::from_path(input)?,
+    };
+    let positions = match format {
+        ParticleFormat::Xyz => Input::Mapped(MappedXyz::open(input)?),
+        _ => {
+            let particles = read_particles(input, Some(format))?;
+            if particles.positions.is_empty() {
+                return Err(Error::EmptyInput {
+                    path: input.to_path_buf(),
+                });
+            }
+            Input::Parsed(particles.positions)
+        }
+    };
     let read_seconds = clock.elapsed().as_secs_f64();
     on_stage("reconstruct");
     let (surface, mut reconstruction) = {
         let progress = std::cell::RefCell::new(&mut *on_stage);
-        reconstruct_with_progress(&particles.positions, options, &|stage| {
-            (progress.borrow_mut())(stage)
-        })?
+        let progress = |stage: &str| (progress.borrow_mut())(stage);
+        match positions {
+            Input::Mapped(file) => reconstruct_source(file, options, &progress)?,
+            Input::Parsed(positions) => reconstruct_source(positions, options, &progress)?,
+        }
     };
-    drop(particles);
     on_stage("write");
     let clock = Instant::now();
     let written = match sink {
@@ -196,6 +216,9 @@ pub fn run_frames(
     let mut collected: Vec<TriMesh> = Vec::new();
     let mut reports = Vec::with_capacity(plan.len());
     for (i, (frame, output)) in plan.iter().enumerate() {
+        if crate::tiles::INTERRUPTED.load(std::sync::atomic::Ordering::Relaxed) {
+            return Err(Error::Interrupted);
+        }
         on_frame(i, frame);
         let exists = match &archive {
             Some(_) => archived.contains(&frame.number),

@@ -127,10 +127,19 @@ struct ReconstructArgs {
     /// outside are enclosed in a ball of c·r (0 = off, the pure Solenthaler field).
     #[arg(long, default_value_t = 0.9)]
     particle_coverage: f32,
-    /// Tile edge in marching-cubes cells (rounded up to 8-cell blocks); default one tile.
-    /// The marching-cubes mesh does not depend on it.
+    /// Tile edge in marching-cubes cells (rounded up to 8-cell blocks); default: one tile
+    /// if the scene fits the memory budget, else the largest tile that does. The
+    /// marching-cubes mesh does not depend on it.
     #[arg(long)]
     tile_size: Option<u32>,
+    /// Memory the run may use (`512MiB`, `2GiB`); default half the available memory.
+    /// Picks the tile size; a run whose smallest tile cannot fit fails before any work.
+    #[arg(long)]
+    memory_budget: Option<String>,
+    /// Directory for the spill file of a tiled run (default: the system's temporary
+    /// directory); removed on success, error and Ctrl-C.
+    #[arg(long)]
+    temp_dir: Option<PathBuf>,
     /// Input format, overriding the extension (xyz, vtk, ply, bgeo).
     #[arg(long)]
     input_format: Option<ParticleFormat>,
@@ -165,6 +174,14 @@ struct ReconstructArgs {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // Ctrl-C: the first stops the run at the next tile or frame (temporary files are
+    // removed, no partial output is left); a second one exits at once.
+    let _ = ctrlc::set_handler(|| {
+        if meniscus::tiles::INTERRUPTED.swap(true, std::sync::atomic::Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+        eprintln!("\ninterrupted: stopping at the next tile or frame (Ctrl-C again to quit now)");
+    });
     match cli.command {
         Command::Reconstruct(args) => report(reconstruct(&args)),
         Command::Archive(command) => report(archive(command)),
@@ -316,6 +333,13 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, String> {
     options.field.particle_coverage = args.particle_coverage;
     options.isolated_sphere_level = parse_level(&args.isolated_spheres, "--isolated-spheres")?;
     options.tiles.tile_size_cells = args.tile_size;
+    options.tiles.memory_budget_bytes = match &args.memory_budget {
+        Some(text) => Some(
+            meniscus::tiles::parse_memory_size(text).map_err(|e| format!("--memory-budget: {e}"))?,
+        ),
+        None => meniscus::tiles::default_memory_budget(),
+    };
+    options.tiles.temp_dir = args.temp_dir.clone();
     options.subdivide.levels = args.subdivide;
     let r = args.particle_radius;
     let error = args.decimate_error.map(|e| e * r);

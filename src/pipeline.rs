@@ -4,7 +4,8 @@
 //! 2. Solenthaler field on the sparse lattice ([`crate::field`]);
 //! 3. marching cubes ([`crate::marching_cubes`]);
 //!
-//! (1–3 run tile by tile and are stitched exactly, see [`crate::tiles`])
+//! (1–3 run tile by tile and are stitched exactly, see [`crate::tiles`]; a tiled run
+//! also decimates each tile as it is meshed, then the seams)
 //! 4. quadric decimation ([`crate::decimation`]);
 //! 5. Loop subdivision ([`crate::subdivision`]);
 //! 6. icospheres of radius `r` at the isolated particles ([`crate::isolated`]);
@@ -19,7 +20,7 @@ use crate::marching_cubes::MarchingCubesStats;
 use crate::mesh::{SphereInstances, Surface};
 use crate::neighbors::find_isolated;
 use crate::subdivision::{subdivide, SubdivideOptions};
-use crate::tiles::{reconstruct_tiled, TileOptions, TileStats};
+use crate::tiles::{reconstruct_tiled, ParticleSource, TileOptions, TileStats};
 use glam::Vec3;
 use std::time::Instant;
 
@@ -158,9 +159,20 @@ pub fn reconstruct_with_progress(
     options: &ReconstructOptions,
     progress: &dyn Fn(&str),
 ) -> Result<(Surface, ReconstructionStats)> {
+    reconstruct_source(positions, options, progress)
+}
+
+/// [`reconstruct_with_progress`] from any [`ParticleSource`]: a tiled run reads it twice
+/// and drops it before the first tile, so a mapped `.xyz` file or an owned `Vec` is never
+/// held during the field stage.
+pub fn reconstruct_source<S: ParticleSource>(
+    source: S,
+    options: &ReconstructOptions,
+    progress: &dyn Fn(&str),
+) -> Result<(Surface, ReconstructionStats)> {
     options.field.validate()?;
     let mut stats = ReconstructionStats {
-        particles: positions.len(),
+        particles: source.particle_count(),
         ..Default::default()
     };
     let r = options.field.particle_radius;
@@ -171,10 +183,11 @@ pub fn reconstruct_with_progress(
         .isolated_sphere_level
         .map(|_| options.field.influence_radius_world() as f32);
     let tiled = reconstruct_tiled(
-        positions,
+        source,
         &options.field,
         isolation_radius,
         &options.tiles,
+        options.decimate.as_ref(),
         &|tile, tiles| {
             if tiles > 1 {
                 progress(&format!(
@@ -194,25 +207,36 @@ pub fn reconstruct_with_progress(
     stats.tiles = tiled.tiles;
     let t = &stats.tiles;
     let untimed = clock.elapsed().as_secs_f64()
-        - (t.neighbour_seconds + t.field_seconds + t.marching_seconds + t.stitch_seconds);
+        - (t.neighbour_seconds
+            + t.field_seconds
+            + t.marching_seconds
+            + t.stitch_seconds
+            + t.decimation_seconds);
     let (neighbours, field, marching, stitching) = (
         t.neighbour_seconds + untimed,
         t.field_seconds,
         t.marching_seconds,
         t.stitch_seconds,
     );
-    stats.marching_cubes_triangles = fluid.triangle_count();
+    stats.marching_cubes_triangles = stats.marching_cubes.triangles;
     stats.push_stage("neighbours", neighbours, 0);
     stats.push_stage("field", field, 0);
     stats.push_stage(
         "marching cubes",
         marching + stitching,
-        fluid.triangle_count(),
+        stats.marching_cubes.triangles,
     );
 
-    // 4. Decimation.
+    // 4. Decimation (already done tile by tile when the run was tiled).
     progress("decimation");
-    if let Some(decimate_options) = &options.decimate {
+    if let Some(tile_decimation) = tiled.decimation {
+        stats.decimation = Some(tile_decimation);
+        stats.push_stage(
+            "decimation",
+            stats.tiles.decimation_seconds,
+            fluid.triangle_count(),
+        );
+    } else if let Some(decimate_options) = &options.decimate {
         let clock = Instant::now();
         stats.decimation = Some(decimate(&mut fluid, decimate_options));
         stats.push_stage(

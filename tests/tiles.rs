@@ -38,7 +38,9 @@ fn run(
                 Some(options.influence_radius_world() as f32),
                 &TileOptions {
                     tile_size_cells: tile,
+                    ..TileOptions::default()
                 },
+                None,
                 &|_, _| {},
             )
             .unwrap()

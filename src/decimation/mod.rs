@@ -317,10 +317,126 @@ fn bounds(positions: &[Vec3]) -> (DVec3, DVec3) {
         })
 }
 
+/// Decimates only the band of triangles around the `flagged` vertices (the triangles
+/// that use a vertex sharing a triangle with a flagged one) until the whole mesh has
+/// `target` triangles or the error bound stops it; the rest of the mesh is untouched and
+/// the band's border does not move. Memory follows the band, not the mesh: this is the
+/// pass across tile seams after each tile was decimated with its seam vertices locked
+/// ([`crate::tiles`]). Unused vertices are removed; the order of the untouched triangles
+/// and vertices is kept, the band's triangles come last.
+pub fn decimate_band(
+    mesh: &mut TriMesh,
+    flagged: &[bool],
+    target: usize,
+    max_error: Option<f32>,
+) -> DecimateStats {
+    let nv = mesh.vertex_count();
+    let before = mesh.triangle_count();
+    let mut near = vec![false; nv];
+    for t in &mesh.triangles {
+        if t.iter().any(|&v| flagged[v as usize]) {
+            for &v in t {
+                near[v as usize] = true;
+            }
+        }
+    }
+    let (band, rest): (Vec<[u32; 3]>, Vec<[u32; 3]>) = mesh
+        .triangles
+        .iter()
+        .partition(|t| t.iter().any(|&v| near[v as usize]));
+    drop(near);
+    let stats = DecimateStats {
+        triangles_before: before,
+        triangles_after: before,
+        ..Default::default()
+    };
+    if band.is_empty() || before <= target {
+        return stats;
+    }
+    // The band's border: vertices the rest also uses.
+    let mut in_rest = vec![false; nv];
+    for t in &rest {
+        for &v in t {
+            in_rest[v as usize] = true;
+        }
+    }
+    let mut local_index = vec![u32::MAX; nv];
+    let mut global_of: Vec<u32> = Vec::new();
+    let mut local = TriMesh::default();
+    local.triangles = band
+        .iter()
+        .map(|t| {
+            t.map(|v| {
+                if local_index[v as usize] == u32::MAX {
+                    local_index[v as usize] = global_of.len() as u32;
+                    global_of.push(v);
+                    local.positions.push(mesh.positions[v as usize]);
+                }
+                local_index[v as usize]
+            })
+        })
+        .collect();
+    drop(band);
+    drop(local_index);
+    let locked: Vec<bool> = global_of.iter().map(|&g| in_rest[g as usize]).collect();
+    let band_target = local.triangle_count().saturating_sub(before - target);
+    let (band_stats, remap) = decimate_locked(&mut local, band_target, max_error, &locked);
+    // Locked survivors keep their vertex; the band's other survivors are appended.
+    let mut output_of = vec![u32::MAX; local.vertex_count()];
+    for (old, &new) in remap.iter().enumerate() {
+        if new != u32::MAX && locked[old] {
+            output_of[new as usize] = global_of[old];
+        }
+    }
+    let mut positions = std::mem::take(&mut mesh.positions);
+    for (new, p) in local.positions.iter().enumerate() {
+        if output_of[new] == u32::MAX {
+            output_of[new] = positions.len() as u32;
+            positions.push(*p);
+        }
+    }
+    let mut triangles = rest;
+    triangles.extend(
+        local
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| output_of[v as usize])),
+    );
+    // Drop the vertices no triangle uses any more, keeping the order.
+    let mut new_index = vec![u32::MAX; positions.len()];
+    for t in &triangles {
+        for &v in t {
+            new_index[v as usize] = 0;
+        }
+    }
+    let mut kept = Vec::with_capacity(positions.len());
+    for (v, p) in positions.iter().enumerate() {
+        if new_index[v] != u32::MAX {
+            new_index[v] = kept.len() as u32;
+            kept.push(*p);
+        }
+    }
+    for t in &mut triangles {
+        for v in t.iter_mut() {
+            *v = new_index[*v as usize];
+        }
+    }
+    *mesh = TriMesh {
+        positions: kept,
+        triangles,
+        normals: Vec::new(),
+    };
+    DecimateStats {
+        triangles_before: before,
+        triangles_after: mesh.triangle_count(),
+        ..band_stats
+    }
+}
+
 /// Decimates to `target` triangles or the error bound, with the `extra_locked` vertices
 /// (indexed like the mesh's; may be empty) never moving; returns the stats and the new
 /// index of every input vertex (`u32::MAX` when it was removed).
-fn decimate_locked(
+pub fn decimate_locked(
     mesh: &mut TriMesh,
     target: usize,
     max_error: Option<f32>,

@@ -163,6 +163,110 @@ pub fn stitch(mut surfaces: Vec<BlockSurface>) -> (TriMesh, MarchingCubesStats) 
     )
 }
 
+/// The triangles of the blocks in `own`, with every vertex they use, as one mesh, and for
+/// each vertex whether it lies on the border of `own` (a lattice edge of a cell outside
+/// `own`, so other tiles' triangles may use it too) and, if so, its global key.
+///
+/// `surfaces` must hold the blocks of `own` and of the layer of blocks just above it (the
+/// owners of the vertices on the upper faces of `own`). Vertices are numbered in block
+/// order like [`stitch`]; a vertex's position depends only on its edge's two end values,
+/// so a seam vertex has the same position in every tile that uses it.
+pub fn stitch_range(surfaces: &[BlockSurface], own: BlockRange) -> RangeMesh {
+    let mut base = Vec::with_capacity(surfaces.len() + 1);
+    base.push(0u32);
+    for s in surfaces {
+        base.push(base.last().unwrap() + s.owned.len() as u32);
+    }
+    let index_of: HashMap<BlockKey, usize> = surfaces
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (s.key, i))
+        .collect();
+    let total = *base.last().unwrap() as usize;
+    let mut triangles: Vec<[u32; 3]> = Vec::new();
+    for s in surfaces.iter().filter(|s| own.contains(s.key)) {
+        let key = s.key;
+        triangles.extend(s.triangles.iter().map(|t| {
+            t.map(|r| {
+                let o = r >> 16;
+                let owner = [
+                    key[0] + (o & 1) as i32,
+                    key[1] + ((o >> 1) & 1) as i32,
+                    key[2] + ((o >> 2) & 1) as i32,
+                ];
+                let bi = *index_of
+                    .get(&owner)
+                    .expect("the owner of a crossed edge is always marched");
+                let local = (r & 0xffff) as u16;
+                let pos = surfaces[bi]
+                    .owned
+                    .binary_search_by_key(&local, |e| e.0)
+                    .expect("the owner of a crossed edge always creates its vertex");
+                base[bi] + pos as u32
+            })
+        }));
+    }
+    // Keep the referenced vertices only, in block order.
+    let mut new_index = vec![u32::MAX; total];
+    for t in &triangles {
+        for &v in t {
+            new_index[v as usize] = 0;
+        }
+    }
+    let (lo, hi) = (
+        own.lo.map(|c| c * E),
+        own.hi.map(|c| (c + 1) * E),
+    );
+    let mut positions = Vec::new();
+    let mut seam_keys = Vec::new();
+    for (bi, s) in surfaces.iter().enumerate() {
+        for (k, &(id, p)) in s.owned.iter().enumerate() {
+            let g = base[bi] as usize + k;
+            if new_index[g] == u32::MAX {
+                continue;
+            }
+            new_index[g] = positions.len() as u32;
+            positions.push(p);
+            let id32 = id as u32;
+            let on_seam = id32 < CENTER_ID_BASE && {
+                let l = (id32 / 3) as i32;
+                let axis = (id32 % 3) as usize;
+                let corner = [l % E, (l / E) % E, l / (E * E)];
+                (0..3).any(|b| {
+                    let g = s.key[b] * E + corner[b];
+                    b != axis && (g <= lo[b] || g >= hi[b])
+                })
+            };
+            seam_keys.push(on_seam.then_some((s.key, id)));
+        }
+    }
+    for t in &mut triangles {
+        for v in t.iter_mut() {
+            *v = new_index[*v as usize];
+        }
+    }
+    RangeMesh {
+        mesh: TriMesh {
+            positions,
+            triangles,
+            normals: Vec::new(),
+        },
+        seam_keys,
+    }
+}
+
+/// Global identity of a mesh vertex: its owning block and its id there.
+pub type VertexKey = (BlockKey, u16);
+
+/// A piece of the marching-cubes mesh cut along block borders ([`stitch_range`]).
+pub struct RangeMesh {
+    /// The triangles of the range and the vertices they use.
+    pub mesh: TriMesh,
+    /// Per vertex: the global key when the vertex lies on the range's border (other
+    /// ranges may use it), `None` inside.
+    pub seam_keys: Vec<Option<VertexKey>>,
+}
+
 /// First local id of cell-centre vertices (after the `8³ · 3` edge ids): cell `n`'s
 /// `k`-th centred loop has id `CENTER_ID_BASE + 4n + k`.
 const CENTER_ID_BASE: u32 = (E * E * E * 3) as u32;

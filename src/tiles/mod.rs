@@ -21,29 +21,79 @@
 //!   round;
 //! * [`crate::marching_cubes::stitch`] numbers vertices in global block order.
 //!
-//! Tiles run one after another, each parallel inside, so peak memory is one tile's field
-//! plus the block surfaces gathered so far.
+//! **Out of core.** A tiled run never holds the scene: a first pass over the
+//! [`ParticleSource`] checks the positions and counts particles per block; a second bins
+//! them into a spill file on disk ([`spill`]), after which the source is dropped; each
+//! tile then reads back the spill cells its zones overlap. Tiles run one after another,
+//! each parallel inside.
+//!
+//! **Memory budget.** [`TileOptions::memory_budget_bytes`] picks the tile size (the largest
+//! power-of-two number of blocks whose densest tile fits next to the expected output) or
+//! refuses, before any work, a run whose smallest tile cannot fit. The estimate is a
+//! per-particle model calibrated on real frames ([`UNTILED_BYTES_PER_PARTICLE`],
+//! [`TILE_BYTES_PER_PARTICLE`], [`OUTPUT_BYTES_PER_PARTICLE`]).
+//!
+//! **Decimation in tiles.** With decimation requested and more than one tile, every tile
+//! decimates its own piece of the marching-cubes mesh as soon as it is meshed, the
+//! vertices on its border locked ([`crate::marching_cubes::stitch_range`]); the reduced
+//! pieces are joined by the global key of the border vertices and one pass over the band
+//! around the seams ([`crate::decimation::decimate_band`]) finishes the job. The raw
+//! surface is then never whole in memory: memory follows the output. The result is
+//! deterministic and independent of the thread count, but depends on the tile size;
+//! without decimation the stitched marching-cubes mesh is bit-identical for every tiling.
 
-use crate::error::Result;
+pub mod source;
+pub mod spill;
+
+use crate::decimation::{decimate_band, decimate_locked, DecimateOptions, DecimateStats};
+use crate::error::{Error, Result};
 use crate::field::{
-    apply_coverage, block_reach, check_positions, compute_blocks, home_blocks, BlockRange,
+    apply_coverage, block_reach, check_positions_from, compute_blocks, home_block, BlockRange,
     FieldOptions, FieldStats,
 };
 use crate::grid::{BlockKey, BLOCK_EDGE};
-use crate::marching_cubes::{march_blocks, stitch, BlockSurface, MarchingCubesStats};
+use crate::marching_cubes::{
+    march_blocks, stitch, stitch_range, BlockSurface, MarchingCubesStats, VertexKey,
+};
 use crate::mesh::TriMesh;
 use crate::neighbors::find_isolated_where;
 use glam::Vec3;
 use hashbrown::{HashMap, HashSet};
 use rayon::prelude::*;
+pub use source::{MappedXyz, ParticleSource};
+use spill::SpillFile;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
+
+/// Set (by the CLI's Ctrl-C handler) to stop a run between tiles with
+/// [`Error::Interrupted`]; temporary files are removed as the error unwinds.
+pub static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+/// Peak memory of an untiled run with full post-processing, bytes per particle (4M
+/// particles of `dambreak_small` copies: 975 MB).
+pub const UNTILED_BYTES_PER_PARTICLE: u64 = 250;
+/// Peak memory of one tile, bytes per particle it loads (own and ghost): particles,
+/// neighbour grid, field blocks, block surfaces and the tile's decimation state.
+pub const TILE_BYTES_PER_PARTICLE: u64 = 600;
+/// Memory after the tiles, bytes per particle: the decimated surface and the Loop step's
+/// working set (4M particles of `dambreak_small` copies: 510 MB at subdivision).
+pub const OUTPUT_BYTES_PER_PARTICLE: u64 = 130;
 
 /// How the lattice is cut.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TileOptions {
-    /// Tile edge in marching-cubes cells, rounded up to whole 8-cell blocks. `None`: one
-    /// tile holds the whole scene. Default `None`.
+    /// Tile edge in marching-cubes cells, rounded up to whole 8-cell blocks. `None`: chosen
+    /// from the memory budget, or one tile when there is no budget. Default `None`.
     pub tile_size_cells: Option<u32>,
+    /// Memory the run may use, bytes (see the module docs). `None`: no limit. Default
+    /// `None`; the CLI defaults to half the available memory.
+    #[serde(default)]
+    pub memory_budget_bytes: Option<u64>,
+    /// Directory for the spill file of a tiled run. `None`: the system's temporary
+    /// directory. Default `None`.
+    #[serde(default)]
+    pub temp_dir: Option<PathBuf>,
 }
 
 /// What the tiled run did.
@@ -53,52 +103,98 @@ pub struct TileStats {
     pub tiles: usize,
     /// Tile edge, blocks (0 when untiled).
     pub tile_blocks: u32,
+    /// Memory budget the tile size was checked against, bytes.
+    pub memory_budget_bytes: Option<u64>,
+    /// Estimated peak memory of the run (model of the module docs), bytes.
+    pub estimated_peak_bytes: u64,
+    /// Bytes of particle records written to the spill file (0 when untiled).
+    pub spill_bytes: u64,
     /// Largest particle count one tile loaded (own + ghosts).
     pub max_tile_particles: usize,
     /// Largest field memory of one tile, bytes.
     pub max_tile_field_bytes: usize,
-    /// Bytes of the gathered block surfaces before stitching.
+    /// Bytes of the gathered block surfaces before stitching (0 when decimated in tiles).
     pub surface_bytes: usize,
+    /// Seconds spent on the two passes over the input (checking, counting, spilling).
+    pub spill_seconds: f64,
     /// Seconds spent loading tile particles and finding isolated particles.
     pub neighbour_seconds: f64,
     /// Seconds spent computing field blocks (with coverage).
     pub field_seconds: f64,
     /// Seconds spent in marching cubes (per-block extraction).
     pub marching_seconds: f64,
-    /// Seconds spent stitching block surfaces into one mesh.
+    /// Seconds spent stitching block surfaces (or decimated tile pieces) into one mesh.
     pub stitch_seconds: f64,
+    /// Seconds spent decimating tiles and the seam band (0 unless decimated in tiles).
+    pub decimation_seconds: f64,
 }
 
 /// The result of the field and marching-cubes stages over all tiles.
 pub struct TiledSurface {
-    /// The stitched marching-cubes mesh.
+    /// The stitched mesh: marching cubes, decimated when [`TiledSurface::decimation`] is
+    /// `Some`.
     pub mesh: TriMesh,
     /// Centres of isolated particles, in input order.
     pub isolated: Vec<Vec3>,
     /// Field figures summed over tiles (particles counts the field particles once).
     pub field: FieldStats,
-    /// Marching-cubes figures of the stitched mesh.
+    /// Marching-cubes figures (summed over tiles when decimated in tiles).
     pub marching_cubes: MarchingCubesStats,
+    /// Decimation figures when the tiles were decimated as they were meshed.
+    pub decimation: Option<DecimateStats>,
     /// Tiling figures.
     pub tiles: TileStats,
 }
 
+/// Spill cell edge, blocks: the granularity at which a tile reads back particles.
+const SPILL_CELL_BLOCKS: i32 = 4;
+
 /// Runs isolation, field and marching cubes tile by tile and stitches the result.
-/// `isolation_radius` (world units) is `None` to keep isolated particles in the field.
-pub fn reconstruct_tiled(
-    positions: &[Vec3],
+/// `isolation_radius` (world units) is `None` to keep isolated particles in the field;
+/// `decimation` asks for decimation in tiles (used only when there is more than one
+/// tile: check [`TiledSurface::decimation`]). `on_tile(n, tiles)` is told before each
+/// tile.
+pub fn reconstruct_tiled<S: ParticleSource>(
+    source: S,
     field_options: &FieldOptions,
     isolation_radius: Option<f32>,
     tile_options: &TileOptions,
+    decimation: Option<&DecimateOptions>,
     on_tile: &dyn Fn(usize, usize),
 ) -> Result<TiledSurface> {
     field_options.validate()?;
-    check_positions(positions, field_options)?;
     let reach = block_reach(field_options);
-    let home = home_blocks(positions, field_options);
-    let tile_blocks = tile_options
-        .tile_size_cells
-        .map(|cells| (cells.max(1) as i32 + BLOCK_EDGE - 1) / BLOCK_EDGE);
+    let inv_h = 1.0 / field_options.cell_size_world();
+    let clock = Instant::now();
+    let particle_count = source.particle_count();
+    if particle_count > u32::MAX as usize {
+        return Err(Error::InvalidOption {
+            option: "INPUT",
+            message: format!("{particle_count} particles: at most 2^32 − 1 per frame"),
+        });
+    }
+
+    // Pass 1: check every position, count particles per home block.
+    let mut block_counts: HashMap<BlockKey, u64> = HashMap::new();
+    source.visit_chunks(&mut |first, chunk| {
+        check_positions_from(first, chunk, field_options)?;
+        let homes: Vec<BlockKey> = chunk.par_iter().map(|p| home_block(*p, inv_h)).collect();
+        let mut run = (homes.first().copied().unwrap_or_default(), 0u64);
+        for h in homes {
+            if h == run.0 {
+                run.1 += 1;
+            } else {
+                *block_counts.entry(run.0).or_default() += run.1;
+                run = (h, 1);
+            }
+        }
+        if run.1 > 0 {
+            *block_counts.entry(run.0).or_default() += run.1;
+        }
+        Ok(())
+    })?;
+    let (tile_blocks, estimated_peak_bytes) =
+        choose_tile_blocks(&block_counts, particle_count as u64, reach, tile_options)?;
     let tile_of = |b: BlockKey| -> BlockKey {
         match tile_blocks {
             Some(t) => b.map(|c| c.div_euclid(t)),
@@ -106,17 +202,60 @@ pub fn reconstruct_tiled(
         }
     };
 
-    // Bin particle indices by home tile, in input order.
-    let mut bins: HashMap<BlockKey, Vec<u32>> = HashMap::new();
-    for (i, b) in home.iter().enumerate() {
-        bins.entry(tile_of(*b)).or_default().push(i as u32);
-    }
+    // Pass 2 (tiled): bin into the spill file; the source is no longer needed after it.
+    // Untiled: the one tile is the whole scene, kept in memory.
+    let mut stats = TileStats {
+        tile_blocks: tile_blocks.unwrap_or(0) as u32,
+        memory_budget_bytes: tile_options.memory_budget_bytes,
+        estimated_peak_bytes,
+        ..TileStats::default()
+    };
+    let cell_of = |b: BlockKey| b.map(|c| c.div_euclid(SPILL_CELL_BLOCKS));
+    let spilled: Option<SpillFile> = match tile_blocks {
+        Some(_) => {
+            let mut cell_counts: HashMap<BlockKey, u64> = HashMap::new();
+            for (b, n) in &block_counts {
+                *cell_counts.entry(cell_of(*b)).or_default() += n;
+            }
+            let temp = tile_options
+                .temp_dir
+                .clone()
+                .unwrap_or_else(std::env::temp_dir);
+            let spill = SpillFile::create(&temp, &cell_counts)?;
+            let mut writer = spill.writer();
+            source.visit_chunks(&mut |first, chunk| {
+                for (k, p) in chunk.iter().enumerate() {
+                    writer.push(cell_of(home_block(*p, inv_h)), *p, (first + k) as u32)?;
+                }
+                interrupted()
+            })?;
+            writer.finish()?;
+            stats.spill_bytes = spill.bytes();
+            Some(spill)
+        }
+        None => None,
+    };
+    let mut copied: Vec<Vec3> = Vec::new();
+    let all: &[Vec3] = if spilled.is_some() {
+        drop(source);
+        &[]
+    } else if let Some(slice) = source.as_slice() {
+        slice
+    } else {
+        copied.reserve_exact(particle_count);
+        source.visit_chunks(&mut |_, chunk| {
+            copied.extend_from_slice(chunk);
+            Ok(())
+        })?;
+        &copied
+    };
+    stats.spill_seconds = clock.elapsed().as_secs_f64();
+
     // Tiles to process: those holding a block within reach (+1 for the marching layer)
     // of a populated home block.
     let mut tiles: HashSet<BlockKey> = HashSet::new();
     if tile_blocks.is_some() {
-        let populated: HashSet<BlockKey> = home.iter().copied().collect();
-        for b in &populated {
+        for b in block_counts.keys() {
             for dz in -reach - 1..=reach {
                 for dy in -reach - 1..=reach {
                     for dx in -reach - 1..=reach {
@@ -125,21 +264,24 @@ pub fn reconstruct_tiled(
                 }
             }
         }
-    } else if !positions.is_empty() {
+    } else if particle_count > 0 {
         tiles.insert([0, 0, 0]);
     }
+    drop(block_counts);
     let mut tiles: Vec<BlockKey> = tiles.into_iter().collect();
     tiles.sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
+    stats.tiles = tiles.len();
+    let decimation = decimation.filter(|_| tile_blocks.is_some());
 
     let mut surfaces: Vec<BlockSurface> = Vec::new();
-    let mut isolated_indices: Vec<u32> = Vec::new();
+    let mut joined = JoinedPieces::default();
+    let mut isolated: Vec<(u32, Vec3)> = Vec::new();
     let mut field_stats = FieldStats::default();
-    let mut stats = TileStats {
-        tiles: tiles.len(),
-        tile_blocks: tile_blocks.unwrap_or(0) as u32,
-        ..TileStats::default()
-    };
+    let mut mc_stats = MarchingCubesStats::default();
+    let mut decimate_stats = DecimateStats::default();
+    let mut loaded: Vec<(Vec3, u32)> = Vec::new();
     for (n, &tile) in tiles.iter().enumerate() {
+        interrupted()?;
         on_tile(n, tiles.len());
         let clock = Instant::now();
         let own = match tile_blocks {
@@ -158,52 +300,54 @@ pub fn reconstruct_tiled(
         let zone1 = field_range.grown(reach, reach);
         let zone2 = zone1.grown(reach, reach);
 
-        // Load zone 2 from the bins of every tile it overlaps, in the canonical order
-        // (home block, input index): spatially coherent, and the same in every tiling.
-        let mut loaded: Vec<u32> = Vec::new();
-        if tile_blocks.is_some() {
-            let (tlo, thi) = (tile_of(zone2.lo), tile_of(zone2.hi));
-            for tz in tlo[2]..=thi[2] {
-                for ty in tlo[1]..=thi[1] {
-                    for tx in tlo[0]..=thi[0] {
-                        if let Some(bin) = bins.get(&[tx, ty, tz]) {
+        // Load zone 2 in the canonical order (home block, input index): spatially
+        // coherent, and the same in every tiling.
+        loaded.clear();
+        match &spilled {
+            Some(spill) => {
+                let (clo, chi) = (cell_of(zone2.lo), cell_of(zone2.hi));
+                let mut cell_records = Vec::new();
+                for cz in clo[2]..=chi[2] {
+                    for cy in clo[1]..=chi[1] {
+                        for cx in clo[0]..=chi[0] {
+                            cell_records.clear();
+                            spill.read_cell([cx, cy, cz], &mut cell_records)?;
                             loaded.extend(
-                                bin.iter()
-                                    .copied()
-                                    .filter(|&i| zone2.contains(home[i as usize])),
+                                cell_records
+                                    .iter()
+                                    .filter(|(p, _)| zone2.contains(home_block(*p, inv_h))),
                             );
                         }
                     }
                 }
             }
-        } else {
-            loaded = (0..positions.len() as u32).collect();
+            None => loaded.extend(all.iter().enumerate().map(|(i, p)| (*p, i as u32))),
         }
-        loaded.par_sort_unstable_by_key(|&i| {
-            let h = home[i as usize];
+        loaded.par_sort_unstable_by_key(|&(p, i)| {
+            let h = home_block(p, inv_h);
             (h[2], h[1], h[0], i)
         });
         stats.max_tile_particles = stats.max_tile_particles.max(loaded.len());
-        let local: Vec<Vec3> = loaded.iter().map(|&i| positions[i as usize]).collect();
+        let local: Vec<Vec3> = loaded.iter().map(|r| r.0).collect();
 
         // Flags are needed for zone 1 only; zone 2 is there to complete their neighbours.
-        let in_zone1: Vec<bool> = loaded
-            .iter()
-            .map(|&i| zone1.contains(home[i as usize]))
+        let in_zone1: Vec<bool> = local
+            .par_iter()
+            .map(|p| zone1.contains(home_block(*p, inv_h)))
             .collect();
-        let isolated = match isolation_radius {
+        let lonely = match isolation_radius {
             Some(radius) => find_isolated_where(&local, radius, &in_zone1),
             None => vec![false; local.len()],
         };
         let mut field_particles = Vec::new();
-        for (k, &gi) in loaded.iter().enumerate() {
-            let h = home[gi as usize];
-            if isolated[k] {
+        for (k, &(p, gi)) in loaded.iter().enumerate() {
+            let h = home_block(p, inv_h);
+            if lonely[k] {
                 if own.contains(h) {
-                    isolated_indices.push(gi);
+                    isolated.push((gi, p));
                 }
-            } else if zone1.contains(h) {
-                field_particles.push(local[k]);
+            } else if in_zone1[k] {
+                field_particles.push(p);
             }
         }
         drop(local);
@@ -216,28 +360,277 @@ pub fn reconstruct_tiled(
         field_stats.blocks += fs.blocks;
         field_stats.vertices_in_band += fs.vertices_in_band;
         field_stats.block_bytes = field_stats.block_bytes.max(fs.block_bytes);
+        drop(field_particles);
         stats.field_seconds += clock.elapsed().as_secs_f64();
         let clock = Instant::now();
-        let tile_surfaces = march_blocks(&field, Some(own));
-        drop(field);
-        surfaces.extend(tile_surfaces);
-        stats.marching_seconds += clock.elapsed().as_secs_f64();
+        match decimation {
+            None => {
+                let tile_surfaces = march_blocks(&field, Some(own));
+                drop(field);
+                surfaces.extend(tile_surfaces);
+                stats.marching_seconds += clock.elapsed().as_secs_f64();
+            }
+            Some(options) => {
+                // The tile's own blocks and the layer above (owners of its upper border
+                // vertices), as one mesh whose border vertices are keyed.
+                let tile_surfaces = march_blocks(&field, Some(own.grown(0, 1)));
+                drop(field);
+                let piece = stitch_range(&tile_surfaces, own);
+                drop(tile_surfaces);
+                mc_stats.triangles += piece.mesh.triangle_count();
+                stats.marching_seconds += clock.elapsed().as_secs_f64();
+                let clock = Instant::now();
+                let tile_stats = decimate_piece(piece, options, &mut joined);
+                decimate_stats.collapses += tile_stats.collapses;
+                decimate_stats.refused_topology += tile_stats.refused_topology;
+                decimate_stats.refused_geometry += tile_stats.refused_geometry;
+                decimate_stats.max_error = decimate_stats.max_error.max(tile_stats.max_error);
+                decimate_stats.passes += tile_stats.passes;
+                decimate_stats.regions += 1;
+                stats.decimation_seconds += clock.elapsed().as_secs_f64();
+            }
+        }
     }
-    stats.surface_bytes = surfaces.iter().map(|s| s.memory_bytes()).sum();
-    let clock = Instant::now();
-    let (mesh, mc_stats) = stitch(surfaces);
-    stats.stitch_seconds = clock.elapsed().as_secs_f64();
+    drop(spilled);
+    drop(loaded);
 
-    isolated_indices.sort_unstable();
-    field_stats.particles = positions.len() - isolated_indices.len();
+    let clock = Instant::now();
+    let (mesh, decimation_stats) = match decimation {
+        None => {
+            stats.surface_bytes = surfaces.iter().map(|s| s.memory_bytes()).sum();
+            let (mesh, mcs) = stitch(surfaces);
+            mc_stats = mcs;
+            stats.stitch_seconds = clock.elapsed().as_secs_f64();
+            (mesh, None)
+        }
+        Some(options) => {
+            let mut mesh = TriMesh {
+                positions: joined.positions,
+                triangles: joined.triangles,
+                normals: Vec::new(),
+            };
+            drop(joined.seam_index);
+            let target = options
+                .target_reduction
+                .map(|f| {
+                    ((1.0 - f.clamp(0.0, 1.0) as f64) * mc_stats.triangles as f64).ceil() as usize
+                })
+                .unwrap_or(0);
+            let band = decimate_band(&mut mesh, &joined.was_seam, target, options.max_error);
+            decimate_stats.collapses += band.collapses;
+            decimate_stats.refused_topology += band.refused_topology;
+            decimate_stats.refused_geometry += band.refused_geometry;
+            decimate_stats.max_error = decimate_stats.max_error.max(band.max_error);
+            decimate_stats.passes += band.passes;
+            decimate_stats.triangles_before = mc_stats.triangles;
+            decimate_stats.triangles_after = mesh.triangle_count();
+            stats.decimation_seconds += clock.elapsed().as_secs_f64();
+            (mesh, Some(decimate_stats))
+        }
+    };
+
+    isolated.sort_unstable_by_key(|r| r.0);
+    field_stats.particles = particle_count - isolated.len();
     Ok(TiledSurface {
         mesh,
-        isolated: isolated_indices
-            .iter()
-            .map(|&i| positions[i as usize])
-            .collect(),
+        isolated: isolated.into_iter().map(|r| r.1).collect(),
         field: field_stats,
         marching_cubes: mc_stats,
+        decimation: decimation_stats,
         tiles: stats,
     })
+}
+
+fn interrupted() -> Result<()> {
+    if INTERRUPTED.load(Ordering::Relaxed) {
+        Err(Error::Interrupted)
+    } else {
+        Ok(())
+    }
+}
+
+/// Decimated tile pieces joined so far.
+#[derive(Default)]
+struct JoinedPieces {
+    positions: Vec<Vec3>,
+    triangles: Vec<[u32; 3]>,
+    /// Per vertex: it lay on a tile border (it stayed locked in its tiles).
+    was_seam: Vec<bool>,
+    /// Border vertex → its index.
+    seam_index: HashMap<VertexKey, u32>,
+}
+
+/// Decimates one tile's piece with its border locked, to the options' fraction of its
+/// triangles, and joins the result.
+fn decimate_piece(
+    piece: crate::marching_cubes::RangeMesh,
+    options: &DecimateOptions,
+    joined: &mut JoinedPieces,
+) -> DecimateStats {
+    let mut mesh = piece.mesh;
+    let locked: Vec<bool> = piece.seam_keys.iter().map(Option::is_some).collect();
+    let target = options
+        .target_reduction
+        .map(|f| ((1.0 - f.clamp(0.0, 1.0) as f64) * mesh.triangle_count() as f64).ceil() as usize)
+        .unwrap_or(0);
+    let original: Vec<Vec3> = piece
+        .seam_keys
+        .iter()
+        .zip(&mesh.positions)
+        .map(|(_, p)| *p)
+        .collect();
+    let (stats, remap) = decimate_locked(&mut mesh, target, options.max_error, &locked);
+    let mut output_of = vec![u32::MAX; mesh.vertex_count()];
+    for (old, &new) in remap.iter().enumerate() {
+        if new == u32::MAX {
+            continue;
+        }
+        if let Some(key) = piece.seam_keys[old] {
+            let index = *joined.seam_index.entry(key).or_insert_with(|| {
+                joined.positions.push(original[old]);
+                joined.was_seam.push(true);
+                (joined.positions.len() - 1) as u32
+            });
+            output_of[new as usize] = index;
+        }
+    }
+    for (new, p) in mesh.positions.iter().enumerate() {
+        if output_of[new] == u32::MAX {
+            output_of[new] = joined.positions.len() as u32;
+            joined.positions.push(*p);
+            joined.was_seam.push(false);
+        }
+    }
+    joined.triangles.extend(
+        mesh.triangles
+            .iter()
+            .map(|t| t.map(|v| output_of[v as usize])),
+    );
+    stats
+}
+
+/// Picks the tile edge in blocks (`None`: one tile) and estimates the run's peak memory.
+fn choose_tile_blocks(
+    block_counts: &HashMap<BlockKey, u64>,
+    particles: u64,
+    reach: i32,
+    options: &TileOptions,
+) -> Result<(Option<i32>, u64)> {
+    let output = particles * OUTPUT_BYTES_PER_PARTICLE;
+    let untiled = particles * UNTILED_BYTES_PER_PARTICLE;
+    // Ghost blocks on each side of a tile's own blocks (zone 2 reaches 2·reach + 1 below
+    // and 2·reach + 2 above, see the module docs).
+    let ghost = 2 * reach + 2;
+    // Particles of the fullest tile's zone 2: its own count plus the share of each
+    // neighbour tile its ghost margin overlaps (particles spread evenly inside a tile).
+    let tile_estimate = |t: i32| -> u64 {
+        let mut per_tile: HashMap<BlockKey, u64> = HashMap::new();
+        for (b, n) in block_counts {
+            *per_tile.entry(b.map(|c| c.div_euclid(t))).or_default() += n;
+        }
+        let k = (ghost + t - 1) / t;
+        let overlap = |d: i32| -> f64 {
+            if d == 0 {
+                1.0
+            } else {
+                ((ghost - (d.abs() - 1) * t) as f64 / t as f64).clamp(0.0, 1.0)
+            }
+        };
+        let keys: Vec<BlockKey> = per_tile.keys().copied().collect();
+        let densest = keys
+            .par_iter()
+            .map(|key| {
+                let mut sum = 0.0;
+                for dz in -k..=k {
+                    for dy in -k..=k {
+                        for dx in -k..=k {
+                            if let Some(n) = per_tile.get(&[key[0] + dx, key[1] + dy, key[2] + dz]) {
+                                sum += *n as f64 * overlap(dx) * overlap(dy) * overlap(dz);
+                            }
+                        }
+                    }
+                }
+                sum
+            })
+            .reduce(|| 0.0, f64::max);
+        densest.min(particles as f64) as u64 * TILE_BYTES_PER_PARTICLE
+    };
+    let mib = |b: u64| b.div_ceil(1 << 20);
+    match (options.tile_size_cells, options.memory_budget_bytes) {
+        (Some(cells), budget) => {
+            let t = (cells.max(1) as i32 + BLOCK_EDGE - 1) / BLOCK_EDGE;
+            let estimate = tile_estimate(t) + output;
+            if let Some(budget) = budget {
+                if estimate > budget {
+                    return Err(Error::MemoryBudget {
+                        budget_mib: mib(budget),
+                        message: format!(
+                            "tiles of {cells} cells need ≈ {} MiB (densest tile ≈ {} MiB, output ≈ {} MiB); use a smaller --tile-size or a larger --memory-budget",
+                            mib(estimate),
+                            mib(estimate - output),
+                            mib(output)
+                        ),
+                    });
+                }
+            }
+            Ok((Some(t), estimate))
+        }
+        (None, None) => Ok((None, untiled)),
+        (None, Some(budget)) => {
+            if untiled <= budget {
+                return Ok((None, untiled));
+            }
+            let mut smallest = 0;
+            for t in [64, 32, 16, 8, 4, 2, 1] {
+                let estimate = tile_estimate(t) + output;
+                smallest = estimate;
+                if estimate <= budget {
+                    return Ok((Some(t), estimate));
+                }
+            }
+            Err(Error::MemoryBudget {
+                budget_mib: mib(budget),
+                message: format!(
+                    "even one-block tiles need ≈ {} MiB for {particles} particles (output ≈ {} MiB)",
+                    mib(smallest),
+                    mib(output)
+                ),
+            })
+        }
+    }
+}
+
+/// Parses a memory size: a number with an optional unit `B`, `KiB`, `MiB`, `GiB`, `TiB`
+/// (powers of 1024; `K`, `M`, `G`, `T`, `KB`, `MB`, `GB`, `TB` are read the same way).
+pub fn parse_memory_size(text: &str) -> std::result::Result<u64, String> {
+    let t = text.trim();
+    let split = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (number, unit) = t.split_at(split);
+    let value: f64 = number
+        .parse()
+        .map_err(|_| format!("{text:?} is not a size like 512MiB or 2GiB"))?;
+    let scale: u64 = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 1,
+        "k" | "kb" | "kib" => 1 << 10,
+        "m" | "mb" | "mib" => 1 << 20,
+        "g" | "gb" | "gib" => 1 << 30,
+        "t" | "tb" | "tib" => 1 << 40,
+        other => return Err(format!("unknown size unit {other:?} in {text:?} (use MiB or GiB)")),
+    };
+    let bytes = value * scale as f64;
+    if !(bytes >= 1.0 && bytes < u64::MAX as f64) {
+        return Err(format!("{text:?} is not a positive size"));
+    }
+    Ok(bytes as u64)
+}
+
+/// Half the memory the system reports available (`MemAvailable`, Linux), the CLI's default
+/// budget; `None` where it cannot be read.
+pub fn default_memory_budget() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024 / 2)
 }

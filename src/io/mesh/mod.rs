@@ -154,15 +154,23 @@ pub fn write_surface(
             (write_document(path, &doc, format)?, doc.vertices)
         }
         other => {
-            let mesh = surface.merged();
-            let normals = options.normals && mesh.normals.len() == mesh.positions.len();
+            // The fluid as it is, the spheres merged (instancing is glTF's only).
+            let spheres = surface.spheres.merged();
+            let parts: Vec<&TriMesh> = [&surface.fluid, &spheres]
+                .into_iter()
+                .filter(|m| m.triangle_count() > 0)
+                .collect();
+            let normals = options.normals
+                && parts
+                    .iter()
+                    .all(|m| m.normals.len() == m.positions.len());
             let bytes = write_atomically(path, |w| match other {
-                MeshFormat::Ply => simple::write_ply(w, &mesh, normals),
-                MeshFormat::Obj => simple::write_obj(w, &mesh, normals),
-                MeshFormat::Vtk => simple::write_vtk(w, &mesh, normals),
+                MeshFormat::Ply => simple::write_ply(w, &parts, normals),
+                MeshFormat::Obj => simple::write_obj(w, &parts, normals),
+                MeshFormat::Vtk => simple::write_vtk(w, &parts, normals),
                 MeshFormat::Glb | MeshFormat::Gltf => unreachable!(),
             })?;
-            (bytes, mesh.vertex_count())
+            (bytes, parts.iter().map(|m| m.vertex_count()).sum())
         }
     };
     Ok(MeshWriteStats {

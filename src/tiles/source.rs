@@ -1,0 +1,134 @@
+//! Where the tiled engine reads particles from: positions in memory, or a raw `.xyz` file
+//! mapped window by window, so that a scene larger than memory is never held whole.
+//!
+//! A [`ParticleSource`] is visited front to back, in input order, a chunk at a time; the
+//! engine visits it at most twice (bounds and tile histogram, then binning into spill
+//! files, see [`super::spill`]).
+
+use crate::error::{Error, Result};
+use glam::Vec3;
+use std::path::{Path, PathBuf};
+
+/// Particles read in input order, a chunk at a time.
+pub trait ParticleSource {
+    /// Number of particles.
+    fn particle_count(&self) -> usize;
+    /// Calls `visit(first_index, positions)` for consecutive chunks covering every
+    /// particle in input order; stops at the first error.
+    fn visit_chunks(&self, visit: &mut dyn FnMut(usize, &[Vec3]) -> Result<()>) -> Result<()>;
+    /// All positions when they already are in memory (lets the untiled run skip a copy).
+    fn as_slice(&self) -> Option<&[Vec3]> {
+        None
+    }
+}
+
+/// Positions in memory (`&[Vec3]`, `Vec<Vec3>`, `&Vec<Vec3>`).
+impl<T: AsRef<[Vec3]>> ParticleSource for T {
+    fn particle_count(&self) -> usize {
+        self.as_ref().len()
+    }
+    fn visit_chunks(&self, visit: &mut dyn FnMut(usize, &[Vec3]) -> Result<()>) -> Result<()> {
+        for (n, chunk) in self.as_ref().chunks(CHUNK_PARTICLES).enumerate() {
+            visit(n * CHUNK_PARTICLES, chunk)?;
+        }
+        Ok(())
+    }
+    fn as_slice(&self) -> Option<&[Vec3]> {
+        Some(self.as_ref())
+    }
+}
+
+/// Particles per visited chunk.
+const CHUNK_PARTICLES: usize = 1 << 20;
+
+/// A raw `.xyz` file (little-endian f32 triples), memory-mapped one window of
+/// [`CHUNK_PARTICLES`] records at a time: resident memory stays one window, whatever the
+/// file size.
+pub struct MappedXyz {
+    path: PathBuf,
+    file: std::fs::File,
+    particles: usize,
+}
+
+impl MappedXyz {
+    /// Opens `path` and checks its size (a whole number of 12-byte records, not empty).
+    pub fn open(path: &Path) -> Result<Self> {
+        let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+        if len == 0 {
+            return Err(Error::EmptyInput {
+                path: path.to_path_buf(),
+            });
+        }
+        if len % 12 != 0 {
+            return Err(Error::parse(
+                path,
+                format!("byte offset {}", len - len % 12),
+                format!(
+                    "file size {len} is not a multiple of 12 (x, y, z as f32): truncated or not .xyz"
+                ),
+            ));
+        }
+        Ok(MappedXyz {
+            path: path.to_path_buf(),
+            file,
+            particles: (len / 12) as usize,
+        })
+    }
+}
+
+impl ParticleSource for MappedXyz {
+    fn particle_count(&self) -> usize {
+        self.particles
+    }
+    fn visit_chunks(&self, visit: &mut dyn FnMut(usize, &[Vec3]) -> Result<()>) -> Result<()> {
+        let mut decoded = Vec::with_capacity(CHUNK_PARTICLES.min(self.particles));
+        let mut first = 0;
+        while first < self.particles {
+            let count = CHUNK_PARTICLES.min(self.particles - first);
+            // The file may have shrunk since it was opened: mapping past its end would
+            // fault on access, so check before every window.
+            let len = self
+                .file
+                .metadata()
+                .map_err(|e| Error::io(&self.path, e))?
+                .len();
+            if len < ((first + count) * 12) as u64 {
+                return Err(Error::parse(
+                    &self.path,
+                    format!("byte offset {len}"),
+                    format!(
+                        "the file was truncated while being read (expected {} bytes)",
+                        self.particles * 12
+                    ),
+                ));
+            }
+            // SAFETY: a read-only map of a range checked above to lie within the file,
+            // dropped before the next window; a concurrent truncation between the check
+            // and the read is outside what any reader can defend against.
+            let map = unsafe {
+                memmap2::MmapOptions::new()
+                    .offset((first * 12) as u64)
+                    .len(count * 12)
+                    .map(&self.file)
+            }
+            .map_err(|e| Error::io(&self.path, e))?;
+            decoded.clear();
+            decoded.extend(map.chunks_exact(12).map(|c| {
+                let f = |k: usize| f32::from_le_bytes([c[k], c[k + 1], c[k + 2], c[k + 3]]);
+                Vec3::new(f(0), f(4), f(8))
+            }));
+            drop(map);
+            if let Some(k) = decoded.iter().position(|p| !p.is_finite()) {
+                return Err(Error::parse(
+                    &self.path,
+                    format!("byte offset {}", (first + k) * 12),
+                    format!("particle {} has a non-finite coordinate", first + k),
+                ));
+            }
+            visit(first, &decoded)?;
+            first += count;
+        }
+        Ok(())
+    }
+}

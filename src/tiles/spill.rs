@@ -1,0 +1,179 @@
+//! Spill file: the particles of a tiled run binned on disk by spill cell, so that a tile
+//! reads back only the particles near it and the whole scene is never in memory.
+//!
+//! One file in a private temporary directory (removed when the [`SpillFile`] is dropped:
+//! on success, on error, and on Ctrl-C, which the CLI turns into an error between
+//! tiles). Records are 16 bytes: `x, y, z` (f32, little-endian) and the particle's input
+//! index (u32). The first pass over the input counts particles per cell, so every cell
+//! gets one contiguous region of the file; the second pass fills the regions through
+//! small per-cell buffers. Records are stored raw: zstd level 1 shrank them by only
+//! ≈ 15 % on `dambreak_small` frames (particle coordinates are noise in their low bits)
+//! at a cost of several times the write time, so compression does not pay here.
+
+use crate::error::{Error, Result};
+use crate::grid::BlockKey;
+use glam::Vec3;
+use hashbrown::HashMap;
+use std::fs::File;
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+
+/// Bytes of one record.
+pub const RECORD_BYTES: usize = 16;
+/// Memory all per-cell write buffers may take together.
+const BUFFER_BYTES: usize = 32 << 20;
+
+/// Particles binned by cell in one temporary file.
+pub struct SpillFile {
+    // Field order matters: the file is closed before its directory is removed.
+    file: File,
+    path: PathBuf,
+    /// Cell → (first record, record count).
+    regions: HashMap<BlockKey, (u64, u64)>,
+    _dir: tempfile::TempDir,
+}
+
+impl SpillFile {
+    /// Creates the file in a new directory under `parent`, with one region per cell of
+    /// `counts` (cell → particles).
+    pub fn create(parent: &Path, counts: &HashMap<BlockKey, u64>) -> Result<Self> {
+        let dir = tempfile::Builder::new()
+            .prefix("meniscus-spill-")
+            .tempdir_in(parent)
+            .map_err(|e| spill_error(parent, e))?;
+        let path = dir.path().join("particles.bin");
+        let file = File::options()
+            .read(true)
+            .write(true)
+            .create_new(true)
+            .open(&path)
+            .map_err(|e| spill_error(&path, e))?;
+        let mut cells: Vec<(&BlockKey, &u64)> = counts.iter().collect();
+        cells.sort_unstable_by_key(|(k, _)| [k[2], k[1], k[0]]);
+        let mut regions = HashMap::with_capacity(cells.len());
+        let mut first = 0u64;
+        for (key, &count) in cells {
+            regions.insert(*key, (first, count));
+            first += count;
+        }
+        file.set_len(first * RECORD_BYTES as u64)
+            .map_err(|e| spill_error(&path, e))?;
+        Ok(SpillFile {
+            file,
+            path,
+            regions,
+            _dir: dir,
+        })
+    }
+
+    /// Bytes of particle records in the file.
+    pub fn bytes(&self) -> u64 {
+        self.regions.values().map(|r| r.1).sum::<u64>() * RECORD_BYTES as u64
+    }
+
+    /// A writer that fills the regions; every particle counted at creation must be
+    /// pushed exactly once.
+    pub fn writer(&self) -> SpillWriter<'_> {
+        let per_cell = (BUFFER_BYTES / self.regions.len().max(1))
+            .clamp(256, 64 << 10)
+            / RECORD_BYTES;
+        SpillWriter {
+            spill: self,
+            cursors: self.regions.iter().map(|(k, r)| (*k, r.0)).collect(),
+            buffers: HashMap::new(),
+            per_cell,
+        }
+    }
+
+    /// The records of one cell (empty when the cell holds no particle).
+    pub fn read_cell(&self, cell: BlockKey, out: &mut Vec<(Vec3, u32)>) -> Result<()> {
+        let Some(&(first, count)) = self.regions.get(&cell) else {
+            return Ok(());
+        };
+        let mut bytes = vec![0u8; count as usize * RECORD_BYTES];
+        self.file
+            .read_exact_at(&mut bytes, first * RECORD_BYTES as u64)
+            .map_err(|e| spill_error(&self.path, e))?;
+        out.extend(bytes.chunks_exact(RECORD_BYTES).map(|c| {
+            let f = |k: usize| f32::from_le_bytes([c[k], c[k + 1], c[k + 2], c[k + 3]]);
+            (
+                Vec3::new(f(0), f(4), f(8)),
+                u32::from_le_bytes([c[12], c[13], c[14], c[15]]),
+            )
+        }));
+        Ok(())
+    }
+}
+
+/// Buffered writes into the regions of a [`SpillFile`].
+pub struct SpillWriter<'a> {
+    spill: &'a SpillFile,
+    cursors: HashMap<BlockKey, u64>,
+    buffers: HashMap<BlockKey, Vec<u8>>,
+    per_cell: usize,
+}
+
+impl SpillWriter<'_> {
+    /// Appends one particle to its cell's region.
+    pub fn push(&mut self, cell: BlockKey, position: Vec3, index: u32) -> Result<()> {
+        let buffer = self
+            .buffers
+            .entry(cell)
+            .or_insert_with(|| Vec::with_capacity(self.per_cell * RECORD_BYTES));
+        for v in position.to_array() {
+            buffer.extend_from_slice(&v.to_le_bytes());
+        }
+        buffer.extend_from_slice(&index.to_le_bytes());
+        if buffer.len() >= self.per_cell * RECORD_BYTES {
+            let bytes = std::mem::take(buffer);
+            self.flush(cell, &bytes)?;
+            let buffer = self.buffers.get_mut(&cell).expect("just used");
+            *buffer = bytes;
+            buffer.clear();
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self, cell: BlockKey, bytes: &[u8]) -> Result<()> {
+        let cursor = self
+            .cursors
+            .get_mut(&cell)
+            .expect("every pushed cell was counted");
+        let (first, count) = self.spill.regions[&cell];
+        let records = (bytes.len() / RECORD_BYTES) as u64;
+        if *cursor + records > first + count {
+            return Err(Error::Spill {
+                path: self.spill.path.clone(),
+                source: std::io::Error::other(
+                    "the input changed between the counting and the binning pass",
+                ),
+            });
+        }
+        self.spill
+            .file
+            .write_all_at(bytes, *cursor * RECORD_BYTES as u64)
+            .map_err(|e| spill_error(&self.spill.path, e))?;
+        *cursor += records;
+        Ok(())
+    }
+
+    /// Writes what is still buffered.
+    pub fn finish(mut self) -> Result<()> {
+        let mut cells: Vec<BlockKey> = self.buffers.keys().copied().collect();
+        cells.sort_unstable();
+        for cell in cells {
+            let bytes = std::mem::take(self.buffers.get_mut(&cell).expect("listed"));
+            if !bytes.is_empty() {
+                self.flush(cell, &bytes)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+fn spill_error(path: &Path, source: std::io::Error) -> Error {
+    Error::Spill {
+        path: path.to_path_buf(),
+        source,
+    }
+}
