@@ -196,7 +196,10 @@ pub fn block_reach(options: &FieldOptions) -> i32 {
 /// The home block (lattice block containing the point) of every position.
 pub fn home_blocks(positions: &[Vec3], options: &FieldOptions) -> Vec<BlockKey> {
     let inv_h = 1.0 / options.cell_size_world();
-    positions.par_iter().map(|p| home_block(*p, inv_h)).collect()
+    positions
+        .par_iter()
+        .map(|p| home_block(*p, inv_h))
+        .collect()
 }
 
 /// The home block of one position, `inv_h` = 1 / cell size (world units).
@@ -212,7 +215,11 @@ pub fn check_positions(positions: &[Vec3], options: &FieldOptions) -> Result<()>
 }
 
 /// [`check_positions`] for a chunk whose first particle has input index `first`.
-pub fn check_positions_from(first: usize, positions: &[Vec3], options: &FieldOptions) -> Result<()> {
+pub fn check_positions_from(
+    first: usize,
+    positions: &[Vec3],
+    options: &FieldOptions,
+) -> Result<()> {
     let inv_h = 1.0 / options.cell_size_world();
     if let Some((i, p)) = positions.iter().enumerate().find(|(_, p)| {
         !p.is_finite() || (p.as_dvec3() * inv_h).abs().max_element() > MAX_CELL_COORDINATE

@@ -7,8 +7,8 @@ use crate::io::mesh::{write_sequence_gltf, write_surface, MeshWriteOptions};
 use crate::io::particles::{read_particles, ParticleFormat};
 use crate::mesh::TriMesh;
 use crate::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
-use crate::tiles::MappedXyz;
 use crate::sequence::{self, Frame};
+use crate::tiles::MappedXyz;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 

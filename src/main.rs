@@ -335,7 +335,8 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, String> {
     options.tiles.tile_size_cells = args.tile_size;
     options.tiles.memory_budget_bytes = match &args.memory_budget {
         Some(text) => Some(
-            meniscus::tiles::parse_memory_size(text).map_err(|e| format!("--memory-budget: {e}"))?,
+            meniscus::tiles::parse_memory_size(text)
+                .map_err(|e| format!("--memory-budget: {e}"))?,
         ),
         None => meniscus::tiles::default_memory_budget(),
     };

@@ -20,7 +20,9 @@ use crate::marching_cubes::MarchingCubesStats;
 use crate::mesh::{SphereInstances, Surface};
 use crate::neighbors::find_isolated;
 use crate::subdivision::{subdivide, SubdivideOptions};
-use crate::tiles::{reconstruct_tiled, ParticleSource, TileOptions, TileStats};
+use crate::tiles::{
+    output_bytes_per_particle, reconstruct_tiled, ParticleSource, TileOptions, TileStats,
+};
 use glam::Vec3;
 use std::time::Instant;
 
@@ -188,6 +190,13 @@ pub fn reconstruct_source<S: ParticleSource>(
         isolation_radius,
         &options.tiles,
         options.decimate.as_ref(),
+        output_bytes_per_particle(
+            options
+                .decimate
+                .as_ref()
+                .map(|d| d.target_reduction.unwrap_or(0.8)),
+            options.subdivide.levels,
+        ),
         &|tile, tiles| {
             if tiles > 1 {
                 progress(&format!(

@@ -54,42 +54,58 @@ pub fn subdivide(mesh: &mut TriMesh, options: &SubdivideOptions) -> SubdivideSta
     }
 }
 
-/// One half-edge record: (min vertex, max vertex, triangle, corner of the edge's start).
-type EdgeUse = (u32, u32, u32, u8);
-
 fn subdivide_once(mesh: &TriMesh) -> TriMesh {
     let nv = mesh.positions.len();
     let tris = &mesh.triangles;
-    // Every triangle side once, sorted by its undirected edge.
-    let mut uses: Vec<EdgeUse> = tris
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(t, tri)| {
-            (0..3).map(move |k| {
-                let (a, b) = (tri[k], tri[(k + 1) % 3]);
-                (a.min(b), a.max(b), t as u32, k as u8)
-            })
-        })
-        .collect();
-    uses.par_sort_unstable();
-    // Unique edges: start index in `uses` of each edge.
-    let mut edge_start: Vec<u32> = Vec::with_capacity(uses.len() / 2 + 1);
-    for i in 0..uses.len() {
-        if i == 0 || (uses[i].0, uses[i].1) != (uses[i - 1].0, uses[i - 1].1) {
+    // Triangle side `s` is side `s % 3` of triangle `s / 3`, from corner `s % 3` to the
+    // next; its undirected edge is (smaller vertex, larger vertex).
+    let ends = |s: u32| -> (u32, u32) {
+        let t = &tris[s as usize / 3];
+        let k = s as usize % 3;
+        let (a, b) = (t[k], t[(k + 1) % 3]);
+        (a.min(b), a.max(b))
+    };
+    // Every side once, sorted by (edge, side): bucketed by the smaller vertex (4 bytes
+    // per side, no sort of wide records), each bucket ordered by the larger one.
+    let mut bucket_start = vec![0u32; nv + 1];
+    for s in 0..tris.len() as u32 * 3 {
+        bucket_start[ends(s).0 as usize + 1] += 1;
+    }
+    for v in 0..nv {
+        bucket_start[v + 1] += bucket_start[v];
+    }
+    let mut sides = vec![0u32; tris.len() * 3];
+    {
+        let mut fill = bucket_start.clone();
+        for s in 0..tris.len() as u32 * 3 {
+            let a = ends(s).0 as usize;
+            sides[fill[a] as usize] = s;
+            fill[a] += 1;
+        }
+    }
+    for v in 0..nv {
+        // Stable: sides of one edge stay in side order.
+        sides[bucket_start[v] as usize..bucket_start[v + 1] as usize].sort_by_key(|&s| ends(s).1);
+    }
+    drop(bucket_start);
+    // Unique edges: start index in `sides` of each edge.
+    let mut edge_start: Vec<u32> = Vec::with_capacity(sides.len() / 2 + 1);
+    for i in 0..sides.len() {
+        if i == 0 || ends(sides[i]) != ends(sides[i - 1]) {
             edge_start.push(i as u32);
         }
     }
     let ne = edge_start.len();
-    edge_start.push(uses.len() as u32);
+    edge_start.push(sides.len() as u32);
     // Edge index of every triangle side.
     let mut side_edge = vec![0u32; tris.len() * 3];
     for e in 0..ne {
-        for u in &uses[edge_start[e] as usize..edge_start[e + 1] as usize] {
-            side_edge[u.2 as usize * 3 + u.3 as usize] = e as u32;
+        for &s in &sides[edge_start[e] as usize..edge_start[e + 1] as usize] {
+            side_edge[s as usize] = e as u32;
         }
     }
     let pos = |i: u32| mesh.positions[i as usize].as_dvec3();
-    let opposite = |u: &EdgeUse| tris[u.2 as usize][(u.3 as usize + 2) % 3];
+    let opposite = |s: u32| tris[s as usize / 3][(s as usize % 3 + 2) % 3];
 
     // Vertex neighbourhoods: valence, neighbour sum, boundary neighbours.
     let mut valence = vec![0u32; nv];
@@ -98,8 +114,7 @@ fn subdivide_once(mesh: &TriMesh) -> TriMesh {
     let mut boundary_sum = vec![DVec3::ZERO; nv];
     let mut non_manifold = vec![false; nv];
     for e in 0..ne {
-        let first = &uses[edge_start[e] as usize];
-        let (a, b) = (first.0, first.1);
+        let (a, b) = ends(sides[edge_start[e] as usize]);
         let count = edge_start[e + 1] - edge_start[e];
         valence[a as usize] += 1;
         valence[b as usize] += 1;
@@ -139,13 +154,15 @@ fn subdivide_once(mesh: &TriMesh) -> TriMesh {
             moved.as_vec3()
         })
         .collect();
+    drop((valence, sum, boundary_count, boundary_sum, non_manifold));
     let edge_points: Vec<glam::Vec3> = (0..ne)
         .into_par_iter()
         .map(|e| {
-            let group = &uses[edge_start[e] as usize..edge_start[e + 1] as usize];
-            let (a, b) = (pos(group[0].0), pos(group[0].1));
+            let group = &sides[edge_start[e] as usize..edge_start[e + 1] as usize];
+            let (a, b) = ends(group[0]);
+            let (a, b) = (pos(a), pos(b));
             let p = if group.len() == 2 {
-                0.375 * (a + b) + 0.125 * (pos(opposite(&group[0])) + pos(opposite(&group[1])))
+                0.375 * (a + b) + 0.125 * (pos(opposite(group[0])) + pos(opposite(group[1])))
             } else {
                 0.5 * (a + b)
             };
@@ -153,20 +170,23 @@ fn subdivide_once(mesh: &TriMesh) -> TriMesh {
         })
         .collect();
     positions.extend(edge_points);
-    let triangles: Vec<[u32; 3]> = tris
-        .par_iter()
+    drop(sides);
+    drop(edge_start);
+    let mut triangles: Vec<[u32; 3]> = vec![[0; 3]; tris.len() * 4];
+    triangles
+        .par_chunks_mut(4)
+        .zip(tris.par_iter())
         .enumerate()
-        .flat_map_iter(|(t, tri)| {
+        .for_each(|(t, (out, tri))| {
             let m = [0, 1, 2].map(|k| nv as u32 + side_edge[t * 3 + k]);
             // m[k] is the midpoint of side (tri[k], tri[k+1]).
-            [
+            out.copy_from_slice(&[
                 [tri[0], m[0], m[2]],
                 [tri[1], m[1], m[0]],
                 [tri[2], m[2], m[1]],
                 [m[0], m[1], m[2]],
-            ]
-        })
-        .collect();
+            ]);
+        });
     TriMesh {
         positions,
         triangles,

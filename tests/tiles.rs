@@ -41,6 +41,7 @@ fn run(
                     ..TileOptions::default()
                 },
                 None,
+                0,
                 &|_, _| {},
             )
             .unwrap()

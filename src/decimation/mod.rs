@@ -317,8 +317,11 @@ fn bounds(positions: &[Vec3]) -> (DVec3, DVec3) {
         })
 }
 
+/// Rings of triangles around the flagged vertices that [`decimate_band`] works on.
+pub const BAND_RINGS: usize = 2;
+
 /// Decimates only the band of triangles around the `flagged` vertices (the triangles
-/// that use a vertex sharing a triangle with a flagged one) until the whole mesh has
+/// within [`BAND_RINGS`] + 1 rings of one) until the whole mesh has
 /// `target` triangles or the error bound stops it; the rest of the mesh is untouched and
 /// the band's border does not move. Memory follows the band, not the mesh: this is the
 /// pass across tile seams after each tile was decimated with its seam vertices locked
@@ -332,13 +335,18 @@ pub fn decimate_band(
 ) -> DecimateStats {
     let nv = mesh.vertex_count();
     let before = mesh.triangle_count();
-    let mut near = vec![false; nv];
-    for t in &mesh.triangles {
-        if t.iter().any(|&v| flagged[v as usize]) {
-            for &v in t {
-                near[v as usize] = true;
+    // The flagged vertices grown by `BAND_RINGS` rings.
+    let mut near = flagged.to_vec();
+    for _ in 0..BAND_RINGS {
+        let mut grown = near.clone();
+        for t in &mesh.triangles {
+            if t.iter().any(|&v| near[v as usize]) {
+                for &v in t {
+                    grown[v as usize] = true;
+                }
             }
         }
+        near = grown;
     }
     let (band, rest): (Vec<[u32; 3]>, Vec<[u32; 3]>) = mesh
         .triangles

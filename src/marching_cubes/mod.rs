@@ -123,25 +123,9 @@ pub fn stitch(mut surfaces: Vec<BlockSurface>) -> (TriMesh, MarchingCubesStats) 
     let triangles: Vec<[u32; 3]> = surfaces
         .par_iter()
         .flat_map_iter(|s| {
-            let key = s.key;
-            let resolve = move |r: EdgeRef| -> u32 {
-                let o = r >> 16;
-                let owner = [
-                    key[0] + (o & 1) as i32,
-                    key[1] + ((o >> 1) & 1) as i32,
-                    key[2] + ((o >> 2) & 1) as i32,
-                ];
-                let bi = *index_ref
-                    .get(&owner)
-                    .expect("the owner of a crossed edge is always visited");
-                let local = (r & 0xffff) as u16;
-                let pos = surfaces_ref[bi]
-                    .owned
-                    .binary_search_by_key(&local, |e| e.0)
-                    .expect("the owner of a crossed edge always creates its vertex");
-                base_ref[bi] + pos as u32
-            };
-            s.triangles.iter().map(move |t| t.map(resolve))
+            s.triangles
+                .iter()
+                .map(move |t| t.map(|r| resolve(surfaces_ref, index_ref, base_ref, s.key, r)))
         })
         .collect();
     let mut positions = Vec::with_capacity(*base.last().unwrap() as usize);
@@ -161,6 +145,32 @@ pub fn stitch(mut surfaces: Vec<BlockSurface>) -> (TriMesh, MarchingCubesStats) 
         },
         stats,
     )
+}
+
+/// The index of the vertex `r` of a triangle of block `key`, in a numbering where block
+/// `surfaces[i]`'s owned vertices start at `base[i]`.
+fn resolve(
+    surfaces: &[BlockSurface],
+    index_of: &HashMap<BlockKey, usize>,
+    base: &[u32],
+    key: BlockKey,
+    r: EdgeRef,
+) -> u32 {
+    let o = r >> 16;
+    let owner = [
+        key[0] + (o & 1) as i32,
+        key[1] + ((o >> 1) & 1) as i32,
+        key[2] + ((o >> 2) & 1) as i32,
+    ];
+    let bi = *index_of
+        .get(&owner)
+        .expect("the owner of a crossed edge is always marched");
+    let local = (r & 0xffff) as u16;
+    let pos = surfaces[bi]
+        .owned
+        .binary_search_by_key(&local, |e| e.0)
+        .expect("the owner of a crossed edge always creates its vertex");
+    base[bi] + pos as u32
 }
 
 /// The triangles of the blocks in `own`, with every vertex they use, as one mesh, and for
@@ -186,25 +196,11 @@ pub fn stitch_range(surfaces: &[BlockSurface], own: BlockRange) -> RangeMesh {
     let mut triangles: Vec<[u32; 3]> = Vec::new();
     for s in surfaces.iter().filter(|s| own.contains(s.key)) {
         let key = s.key;
-        triangles.extend(s.triangles.iter().map(|t| {
-            t.map(|r| {
-                let o = r >> 16;
-                let owner = [
-                    key[0] + (o & 1) as i32,
-                    key[1] + ((o >> 1) & 1) as i32,
-                    key[2] + ((o >> 2) & 1) as i32,
-                ];
-                let bi = *index_of
-                    .get(&owner)
-                    .expect("the owner of a crossed edge is always marched");
-                let local = (r & 0xffff) as u16;
-                let pos = surfaces[bi]
-                    .owned
-                    .binary_search_by_key(&local, |e| e.0)
-                    .expect("the owner of a crossed edge always creates its vertex");
-                base[bi] + pos as u32
-            })
-        }));
+        triangles.extend(
+            s.triangles
+                .iter()
+                .map(|t| t.map(|r| resolve(surfaces, &index_of, &base, key, r))),
+        );
     }
     // Keep the referenced vertices only, in block order.
     let mut new_index = vec![u32::MAX; total];
@@ -213,10 +209,7 @@ pub fn stitch_range(surfaces: &[BlockSurface], own: BlockRange) -> RangeMesh {
             new_index[v as usize] = 0;
         }
     }
-    let (lo, hi) = (
-        own.lo.map(|c| c * E),
-        own.hi.map(|c| (c + 1) * E),
-    );
+    let (lo, hi) = (own.lo.map(|c| c * E), own.hi.map(|c| (c + 1) * E));
     let mut positions = Vec::new();
     let mut seam_keys = Vec::new();
     for (bi, s) in surfaces.iter().enumerate() {

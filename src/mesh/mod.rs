@@ -14,7 +14,8 @@ pub use topology::triangle_components;
 pub use inside::InsideTest;
 pub use topology::{validate, TopologyReport};
 
-use glam::{DVec3, Vec3};
+use glam::Vec3;
+use rayon::prelude::*;
 
 /// An indexed triangle mesh. Positions are world units.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -42,26 +43,26 @@ impl TriMesh {
     /// to its three vertices), stored in [`TriMesh::normals`]. A vertex with no area around
     /// it gets +y.
     pub fn compute_normals(&mut self) {
-        let mut acc = vec![DVec3::ZERO; self.positions.len()];
+        // Accumulated in place in f32 (cross products in f64): one array of the output's
+        // size, not a second f64 one, since the fluid surface is the largest thing alive.
+        let mut acc = vec![Vec3::ZERO; self.positions.len()];
         for t in &self.triangles {
             let [a, b, c] = t.map(|i| self.positions[i as usize].as_dvec3());
             // The cross product is twice the area times the unit normal.
-            let n = (b - a).cross(c - a);
+            let n = (b - a).cross(c - a).as_vec3();
             for &i in t {
                 acc[i as usize] += n;
             }
         }
-        self.normals = acc
-            .into_iter()
-            .map(|n| {
-                let len = n.length();
-                if len > 0.0 && len.is_finite() {
-                    (n / len).as_vec3()
-                } else {
-                    Vec3::Y
-                }
-            })
-            .collect();
+        acc.par_iter_mut().for_each(|n| {
+            let len = n.length();
+            *n = if len > 0.0 && len.is_finite() {
+                *n / len
+            } else {
+                Vec3::Y
+            };
+        });
+        self.normals = acc;
     }
 
     /// Signed enclosed volume (world units cubed), positive for an outward-oriented closed

@@ -7,7 +7,9 @@
 //! the untiled run).
 //!
 //! Why the result does not depend on the tiling:
-//! * tile `t` owns blocks `T·t ..= T·t + T − 1` (`T` blocks per axis); it marches its own
+//! * tile `t` owns blocks `o + T·t ..= o + T·t + T − 1` (`T` blocks per axis, `o` the
+//!   lowest block the field reaches, so a tile larger than the scene is one tile); it
+//!   marches its own
 //!   blocks only (reading the field one block further up), and every mesh vertex is owned
 //!   by exactly one block;
 //! * a field block sums over the particles whose home block is within `reach` blocks
@@ -31,7 +33,7 @@
 //! power-of-two number of blocks whose densest tile fits next to the expected output) or
 //! refuses, before any work, a run whose smallest tile cannot fit. The estimate is a
 //! per-particle model calibrated on real frames ([`UNTILED_BYTES_PER_PARTICLE`],
-//! [`TILE_BYTES_PER_PARTICLE`], [`OUTPUT_BYTES_PER_PARTICLE`]).
+//! [`TILE_BYTES_PER_PARTICLE`], [`output_bytes_per_particle`]).
 //!
 //! **Decimation in tiles.** With decimation requested and more than one tile, every tile
 //! decimates its own piece of the marching-cubes mesh as soon as it is meshed, the
@@ -71,14 +73,48 @@ use std::time::Instant;
 pub static INTERRUPTED: AtomicBool = AtomicBool::new(false);
 
 /// Peak memory of an untiled run with full post-processing, bytes per particle (4M
-/// particles of `dambreak_small` copies: 975 MB).
-pub const UNTILED_BYTES_PER_PARTICLE: u64 = 250;
+/// particles of `dambreak_small` copies: 722 MB).
+pub const UNTILED_BYTES_PER_PARTICLE: u64 = 200;
 /// Peak memory of one tile, bytes per particle it loads (own and ghost): particles,
 /// neighbour grid, field blocks, block surfaces and the tile's decimation state.
 pub const TILE_BYTES_PER_PARTICLE: u64 = 600;
-/// Memory after the tiles, bytes per particle: the decimated surface and the Loop step's
-/// working set (4M particles of `dambreak_small` copies: 510 MB at subdivision).
-pub const OUTPUT_BYTES_PER_PARTICLE: u64 = 130;
+/// Marching-cubes triangles per particle of a fluid body at h = r (`dambreak_small`:
+/// 2.67).
+pub const MC_TRIANGLES_PER_PARTICLE: f64 = 2.7;
+/// Peak working set of one Loop step, bytes per input triangle (the input, side → edge
+/// indices, the output mesh; measured 118 on 4M particles).
+pub const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 120.0;
+/// Bytes per triangle of a finished mesh with normals (12 for indices, half a vertex of
+/// 24 for position and normal).
+pub const MESH_BYTES_PER_TRIANGLE: f64 = 24.0;
+
+/// Memory the surface needs after the tiles (the post-processing's peak), bytes per
+/// particle, for decimation removing `reduction` of the triangles (`None`: no
+/// decimation; an error-bounded run counts as 0.8) and `subdivide_levels` Loop steps.
+pub fn output_bytes_per_particle(reduction: Option<f32>, subdivide_levels: u32) -> u64 {
+    let mut triangles = MC_TRIANGLES_PER_PARTICLE;
+    // Without decimation the block surfaces (≈ 20 B per triangle) and the stitched mesh
+    // (≈ 18 B) exist together.
+    let mut peak = match reduction {
+        None => triangles * 38.0,
+        Some(f) => {
+            triangles *= 1.0 - f.clamp(0.0, 1.0) as f64;
+            triangles * MESH_BYTES_PER_TRIANGLE
+        }
+    };
+    for _ in 0..subdivide_levels {
+        peak = peak.max(triangles * SUBDIVISION_BYTES_PER_INPUT_TRIANGLE);
+        triangles *= 4.0;
+    }
+    peak.max(triangles * MESH_BYTES_PER_TRIANGLE).ceil() as u64
+}
+
+/// Error bound of collapses in tiles and in the seam pass when the decimation options set
+/// none, multiples of r. Measured on `dambreak_small` frame 25 in 64-cell tiles: without
+/// it 18 of 41 912 particles end up just outside the surface, with it none, at the same
+/// 80 % and a lower flat-region bumpiness (0.0092 r instead of 0.0097 r); 0.05 r misses
+/// the fraction on `double_dambreak`.
+pub const TILE_ERROR_CAP: f32 = 0.1;
 
 /// How the lattice is cut.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -152,14 +188,16 @@ const SPILL_CELL_BLOCKS: i32 = 4;
 /// Runs isolation, field and marching cubes tile by tile and stitches the result.
 /// `isolation_radius` (world units) is `None` to keep isolated particles in the field;
 /// `decimation` asks for decimation in tiles (used only when there is more than one
-/// tile: check [`TiledSurface::decimation`]). `on_tile(n, tiles)` is told before each
-/// tile.
+/// tile: check [`TiledSurface::decimation`]). `output_bytes_per_particle` is what the
+/// surface will need after the tiles ([`output_bytes_per_particle`]), for the memory
+/// budget. `on_tile(n, tiles)` is told before each tile.
 pub fn reconstruct_tiled<S: ParticleSource>(
     source: S,
     field_options: &FieldOptions,
     isolation_radius: Option<f32>,
     tile_options: &TileOptions,
     decimation: Option<&DecimateOptions>,
+    output_bytes_per_particle: u64,
     on_tile: &dyn Fn(usize, usize),
 ) -> Result<TiledSurface> {
     field_options.validate()?;
@@ -193,11 +231,20 @@ pub fn reconstruct_tiled<S: ParticleSource>(
         }
         Ok(())
     })?;
-    let (tile_blocks, estimated_peak_bytes) =
-        choose_tile_blocks(&block_counts, particle_count as u64, reach, tile_options)?;
+    let (tile_blocks, estimated_peak_bytes) = choose_tile_blocks(
+        &block_counts,
+        particle_count as u64,
+        reach,
+        output_bytes_per_particle,
+        decimation.is_some(),
+        tile_options,
+    )?;
+    // Tiles are counted from the lowest block the field reaches, so a tile larger than
+    // the scene is one tile wherever the scene lies.
+    let origin = tile_origin(&block_counts, reach);
     let tile_of = |b: BlockKey| -> BlockKey {
         match tile_blocks {
-            Some(t) => b.map(|c| c.div_euclid(t)),
+            Some(t) => [0, 1, 2].map(|a| (b[a] - origin[a]).div_euclid(t)),
             None => [0, 0, 0],
         }
     };
@@ -273,6 +320,17 @@ pub fn reconstruct_tiled<S: ParticleSource>(
     stats.tiles = tiles.len();
     let decimation = decimation.filter(|_| tile_blocks.is_some());
 
+    // Each tile must reach the fraction on its own; the error cap keeps a tile of mostly
+    // curved surface from forcing large collapses to get there (the seam pass, capped
+    // too, makes up the rest where it can).
+    let tile_decimation = decimation
+        .map(|d| DecimateOptions {
+            max_error: d
+                .max_error
+                .or(Some(TILE_ERROR_CAP * field_options.particle_radius)),
+            ..d.clone()
+        })
+        .unwrap_or_default();
     let mut surfaces: Vec<BlockSurface> = Vec::new();
     let mut joined = JoinedPieces::default();
     let mut isolated: Vec<(u32, Vec3)> = Vec::new();
@@ -286,8 +344,8 @@ pub fn reconstruct_tiled<S: ParticleSource>(
         let clock = Instant::now();
         let own = match tile_blocks {
             Some(t) => BlockRange {
-                lo: tile.map(|c| c * t),
-                hi: tile.map(|c| c * t + t - 1),
+                lo: [0, 1, 2].map(|a| origin[a] + tile[a] * t),
+                hi: [0, 1, 2].map(|a| origin[a] + tile[a] * t + t - 1),
             },
             None => BlockRange {
                 lo: [i32::MIN / 4; 3],
@@ -305,20 +363,41 @@ pub fn reconstruct_tiled<S: ParticleSource>(
         loaded.clear();
         match &spilled {
             Some(spill) => {
-                let (clo, chi) = (cell_of(zone2.lo), cell_of(zone2.hi));
-                let mut cell_records = Vec::new();
-                for cz in clo[2]..=chi[2] {
-                    for cy in clo[1]..=chi[1] {
-                        for cx in clo[0]..=chi[0] {
-                            cell_records.clear();
-                            spill.read_cell([cx, cy, cz], &mut cell_records)?;
-                            loaded.extend(
-                                cell_records
-                                    .iter()
-                                    .filter(|(p, _)| zone2.contains(home_block(*p, inv_h))),
-                            );
+                let cells = BlockRange {
+                    lo: cell_of(zone2.lo),
+                    hi: cell_of(zone2.hi),
+                };
+                // Visit the zone's cells, or the populated cells when those are fewer
+                // (a tile much larger than the scene).
+                let volume = (0..3)
+                    .map(|a| (cells.hi[a] - cells.lo[a] + 1) as u64)
+                    .product::<u64>();
+                let wanted: Vec<BlockKey> = if volume <= spill.cell_count() as u64 {
+                    let mut v = Vec::new();
+                    for cz in cells.lo[2]..=cells.hi[2] {
+                        for cy in cells.lo[1]..=cells.hi[1] {
+                            for cx in cells.lo[0]..=cells.hi[0] {
+                                v.push([cx, cy, cz]);
+                            }
                         }
                     }
+                    v
+                } else {
+                    spill
+                        .cells()
+                        .filter(|c| cells.contains(**c))
+                        .copied()
+                        .collect()
+                };
+                let mut cell_records = Vec::new();
+                for cell in wanted {
+                    cell_records.clear();
+                    spill.read_cell(cell, &mut cell_records)?;
+                    loaded.extend(
+                        cell_records
+                            .iter()
+                            .filter(|(p, _)| zone2.contains(home_block(*p, inv_h))),
+                    );
                 }
             }
             None => loaded.extend(all.iter().enumerate().map(|(i, p)| (*p, i as u32))),
@@ -370,7 +449,7 @@ pub fn reconstruct_tiled<S: ParticleSource>(
                 surfaces.extend(tile_surfaces);
                 stats.marching_seconds += clock.elapsed().as_secs_f64();
             }
-            Some(options) => {
+            Some(_) => {
                 // The tile's own blocks and the layer above (owners of its upper border
                 // vertices), as one mesh whose border vertices are keyed.
                 let tile_surfaces = march_blocks(&field, Some(own.grown(0, 1)));
@@ -380,7 +459,7 @@ pub fn reconstruct_tiled<S: ParticleSource>(
                 mc_stats.triangles += piece.mesh.triangle_count();
                 stats.marching_seconds += clock.elapsed().as_secs_f64();
                 let clock = Instant::now();
-                let tile_stats = decimate_piece(piece, options, &mut joined);
+                let tile_stats = decimate_piece(piece, &tile_decimation, &mut joined);
                 decimate_stats.collapses += tile_stats.collapses;
                 decimate_stats.refused_topology += tile_stats.refused_topology;
                 decimate_stats.refused_geometry += tile_stats.refused_geometry;
@@ -416,7 +495,12 @@ pub fn reconstruct_tiled<S: ParticleSource>(
                     ((1.0 - f.clamp(0.0, 1.0) as f64) * mc_stats.triangles as f64).ceil() as usize
                 })
                 .unwrap_or(0);
-            let band = decimate_band(&mut mesh, &joined.was_seam, target, options.max_error);
+            let band = decimate_band(
+                &mut mesh,
+                &joined.was_seam,
+                target,
+                tile_decimation.max_error,
+            );
             decimate_stats.collapses += band.collapses;
             decimate_stats.refused_topology += band.refused_topology;
             decimate_stats.refused_geometry += band.refused_geometry;
@@ -509,66 +593,79 @@ fn decimate_piece(
     stats
 }
 
+/// The lowest block any tile processes: the lowest populated block, less the field's
+/// reach and the marching layer.
+fn tile_origin(block_counts: &HashMap<BlockKey, u64>, reach: i32) -> BlockKey {
+    block_counts
+        .keys()
+        .fold([i32::MAX; 3], |o, b| [0, 1, 2].map(|a| o[a].min(b[a])))
+        .map(|c| c.saturating_sub(reach + 1))
+}
+
 /// Picks the tile edge in blocks (`None`: one tile) and estimates the run's peak memory.
 fn choose_tile_blocks(
     block_counts: &HashMap<BlockKey, u64>,
     particles: u64,
     reach: i32,
+    output_bytes_per_particle: u64,
+    decimated_in_tiles: bool,
     options: &TileOptions,
 ) -> Result<(Option<i32>, u64)> {
-    let output = particles * OUTPUT_BYTES_PER_PARTICLE;
-    let untiled = particles * UNTILED_BYTES_PER_PARTICLE;
-    // Ghost blocks on each side of a tile's own blocks (zone 2 reaches 2·reach + 1 below
-    // and 2·reach + 2 above, see the module docs).
-    let ghost = 2 * reach + 2;
-    // Particles of the fullest tile's zone 2: its own count plus the share of each
-    // neighbour tile its ghost margin overlaps (particles spread evenly inside a tile).
-    let tile_estimate = |t: i32| -> u64 {
-        let mut per_tile: HashMap<BlockKey, u64> = HashMap::new();
-        for (b, n) in block_counts {
-            *per_tile.entry(b.map(|c| c.div_euclid(t))).or_default() += n;
-        }
-        let k = (ghost + t - 1) / t;
-        let overlap = |d: i32| -> f64 {
-            if d == 0 {
-                1.0
-            } else {
-                ((ghost - (d.abs() - 1) * t) as f64 / t as f64).clamp(0.0, 1.0)
-            }
+    // After the tiles: the post-processing's peak. During the tiles: one tile plus what
+    // the tiles have produced so far (decimated pieces, or the raw block surfaces).
+    let output = particles * output_bytes_per_particle;
+    let produced = particles
+        * if decimated_in_tiles {
+            (MC_TRIANGLES_PER_PARTICLE * 0.2 * MESH_BYTES_PER_TRIANGLE) as u64
+        } else {
+            (MC_TRIANGLES_PER_PARTICLE * 20.0) as u64
         };
-        let keys: Vec<BlockKey> = per_tile.keys().copied().collect();
-        let densest = keys
-            .par_iter()
-            .map(|key| {
-                let mut sum = 0.0;
-                for dz in -k..=k {
-                    for dy in -k..=k {
-                        for dx in -k..=k {
-                            if let Some(n) = per_tile.get(&[key[0] + dx, key[1] + dy, key[2] + dz]) {
-                                sum += *n as f64 * overlap(dx) * overlap(dy) * overlap(dz);
-                            }
-                        }
+    let untiled = particles * UNTILED_BYTES_PER_PARTICLE;
+    // Zone 2 of a tile reaches 2·reach + 1 blocks below its own blocks and 2·reach + 2
+    // above (see the module docs). Exact particle count of the fullest zone 2: every
+    // populated block adds its count to each tile whose zone 2 holds it.
+    let (below, above) = (2 * reach + 1, 2 * reach + 2);
+    let origin = tile_origin(block_counts, reach);
+    let tile_estimate = |t: i32| -> u64 {
+        let mut zone: HashMap<BlockKey, u64> = HashMap::new();
+        for (b, n) in block_counts {
+            let lo = [0, 1, 2].map(|a| (b[a] - origin[a] - above).div_euclid(t));
+            let hi = [0, 1, 2].map(|a| (b[a] - origin[a] + below).div_euclid(t));
+            for tz in lo[2]..=hi[2] {
+                for ty in lo[1]..=hi[1] {
+                    for tx in lo[0]..=hi[0] {
+                        *zone.entry([tx, ty, tz]).or_default() += n;
                     }
                 }
-                sum
-            })
-            .reduce(|| 0.0, f64::max);
-        densest.min(particles as f64) as u64 * TILE_BYTES_PER_PARTICLE
+            }
+        }
+        zone.values().copied().max().unwrap_or(0) * TILE_BYTES_PER_PARTICLE
     };
     let mib = |b: u64| b.div_ceil(1 << 20);
+    if let Some(budget) = options.memory_budget_bytes {
+        if output > budget {
+            return Err(Error::MemoryBudget {
+                budget_mib: mib(budget),
+                message: format!(
+                    "the surface of {particles} particles alone needs ≈ {} MiB after the tiles (decimation and subdivision); raise --memory-budget, or use --subdivide 0",
+                    mib(output)
+                ),
+            });
+        }
+    }
     match (options.tile_size_cells, options.memory_budget_bytes) {
         (Some(cells), budget) => {
             let t = (cells.max(1) as i32 + BLOCK_EDGE - 1) / BLOCK_EDGE;
-            let estimate = tile_estimate(t) + output;
+            let estimate = (tile_estimate(t) + produced).max(output);
             if let Some(budget) = budget {
                 if estimate > budget {
                     return Err(Error::MemoryBudget {
                         budget_mib: mib(budget),
                         message: format!(
-                            "tiles of {cells} cells need ≈ {} MiB (densest tile ≈ {} MiB, output ≈ {} MiB); use a smaller --tile-size or a larger --memory-budget",
+                            "tiles of {cells} cells need ≈ {} MiB (densest tile ≈ {} MiB, surface so far ≈ {} MiB); use a smaller --tile-size or a larger --memory-budget",
                             mib(estimate),
-                            mib(estimate - output),
-                            mib(output)
+                            mib(tile_estimate(t)),
+                            mib(produced)
                         ),
                     });
                 }
@@ -582,7 +679,7 @@ fn choose_tile_blocks(
             }
             let mut smallest = 0;
             for t in [64, 32, 16, 8, 4, 2, 1] {
-                let estimate = tile_estimate(t) + output;
+                let estimate = (tile_estimate(t) + produced).max(output);
                 smallest = estimate;
                 if estimate <= budget {
                     return Ok((Some(t), estimate));
@@ -591,9 +688,9 @@ fn choose_tile_blocks(
             Err(Error::MemoryBudget {
                 budget_mib: mib(budget),
                 message: format!(
-                    "even one-block tiles need ≈ {} MiB for {particles} particles (output ≈ {} MiB)",
+                    "even one-block tiles need ≈ {} MiB for {particles} particles (surface so far ≈ {} MiB)",
                     mib(smallest),
-                    mib(output)
+                    mib(produced)
                 ),
             })
         }
@@ -617,7 +714,11 @@ pub fn parse_memory_size(text: &str) -> std::result::Result<u64, String> {
         "m" | "mb" | "mib" => 1 << 20,
         "g" | "gb" | "gib" => 1 << 30,
         "t" | "tb" | "tib" => 1 << 40,
-        other => return Err(format!("unknown size unit {other:?} in {text:?} (use MiB or GiB)")),
+        other => {
+            return Err(format!(
+                "unknown size unit {other:?} in {text:?} (use MiB or GiB)"
+            ))
+        }
     };
     let bytes = value * scale as f64;
     if !(bytes >= 1.0 && bytes < u64::MAX as f64) {

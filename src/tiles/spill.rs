@@ -66,6 +66,16 @@ impl SpillFile {
         })
     }
 
+    /// The cells holding particles.
+    pub fn cells(&self) -> impl Iterator<Item = &BlockKey> {
+        self.regions.keys()
+    }
+
+    /// Number of cells holding particles.
+    pub fn cell_count(&self) -> usize {
+        self.regions.len()
+    }
+
     /// Bytes of particle records in the file.
     pub fn bytes(&self) -> u64 {
         self.regions.values().map(|r| r.1).sum::<u64>() * RECORD_BYTES as u64
@@ -74,9 +84,8 @@ impl SpillFile {
     /// A writer that fills the regions; every particle counted at creation must be
     /// pushed exactly once.
     pub fn writer(&self) -> SpillWriter<'_> {
-        let per_cell = (BUFFER_BYTES / self.regions.len().max(1))
-            .clamp(256, 64 << 10)
-            / RECORD_BYTES;
+        let per_cell =
+            (BUFFER_BYTES / self.regions.len().max(1)).clamp(256, 64 << 10) / RECORD_BYTES;
         SpillWriter {
             spill: self,
             cursors: self.regions.iter().map(|(k, r)| (*k, r.0)).collect(),

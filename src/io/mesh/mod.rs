@@ -154,23 +154,24 @@ pub fn write_surface(
             (write_document(path, &doc, format)?, doc.vertices)
         }
         other => {
-            // The fluid as it is, the spheres merged (instancing is glTF's only).
-            let spheres = surface.spheres.merged();
-            let parts: Vec<&TriMesh> = [&surface.fluid, &spheres]
-                .into_iter()
-                .filter(|m| m.triangle_count() > 0)
-                .collect();
-            let normals = options.normals
-                && parts
-                    .iter()
-                    .all(|m| m.normals.len() == m.positions.len());
+            // The fluid as it is, then the spheres instance after instance (instancing is
+            // glTF's only); nothing is merged in memory.
+            let mut parts = vec![simple::Part::Mesh(&surface.fluid)];
+            if !surface.spheres.centers.is_empty() {
+                parts.push(simple::Part::Spheres(&surface.spheres));
+            }
+            let normals = options.normals && parts.iter().all(|p| p.has_normals());
             let bytes = write_atomically(path, |w| match other {
                 MeshFormat::Ply => simple::write_ply(w, &parts, normals),
                 MeshFormat::Obj => simple::write_obj(w, &parts, normals),
                 MeshFormat::Vtk => simple::write_vtk(w, &parts, normals),
                 MeshFormat::Glb | MeshFormat::Gltf => unreachable!(),
             })?;
-            (bytes, parts.iter().map(|m| m.vertex_count()).sum())
+            (
+                bytes,
+                surface.fluid.vertex_count()
+                    + surface.spheres.template.vertex_count() * surface.spheres.centers.len(),
+            )
         }
     };
     Ok(MeshWriteStats {

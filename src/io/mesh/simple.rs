@@ -1,17 +1,75 @@
 //! PLY, OBJ and legacy VTK mesh writers.
 //!
-//! A surface is written as a list of parts (the fluid, the merged isolated spheres) that
-//! share one vertex numbering, so nothing is copied into one merged mesh first; binary
+//! A surface is written as a list of parts (the fluid mesh, the instanced isolated
+//! spheres) that share one vertex numbering, so nothing is merged or copied first; binary
 //! data goes out in chunks of [`CHUNK_BYTES`], so writing adds no more than that to the
 //! memory peak.
 
-use crate::mesh::TriMesh;
+use crate::mesh::{SphereInstances, TriMesh};
+use glam::Vec3;
 use std::io::{Result, Write};
+
+/// A piece of the written surface.
+#[derive(Clone, Copy)]
+pub(super) enum Part<'a> {
+    /// A mesh as it is.
+    Mesh(&'a TriMesh),
+    /// Every instance of a sphere, as if merged (instance after instance).
+    Spheres(&'a SphereInstances),
+}
+
+impl Part<'_> {
+    fn vertex_count(&self) -> usize {
+        match self {
+            Part::Mesh(m) => m.vertex_count(),
+            Part::Spheres(s) => s.template.vertex_count() * s.centers.len(),
+        }
+    }
+    fn triangle_count(&self) -> usize {
+        match self {
+            Part::Mesh(m) => m.triangle_count(),
+            Part::Spheres(s) => s.template.triangle_count() * s.centers.len(),
+        }
+    }
+    /// True when every vertex has a normal.
+    pub(super) fn has_normals(&self) -> bool {
+        let m = match self {
+            Part::Mesh(m) => m,
+            Part::Spheres(s) => &s.template,
+        };
+        m.normals.len() == m.positions.len()
+    }
+    fn position(&self, i: usize) -> Vec3 {
+        match self {
+            Part::Mesh(m) => m.positions[i],
+            Part::Spheres(s) => {
+                let n = s.template.vertex_count();
+                s.template.positions[i % n] + s.centers[i / n]
+            }
+        }
+    }
+    fn normal(&self, i: usize) -> Vec3 {
+        match self {
+            Part::Mesh(m) => m.normals[i],
+            Part::Spheres(s) => s.template.normals[i % s.template.vertex_count()],
+        }
+    }
+    fn triangle(&self, j: usize) -> [u32; 3] {
+        match self {
+            Part::Mesh(m) => m.triangles[j],
+            Part::Spheres(s) => {
+                let n = s.template.triangle_count();
+                let base = (j / n * s.template.vertex_count()) as u32;
+                s.template.triangles[j % n].map(|v| v + base)
+            }
+        }
+    }
+}
 
 /// Bytes encoded before each write.
 const CHUNK_BYTES: usize = 1 << 20;
 
-fn counts(parts: &[&TriMesh]) -> (usize, usize) {
+fn counts(parts: &[Part]) -> (usize, usize) {
     parts.iter().fold((0, 0), |(v, t), m| {
         (v + m.vertex_count(), t + m.triangle_count())
     })
@@ -35,16 +93,28 @@ fn write_chunked<T>(
 }
 
 /// The triangles of all parts, with vertex indices offset to the shared numbering.
-fn all_triangles<'a>(parts: &'a [&'a TriMesh]) -> impl Iterator<Item = [u32; 3]> + 'a {
+fn all_triangles<'a>(parts: &'a [Part<'a>]) -> impl Iterator<Item = [u32; 3]> + 'a {
     let mut base = 0u32;
     parts.iter().flat_map(move |m| {
         let b = base;
         base += m.vertex_count() as u32;
-        m.triangles.iter().map(move |t| t.map(|i| i + b))
+        (0..m.triangle_count()).map(move |j| m.triangle(j).map(|i| i + b))
     })
 }
 
-pub(super) fn write_ply(w: &mut impl Write, parts: &[&TriMesh], normals: bool) -> Result<()> {
+fn all_positions<'a>(parts: &'a [Part<'a>]) -> impl Iterator<Item = Vec3> + 'a {
+    parts
+        .iter()
+        .flat_map(|m| (0..m.vertex_count()).map(move |i| m.position(i)))
+}
+
+fn all_normals<'a>(parts: &'a [Part<'a>]) -> impl Iterator<Item = Vec3> + 'a {
+    parts
+        .iter()
+        .flat_map(|m| (0..m.vertex_count()).map(move |i| m.normal(i)))
+}
+
+pub(super) fn write_ply(w: &mut impl Write, parts: &[Part], normals: bool) -> Result<()> {
     let (nv, nt) = counts(parts);
     write!(
         w,
@@ -59,11 +129,11 @@ pub(super) fn write_ply(w: &mut impl Write, parts: &[&TriMesh], normals: bool) -
     )?;
     for m in parts {
         write_chunked(w, 0..m.vertex_count(), |buf, i| {
-            for v in m.positions[i].to_array() {
+            for v in m.position(i).to_array() {
                 buf.extend_from_slice(&v.to_le_bytes());
             }
             if normals {
-                for v in m.normals[i].to_array() {
+                for v in m.normal(i).to_array() {
                     buf.extend_from_slice(&v.to_le_bytes());
                 }
             }
@@ -77,19 +147,15 @@ pub(super) fn write_ply(w: &mut impl Write, parts: &[&TriMesh], normals: bool) -
     })
 }
 
-pub(super) fn write_obj(w: &mut impl Write, parts: &[&TriMesh], normals: bool) -> Result<()> {
+pub(super) fn write_obj(w: &mut impl Write, parts: &[Part], normals: bool) -> Result<()> {
     let (nv, nt) = counts(parts);
     writeln!(w, "# meniscus surface: {nv} vertices, {nt} triangles")?;
-    for m in parts {
-        for p in &m.positions {
-            writeln!(w, "v {} {} {}", p.x, p.y, p.z)?;
-        }
+    for p in all_positions(parts) {
+        writeln!(w, "v {} {} {}", p.x, p.y, p.z)?;
     }
     if normals {
-        for m in parts {
-            for n in &m.normals {
-                writeln!(w, "vn {} {} {}", n.x, n.y, n.z)?;
-            }
+        for n in all_normals(parts) {
+            writeln!(w, "vn {} {} {}", n.x, n.y, n.z)?;
         }
         for t in all_triangles(parts) {
             let [a, b, c] = t.map(|i| i + 1);
@@ -104,16 +170,14 @@ pub(super) fn write_obj(w: &mut impl Write, parts: &[&TriMesh], normals: bool) -
     Ok(())
 }
 
-pub(super) fn write_vtk(w: &mut impl Write, parts: &[&TriMesh], normals: bool) -> Result<()> {
+pub(super) fn write_vtk(w: &mut impl Write, parts: &[Part], normals: bool) -> Result<()> {
     let (nv, nt) = counts(parts);
     write!(w, "# vtk DataFile Version 4.2\nmeniscus surface\nBINARY\nDATASET POLYDATA\nPOINTS {nv} float\n")?;
-    for m in parts {
-        write_chunked(w, m.positions.iter(), |buf, p| {
-            for v in p.to_array() {
-                buf.extend_from_slice(&v.to_be_bytes());
-            }
-        })?;
-    }
+    write_chunked(w, all_positions(parts), |buf, p| {
+        for v in p.to_array() {
+            buf.extend_from_slice(&v.to_be_bytes());
+        }
+    })?;
     write!(w, "\nPOLYGONS {nt} {}\n", 4 * nt)?;
     write_chunked(w, all_triangles(parts), |buf, t| {
         buf.extend_from_slice(&3i32.to_be_bytes());
@@ -124,13 +188,11 @@ pub(super) fn write_vtk(w: &mut impl Write, parts: &[&TriMesh], normals: bool) -
     w.write_all(b"\n")?;
     if normals {
         write!(w, "POINT_DATA {nv}\nNORMALS normals float\n")?;
-        for m in parts {
-            write_chunked(w, m.normals.iter(), |buf, n| {
-                for v in n.to_array() {
-                    buf.extend_from_slice(&v.to_be_bytes());
-                }
-            })?;
-        }
+        write_chunked(w, all_normals(parts), |buf, n| {
+            for v in n.to_array() {
+                buf.extend_from_slice(&v.to_be_bytes());
+            }
+        })?;
         w.write_all(b"\n")?;
     }
     Ok(())

@@ -1,0 +1,332 @@
+//! The out-of-core engine: decimation in tiles, the memory budget, the spill file, and
+//! failures (unwritable temp dir, budget too small, truncated input, Ctrl-C) that leave
+//! no output and no temporary file behind.
+
+use glam::Vec3;
+use meniscus::mesh::{validate, InsideTest};
+use meniscus::pipeline::{reconstruct_source, ReconstructOptions};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+fn dataset(rel: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("datasets")
+        .join(rel)
+}
+
+fn xyz(rel: &str) -> Vec<Vec3> {
+    std::fs::read(dataset(rel))
+        .unwrap()
+        .chunks_exact(12)
+        .map(|c| {
+            let f = |k: usize| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap());
+            Vec3::new(f(0), f(1), f(2))
+        })
+        .collect()
+}
+
+fn meniscus() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_meniscus"))
+}
+
+fn entries(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f)
+}
+
+#[test]
+fn decimation_in_tiles_keeps_the_surface_closed_on_target_and_thread_independent() {
+    for (rel, r, tile) in [
+        ("dambreak_small/ParticleData_Fluid_25.xyz", 0.012, 64),
+        ("dambreak_small/ParticleData_Fluid_25.xyz", 0.012, 128),
+        ("double_dambreak/ParticleData_Fluid_9.xyz", 0.025, 64),
+    ] {
+        let positions = xyz(rel);
+        let whole = ReconstructOptions::new(r);
+        let mut tiled = whole.clone();
+        tiled.tiles.tile_size_cells = Some(tile);
+        let (reference, _) = reconstruct_source(&positions, &whole, &|_| {}).unwrap();
+        let (one, stats) = in_pool(1, || {
+            reconstruct_source(&positions, &tiled, &|_| {}).unwrap()
+        });
+        let (two, _) = in_pool(2, || {
+            reconstruct_source(&positions, &tiled, &|_| {}).unwrap()
+        });
+
+        assert!(stats.tiles.tiles >= 3, "{rel}: {:?}", stats.tiles);
+        assert!(stats.tiles.spill_bytes >= 16 * positions.len() as u64);
+        let d = stats.decimation.as_ref().expect("decimated in tiles");
+        let target =
+            ((1.0 - 0.8f32 as f64) * stats.marching_cubes_triangles as f64).ceil() as usize;
+        // A collapse removes two triangles: one below the target at most.
+        assert!(
+            d.triangles_after + 1 >= target && d.triangles_after <= target + target / 50,
+            "{rel}: {} triangles after decimation, target {target}",
+            d.triangles_after
+        );
+        let report = validate(&one.fluid);
+        assert!(report.is_closed_manifold(), "{rel}: {report:?}");
+        assert!(
+            one.fluid.positions == two.fluid.positions
+                && one.fluid.triangles == two.fluid.triangles,
+            "{rel}: output depends on the thread count"
+        );
+        // The same surface as the untiled run, up to the decimation's choices.
+        let (v_tiled, v_whole) = (one.fluid.signed_volume(), reference.fluid.signed_volume());
+        assert!(
+            (v_tiled - v_whole).abs() < 0.01 * v_whole,
+            "{rel}: volume {v_tiled} vs untiled {v_whole}"
+        );
+        assert_eq!(one.spheres.centers, reference.spheres.centers, "{rel}");
+        let inside = InsideTest::new(&one.fluid, 4.0 * r);
+        let outside = positions
+            .iter()
+            .filter(|p| !one.spheres.centers.contains(p) && !inside.contains(**p))
+            .count();
+        let inside_reference = InsideTest::new(&reference.fluid, 4.0 * r);
+        let outside_reference = positions
+            .iter()
+            .filter(|p| !reference.spheres.centers.contains(p) && !inside_reference.contains(**p))
+            .count();
+        assert_eq!(
+            outside, outside_reference,
+            "{rel}: particles outside the tiled surface"
+        );
+    }
+}
+
+#[test]
+fn a_tiled_cli_run_leaves_no_temporary_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let temp = dir.path().join("temp");
+    std::fs::create_dir(&temp).unwrap();
+    let out = dir.path().join("s.ply");
+    let status = meniscus()
+        .args(["reconstruct"])
+        .arg(dataset("dambreak_small/ParticleData_Fluid_25.xyz"))
+        .args(["-r", "0.012", "--tile-size", "64", "-q", "--temp-dir"])
+        .arg(&temp)
+        .arg("-o")
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    assert!(out.exists());
+    assert!(entries(&temp).is_empty(), "{:?}", entries(&temp));
+}
+
+/// Runs the CLI expecting a failure; returns its stderr after checking that neither the
+/// output nor anything in `temp` was left behind.
+fn fails_cleanly(args: &[&str], input: &Path, temp: &Path, out: &Path) -> String {
+    let result = meniscus()
+        .arg("reconstruct")
+        .arg(input)
+        .args(args)
+        .arg("--temp-dir")
+        .arg(temp)
+        .arg("-o")
+        .arg(out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&result.stderr).into_owned();
+    assert!(!result.status.success(), "{args:?} succeeded");
+    assert!(!out.exists(), "{args:?} left {}", out.display());
+    if temp.is_dir() {
+        assert!(
+            entries(temp).is_empty(),
+            "{args:?} left {:?}",
+            entries(temp)
+        );
+    }
+    let siblings = entries(out.parent().unwrap());
+    assert!(
+        siblings
+            .iter()
+            .all(|n| !n.starts_with('.') && !n.contains("tmp")),
+        "{args:?} left {siblings:?}"
+    );
+    err
+}
+
+#[test]
+fn an_unwritable_temp_dir_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let blocker = dir.path().join("not-a-dir");
+    std::fs::write(&blocker, b"x").unwrap();
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let err = fails_cleanly(
+        &["-r", "0.012", "--tile-size", "64", "-q"],
+        &dataset("dambreak_small/ParticleData_Fluid_25.xyz"),
+        &blocker.join("spill"),
+        &out_dir.join("s.ply"),
+    );
+    assert!(
+        err.contains("spill file") && err.contains("not-a-dir"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_budget_too_small_for_one_tile_fails_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let temp = dir.path().join("temp");
+    std::fs::create_dir(&temp).unwrap();
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let input = dataset("dambreak_small/ParticleData_Fluid_25.xyz");
+    let out = out_dir.join("s.ply");
+    let clock = Instant::now();
+    let err = fails_cleanly(
+        &["-r", "0.012", "--memory-budget", "2MiB", "-q"],
+        &input,
+        &temp,
+        &out,
+    );
+    assert!(err.contains("memory budget of 2 MiB is too small"), "{err}");
+    assert!(clock.elapsed() < Duration::from_secs(5));
+    // An explicit tile size that does not fit is refused the same way.
+    let err = fails_cleanly(
+        &[
+            "-r",
+            "0.012",
+            "--memory-budget",
+            "8MiB",
+            "--tile-size",
+            "4096",
+            "-q",
+        ],
+        &input,
+        &temp,
+        &out,
+    );
+    assert!(err.contains("--tile-size"), "{err}");
+    // Nonsense sizes are rejected by name.
+    let err = fails_cleanly(
+        &["-r", "0.012", "--memory-budget", "2 parsecs"],
+        &input,
+        &temp,
+        &out,
+    );
+    assert!(err.contains("--memory-budget"), "{err}");
+}
+
+#[test]
+fn truncated_inputs_fail_cleanly_in_a_tiled_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let temp = dir.path().join("temp");
+    std::fs::create_dir(&temp).unwrap();
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let args = ["-r", "0.012", "--tile-size", "64", "-q"];
+
+    // Raw positions cut mid-record.
+    let bytes = std::fs::read(dataset("dambreak_small/ParticleData_Fluid_25.xyz")).unwrap();
+    let cut = dir.path().join("cut.xyz");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2 + 5]).unwrap();
+    let err = fails_cleanly(&args, &cut, &temp, &out_dir.join("a.ply"));
+    assert!(
+        err.contains("cut.xyz") && err.contains("not a multiple of 12"),
+        "{err}"
+    );
+
+    // A gzip BGEO stream cut in the middle of the particle data.
+    let bgeo = std::fs::read(dataset("dambreak_small/ParticleData_Fluid_25.bgeo")).unwrap();
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    std::io::Write::write_all(&mut gz, &bgeo).unwrap();
+    let gz = gz.finish().unwrap();
+    let cut = dir.path().join("cut.bgeo.gz");
+    std::fs::write(&cut, &gz[..gz.len() / 2]).unwrap();
+    let err = fails_cleanly(&args, &cut, &temp, &out_dir.join("b.ply"));
+    assert!(err.contains("cut.bgeo.gz"), "{err}");
+}
+
+#[test]
+fn ctrl_c_stops_a_tiled_run_and_removes_its_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let temp = dir.path().join("temp");
+    std::fs::create_dir(&temp).unwrap();
+    let out = dir.path().join("s.ply");
+    // One-block tiles: hundreds of tiles, several seconds of work.
+    let mut child = meniscus()
+        .arg("reconstruct")
+        .arg(dataset("dambreak_small/ParticleData_Fluid_25.xyz"))
+        .args(["-r", "0.012", "--tile-size", "8", "-q", "--temp-dir"])
+        .arg(&temp)
+        .arg("-o")
+        .arg(&out)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until the spill file exists, then interrupt.
+    let clock = Instant::now();
+    while entries(&temp).is_empty() {
+        assert!(
+            clock.elapsed() < Duration::from_secs(60),
+            "no spill file appeared"
+        );
+        assert!(child.try_wait().unwrap().is_none(), "the run ended early");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    std::thread::sleep(Duration::from_millis(100));
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let result = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&result.stderr);
+    assert!(!result.status.success());
+    assert!(err.contains("interrupted"), "{err}");
+    assert!(!out.exists());
+    assert!(entries(&temp).is_empty(), "{:?}", entries(&temp));
+}
+
+#[test]
+fn marching_cubes_files_are_byte_identical_for_any_tiling_and_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dataset("dambreak_small/ParticleData_Fluid_25.xyz");
+    let mut files = Vec::new();
+    for (tile, threads) in [
+        (None, "2"),
+        (Some("16"), "1"),
+        (Some("64"), "2"),
+        (Some("100000"), "1"),
+    ] {
+        let out = dir
+            .path()
+            .join(format!("s_{}_{threads}.ply", tile.unwrap_or("none")));
+        let mut command = meniscus();
+        command
+            .arg("reconstruct")
+            .arg(&input)
+            .args(["-r", "0.012", "--decimate", "off", "--subdivide", "0", "-q"])
+            .args(["--threads", threads])
+            .arg("-o")
+            .arg(&out);
+        if let Some(t) = tile {
+            command.args(["--tile-size", t]);
+        }
+        assert!(command.status().unwrap().success());
+        files.push((tile, std::fs::read(&out).unwrap()));
+    }
+    for (tile, bytes) in &files[1..] {
+        assert!(
+            bytes == &files[0].1,
+            "tile {tile:?}: output differs from the untiled run"
+        );
+    }
+}
