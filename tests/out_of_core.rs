@@ -204,7 +204,7 @@ fn a_budget_too_small_for_one_tile_fails_before_any_work() {
             "-r",
             "0.012",
             "--memory-budget",
-            "8MiB",
+            "70MiB",
             "--tile-size",
             "4096",
             "-q",

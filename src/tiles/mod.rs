@@ -73,8 +73,8 @@ use std::time::Instant;
 pub static INTERRUPTED: AtomicBool = AtomicBool::new(false);
 
 /// Peak memory of an untiled run with full post-processing, bytes per particle (4M
-/// particles of `dambreak_small` copies: 722 MB).
-pub const UNTILED_BYTES_PER_PARTICLE: u64 = 200;
+/// particles of `dambreak_small` copies: 720 MB, on top of [`BASE_BYTES`]).
+pub const UNTILED_BYTES_PER_PARTICLE: u64 = 170;
 /// Peak memory of one tile, bytes per particle it loads (own and ghost): particles,
 /// neighbour grid, field blocks, block surfaces and the tile's decimation state.
 pub const TILE_BYTES_PER_PARTICLE: u64 = 600;
@@ -82,8 +82,11 @@ pub const TILE_BYTES_PER_PARTICLE: u64 = 600;
 /// 2.67).
 pub const MC_TRIANGLES_PER_PARTICLE: f64 = 2.7;
 /// Peak working set of one Loop step, bytes per input triangle (the input, side → edge
-/// indices, the output mesh; measured 118 on 4M particles).
+/// indices, the output mesh; measured 104 on 32M particles, 134 on 4M where heap left
+/// over from the tiles counts more).
 pub const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 120.0;
+/// Memory of the process before any particle (code, thread stacks, allocator), bytes.
+pub const BASE_BYTES: u64 = 64 << 20;
 /// Bytes per triangle of a finished mesh with normals (12 for indices, half a vertex of
 /// 24 for position and normal).
 pub const MESH_BYTES_PER_TRIANGLE: f64 = 24.0;
@@ -613,14 +616,15 @@ fn choose_tile_blocks(
 ) -> Result<(Option<i32>, u64)> {
     // After the tiles: the post-processing's peak. During the tiles: one tile plus what
     // the tiles have produced so far (decimated pieces, or the raw block surfaces).
-    let output = particles * output_bytes_per_particle;
-    let produced = particles
-        * if decimated_in_tiles {
-            (MC_TRIANGLES_PER_PARTICLE * 0.2 * MESH_BYTES_PER_TRIANGLE) as u64
-        } else {
-            (MC_TRIANGLES_PER_PARTICLE * 20.0) as u64
-        };
-    let untiled = particles * UNTILED_BYTES_PER_PARTICLE;
+    let output = BASE_BYTES + particles * output_bytes_per_particle;
+    let produced = BASE_BYTES
+        + particles
+            * if decimated_in_tiles {
+                (MC_TRIANGLES_PER_PARTICLE * 0.2 * MESH_BYTES_PER_TRIANGLE) as u64
+            } else {
+                (MC_TRIANGLES_PER_PARTICLE * 20.0) as u64
+            };
+    let untiled = BASE_BYTES + particles * UNTILED_BYTES_PER_PARTICLE;
     // Zone 2 of a tile reaches 2·reach + 1 blocks below its own blocks and 2·reach + 2
     // above (see the module docs). Exact particle count of the fullest zone 2: every
     // populated block adds its count to each tile whose zone 2 holds it.
@@ -647,7 +651,7 @@ fn choose_tile_blocks(
             return Err(Error::MemoryBudget {
                 budget_mib: mib(budget),
                 message: format!(
-                    "the surface of {particles} particles alone needs ≈ {} MiB after the tiles (decimation and subdivision); raise --memory-budget, or use --subdivide 0",
+                    "the process and the surface of {particles} particles need ≈ {} MiB after the tiles (decimation and subdivision); raise --memory-budget, or use --subdivide 0",
                     mib(output)
                 ),
             });
@@ -662,7 +666,7 @@ fn choose_tile_blocks(
                     return Err(Error::MemoryBudget {
                         budget_mib: mib(budget),
                         message: format!(
-                            "tiles of {cells} cells need ≈ {} MiB (densest tile ≈ {} MiB, surface so far ≈ {} MiB); use a smaller --tile-size or a larger --memory-budget",
+                            "tiles of {cells} cells need ≈ {} MiB (densest tile ≈ {} MiB, the process and the surface so far ≈ {} MiB); use a smaller --tile-size or a larger --memory-budget",
                             mib(estimate),
                             mib(tile_estimate(t)),
                             mib(produced)
@@ -688,7 +692,7 @@ fn choose_tile_blocks(
             Err(Error::MemoryBudget {
                 budget_mib: mib(budget),
                 message: format!(
-                    "even one-block tiles need ≈ {} MiB for {particles} particles (surface so far ≈ {} MiB)",
+                    "even one-block tiles need ≈ {} MiB for {particles} particles (the process and the surface so far ≈ {} MiB)",
                     mib(smallest),
                     mib(produced)
                 ),

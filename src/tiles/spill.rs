@@ -6,9 +6,10 @@
 //! tiles). Records are 16 bytes: `x, y, z` (f32, little-endian) and the particle's input
 //! index (u32). The first pass over the input counts particles per cell, so every cell
 //! gets one contiguous region of the file; the second pass fills the regions through
-//! small per-cell buffers. Records are stored raw: zstd level 1 shrank them by only
-//! ≈ 15 % on `dambreak_small` frames (particle coordinates are noise in their low bits)
-//! at a cost of several times the write time, so compression does not pay here.
+//! small per-cell buffers. Records are stored raw: zstd level 1 shrinks the records of
+//! `dambreak_small` frame 25 by 12 % only (670 592 → 588 016 bytes; the low bits of
+//! particle coordinates are noise), not worth a compression pass on every write and
+//! every ghost read.
 
 use crate::error::{Error, Result};
 use crate::grid::BlockKey;
