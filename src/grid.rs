@@ -10,6 +10,7 @@
 //! influence sphere exist. Nothing is sized by the scene's bounding box.
 
 use hashbrown::HashMap;
+use rayon::prelude::*;
 
 /// Vertices per block edge.
 pub const BLOCK_EDGE: i32 = 8;
@@ -94,6 +95,14 @@ impl SparseField {
             index,
             values,
         }
+    }
+
+    /// Adds `delta` to every stored value and to the value of vertices not stored.
+    pub fn shift_values(&mut self, delta: f32) {
+        self.outside_value += delta;
+        self.values
+            .par_iter_mut()
+            .for_each(|block| block.iter_mut().for_each(|v| *v += delta));
     }
 
     /// Number of stored blocks.

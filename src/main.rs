@@ -127,6 +127,11 @@ struct ReconstructArgs {
     /// outside are enclosed in a ball of c·r (0 = off, the pure Solenthaler field).
     #[arg(long, default_value_t = 0.9)]
     particle_coverage: f32,
+    /// Iso-surface offset, multiples of r: extract where phi = offset·r, moving the surface
+    /// outwards by about that much (0 = the paper's surface; 0.133 removes its inward
+    /// bias on the shipped frames, at some flat-region smoothness).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    iso_offset: f32,
     /// Tile edge in marching-cubes cells (rounded up to 8-cell blocks); default: one tile
     /// if the scene fits the memory budget, else the largest tile that does. The
     /// marching-cubes mesh does not depend on it.
@@ -331,6 +336,7 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, String> {
     options.field.t_low = args.t_low;
     options.field.t_high = args.t_high;
     options.field.particle_coverage = args.particle_coverage;
+    options.field.iso_offset = args.iso_offset;
     options.isolated_sphere_level = parse_level(&args.isolated_spheres, "--isolated-spheres")?;
     options.tiles.tile_size_cells = args.tile_size;
     options.tiles.memory_budget_bytes = match &args.memory_budget {

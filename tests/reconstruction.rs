@@ -174,3 +174,50 @@ fn reconstruction_does_not_depend_on_thread_count() {
     assert_eq!(one, run(2));
     assert_eq!(one, run(4));
 }
+
+#[test]
+fn the_iso_offset_moves_the_surface_outwards_onto_the_true_box() {
+    // The paper's surface lies inside the outer particles; an offset of 0.133 r moves it
+    // out (by 0.19 r on these faces): the flat faces then sit on the true box faces.
+    let r = 0.025f32;
+    let particles = dataset("analytic/box.xyz");
+    let half = Vec3::new(0.5, 0.3, 0.2);
+    // Mean signed distance (positive outside) of the vertices of the flat faces (at least
+    // 3r from every box edge) to the true box.
+    let flat_offset = |iso_offset: f32| -> (f32, f64) {
+        let mut options = raw_options(r);
+        options.field.iso_offset = iso_offset;
+        let (surface, _) = reconstruct(&particles, &options).unwrap();
+        assert_closed_manifold(&surface.fluid, "box");
+        let (mut sum, mut n) = (0.0f32, 0);
+        for p in &surface.fluid.positions {
+            let m = half - p.abs();
+            let mut s = [m.x, m.y, m.z];
+            s.sort_by(f32::total_cmp);
+            if s[1] >= 3.0 * r {
+                sum += -s[0];
+                n += 1;
+            }
+        }
+        (sum / n as f32, surface.fluid.signed_volume())
+    };
+    let (paper, paper_volume) = flat_offset(0.0);
+    let (shifted, shifted_volume) = flat_offset(0.133);
+    assert!(
+        paper < -0.1 * r,
+        "paper's flat faces {} r from the box",
+        paper / r
+    );
+    assert!(
+        shifted.abs() < 0.05 * r,
+        "shifted flat faces {} r from the box",
+        shifted / r
+    );
+    // By δ·r / |∇phi|, with |∇phi| between 1/2 and 1 near the surface.
+    let moved = (shifted - paper) / r;
+    assert!((0.133..0.27).contains(&moved), "moved by {moved} r");
+    assert!((shifted_volume / 0.24 - 1.0).abs() < (paper_volume / 0.24 - 1.0).abs());
+    let mut bad = raw_options(r);
+    bad.field.iso_offset = 1.5;
+    assert!(reconstruct(&particles, &bad).is_err());
+}

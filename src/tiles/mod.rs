@@ -50,8 +50,8 @@ pub mod spill;
 use crate::decimation::{decimate_band, decimate_locked, DecimateOptions, DecimateStats};
 use crate::error::{Error, Result};
 use crate::field::{
-    apply_coverage, block_reach, check_positions_from, compute_blocks, home_block, BlockRange,
-    FieldOptions, FieldStats,
+    apply_coverage, apply_iso_offset, block_reach, check_positions_from, compute_blocks,
+    home_block, BlockRange, FieldOptions, FieldStats,
 };
 use crate::grid::{BlockKey, BLOCK_EDGE};
 use crate::marching_cubes::{
@@ -438,6 +438,7 @@ pub fn reconstruct_tiled<S: ParticleSource>(
         let (mut field, fs) = compute_blocks(&field_particles, field_options, Some(field_range));
         field_stats.uncovered_particles +=
             apply_coverage(&mut field, &field_particles, field_options, Some(own));
+        apply_iso_offset(&mut field, field_options);
         stats.max_tile_field_bytes = stats.max_tile_field_bytes.max(fs.block_bytes);
         field_stats.blocks += fs.blocks;
         field_stats.vertices_in_band += fs.vertices_in_band;
