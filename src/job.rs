@@ -107,6 +107,7 @@ pub fn reconstruct_file(
             Input::Parsed(positions) => reconstruct_source(positions, options, &progress)?,
         }
     };
+    crate::tiles::interrupted()?;
     on_stage("write");
     let clock = Instant::now();
     let written = match sink {

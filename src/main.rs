@@ -179,13 +179,13 @@ struct ReconstructArgs {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    // Ctrl-C: the first stops the run at the next tile or frame (temporary files are
+    // Ctrl-C: the first stops the run at the next tile or stage (temporary files are
     // removed, no partial output is left); a second one exits at once.
     let _ = ctrlc::set_handler(|| {
         if meniscus::tiles::INTERRUPTED.swap(true, std::sync::atomic::Ordering::SeqCst) {
             std::process::exit(130);
         }
-        eprintln!("\ninterrupted: stopping at the next tile or frame (Ctrl-C again to quit now)");
+        eprintln!("\ninterrupted: stopping at the next tile or stage (Ctrl-C again to quit now)");
     });
     match cli.command {
         Command::Reconstruct(args) => report(reconstruct(&args)),

@@ -236,6 +236,7 @@ pub fn reconstruct_source<S: ParticleSource>(
         stats.marching_cubes.triangles,
     );
 
+    crate::tiles::interrupted()?;
     // 4. Decimation (already done tile by tile when the run was tiled).
     progress("decimation");
     if let Some(tile_decimation) = tiled.decimation {
@@ -255,6 +256,7 @@ pub fn reconstruct_source<S: ParticleSource>(
         );
     }
 
+    crate::tiles::interrupted()?;
     // 5. Subdivision.
     progress("subdivision");
     if options.subdivide.levels > 0 {
@@ -267,6 +269,7 @@ pub fn reconstruct_source<S: ParticleSource>(
         );
     }
 
+    crate::tiles::interrupted()?;
     // 6. Spheres.
     let clock = Instant::now();
     let spheres = match options.isolated_sphere_level {

@@ -529,7 +529,8 @@ pub fn reconstruct_tiled<S: ParticleSource>(
     })
 }
 
-fn interrupted() -> Result<()> {
+/// [`Error::Interrupted`] once [`INTERRUPTED`] is set (checked between tiles and stages).
+pub fn interrupted() -> Result<()> {
     if INTERRUPTED.load(Ordering::Relaxed) {
         Err(Error::Interrupted)
     } else {
