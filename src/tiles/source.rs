@@ -42,7 +42,7 @@ impl<T: AsRef<[Vec3]>> ParticleSource for T {
 const CHUNK_PARTICLES: usize = 1 << 20;
 
 /// A raw `.xyz` file (little-endian f32 triples), memory-mapped one window of
-/// [`CHUNK_PARTICLES`] records at a time: resident memory stays one window, whatever the
+/// 2^20 records (12 MiB) at a time: resident memory stays one window, whatever the
 /// file size.
 pub struct MappedXyz {
     path: PathBuf,
