@@ -1,8 +1,13 @@
 //! glTF 2.0 output, built with serde_json: the document is small and fixed in shape, and
 //! writing its JSON directly keeps the byte layout (alignment, accessor bounds) in view.
 //! The `gltf` crate reads the result back in the tests.
+//!
+//! The binary buffer is never assembled in memory: the document records which mesh arrays
+//! go where, and writing streams them in chunks of [`CHUNK_BYTES`] (base64-encoded on the
+//! fly for `.gltf`), so a 70 M-triangle surface is written without a 1.7 GB copy.
 
 use crate::mesh::{Surface, TriMesh};
+use glam::Vec3;
 use serde_json::{json, Value};
 use std::io::{Result, Write};
 
@@ -10,42 +15,87 @@ const FLOAT: u32 = 5126;
 const UNSIGNED_INT: u32 = 5125;
 const ARRAY_BUFFER: u32 = 34962;
 const ELEMENT_ARRAY_BUFFER: u32 = 34963;
+/// Bytes encoded before each write.
+const CHUNK_BYTES: usize = 1 << 20;
 
-pub(super) struct Document {
+/// Data of one buffer view, borrowed from the meshes until it is written.
+enum Payload<'a> {
+    Vectors(&'a [Vec3]),
+    Triangles(&'a [[u32; 3]]),
+    Bytes(Vec<u8>),
+}
+
+impl Payload<'_> {
+    fn byte_len(&self) -> usize {
+        match self {
+            Payload::Vectors(v) => v.len() * 12,
+            Payload::Triangles(t) => t.len() * 12,
+            Payload::Bytes(b) => b.len(),
+        }
+    }
+
+    /// Writes the little-endian bytes in chunks.
+    fn write(&self, w: &mut impl Write) -> Result<()> {
+        let mut buf = Vec::with_capacity(CHUNK_BYTES + 16);
+        let flush = |buf: &mut Vec<u8>, w: &mut dyn Write, last: bool| -> Result<()> {
+            if last || buf.len() >= CHUNK_BYTES {
+                w.write_all(buf)?;
+                buf.clear();
+            }
+            Ok(())
+        };
+        match self {
+            Payload::Vectors(v) => {
+                for p in *v {
+                    for c in p.to_array() {
+                        buf.extend_from_slice(&c.to_le_bytes());
+                    }
+                    flush(&mut buf, w, false)?;
+                }
+            }
+            Payload::Triangles(t) => {
+                for tri in *t {
+                    for i in tri {
+                        buf.extend_from_slice(&i.to_le_bytes());
+                    }
+                    flush(&mut buf, w, false)?;
+                }
+            }
+            Payload::Bytes(b) => buf.extend_from_slice(b),
+        }
+        flush(&mut buf, w, true)
+    }
+}
+
+pub(super) struct Document<'a> {
     json: Value,
-    bin: Vec<u8>,
+    /// The buffer's views in order; each starts 4-byte aligned.
+    payloads: Vec<Payload<'a>>,
+    /// Length of the whole buffer (a multiple of 4).
+    bin_len: usize,
     pub vertices: usize,
 }
 
 #[derive(Default)]
-struct Builder {
-    bin: Vec<u8>,
+struct Builder<'a> {
+    payloads: Vec<Payload<'a>>,
+    bin_len: usize,
     views: Vec<Value>,
     accessors: Vec<Value>,
 }
 
-impl Builder {
-    fn push_view(&mut self, bytes: &[u8], target: u32) -> usize {
-        while self.bin.len() % 4 != 0 {
-            self.bin.push(0);
+impl<'a> Builder<'a> {
+    /// Adds a buffer view (`target` `None` for animation data); returns its index.
+    fn push_view(&mut self, payload: Payload<'a>, target: Option<u32>) -> usize {
+        let offset = self.bin_len.next_multiple_of(4);
+        let len = payload.byte_len();
+        self.bin_len = (offset + len).next_multiple_of(4);
+        let mut view = json!({"buffer": 0, "byteOffset": offset, "byteLength": len});
+        if let Some(target) = target {
+            view["target"] = json!(target);
         }
-        let offset = self.bin.len();
-        self.bin.extend_from_slice(bytes);
-        self.views.push(
-            json!({"buffer": 0, "byteOffset": offset, "byteLength": bytes.len(), "target": target}),
-        );
-        self.views.len() - 1
-    }
-
-    /// A buffer view without a target (animation data).
-    fn push_view_untargeted(&mut self, bytes: &[u8]) -> usize {
-        while self.bin.len() % 4 != 0 {
-            self.bin.push(0);
-        }
-        let offset = self.bin.len();
-        self.bin.extend_from_slice(bytes);
-        self.views
-            .push(json!({"buffer": 0, "byteOffset": offset, "byteLength": bytes.len()}));
+        self.views.push(view);
+        self.payloads.push(payload);
         self.views.len() - 1
     }
 
@@ -55,49 +105,51 @@ impl Builder {
     }
 
     /// Adds a mesh's attributes and indices; returns the primitive JSON.
-    fn primitive(&mut self, mesh: &TriMesh, normals: bool) -> Value {
-        let mut bytes = Vec::with_capacity(mesh.vertex_count() * 12);
+    fn primitive(&mut self, mesh: &'a TriMesh, normals: bool) -> Value {
         let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
         for p in &mesh.positions {
             for (k, v) in p.to_array().into_iter().enumerate() {
-                bytes.extend_from_slice(&v.to_le_bytes());
                 lo[k] = lo[k].min(v);
                 hi[k] = hi[k].max(v);
             }
         }
-        let view = self.push_view(&bytes, ARRAY_BUFFER);
+        let view = self.push_view(Payload::Vectors(&mesh.positions), Some(ARRAY_BUFFER));
         let position = self.push_accessor(json!({
             "bufferView": view, "componentType": FLOAT, "count": mesh.vertex_count(),
             "type": "VEC3", "min": lo, "max": hi
         }));
         let mut attributes = json!({ "POSITION": position });
         if normals && mesh.normals.len() == mesh.positions.len() {
-            bytes.clear();
-            for n in &mesh.normals {
-                for v in n.to_array() {
-                    bytes.extend_from_slice(&v.to_le_bytes());
-                }
-            }
-            let view = self.push_view(&bytes, ARRAY_BUFFER);
+            let view = self.push_view(Payload::Vectors(&mesh.normals), Some(ARRAY_BUFFER));
             let normal = self.push_accessor(json!({
                 "bufferView": view, "componentType": FLOAT, "count": mesh.vertex_count(), "type": "VEC3"
             }));
             attributes["NORMAL"] = json!(normal);
         }
-        bytes.clear();
-        let mut max_index = 0u32;
-        for t in &mesh.triangles {
-            for i in t {
-                bytes.extend_from_slice(&i.to_le_bytes());
-                max_index = max_index.max(*i);
-            }
-        }
-        let view = self.push_view(&bytes, ELEMENT_ARRAY_BUFFER);
+        let max_index = mesh
+            .triangles
+            .iter()
+            .flat_map(|t| t.iter().copied())
+            .max()
+            .unwrap_or(0);
+        let view = self.push_view(
+            Payload::Triangles(&mesh.triangles),
+            Some(ELEMENT_ARRAY_BUFFER),
+        );
         let indices = self.push_accessor(json!({
             "bufferView": view, "componentType": UNSIGNED_INT, "count": mesh.triangle_count() * 3,
             "type": "SCALAR", "min": [0], "max": [max_index]
         }));
         json!({ "attributes": attributes, "indices": indices, "mode": 4 })
+    }
+
+    fn finish(self, json: Value, vertices: usize) -> Document<'a> {
+        Document {
+            json,
+            payloads: self.payloads,
+            bin_len: self.bin_len,
+            vertices,
+        }
     }
 }
 
@@ -105,7 +157,7 @@ fn asset() -> Value {
     json!({"version": "2.0", "generator": concat!("meniscus ", env!("CARGO_PKG_VERSION"))})
 }
 
-pub(super) fn build(surface: &Surface, normals: bool) -> Document {
+pub(super) fn build(surface: &Surface, normals: bool) -> Document<'_> {
     let mut b = Builder::default();
     let mut meshes = Vec::new();
     let mut nodes = Vec::new();
@@ -133,9 +185,6 @@ pub(super) fn build(surface: &Surface, normals: bool) -> Document {
         }
         vertices += spheres.template.vertex_count();
     }
-    while b.bin.len() % 4 != 0 {
-        b.bin.push(0);
-    }
     let mut json = json!({
         "asset": asset(),
         "scene": 0,
@@ -146,19 +195,15 @@ pub(super) fn build(surface: &Surface, normals: bool) -> Document {
         json["meshes"] = json!(meshes);
         json["accessors"] = json!(b.accessors);
         json["bufferViews"] = json!(b.views);
-        json["buffers"] = json!([{"byteLength": b.bin.len()}]);
+        json["buffers"] = json!([{"byteLength": b.bin_len}]);
     }
-    Document {
-        json,
-        bin: b.bin,
-        vertices,
-    }
+    b.finish(json, vertices)
 }
 
 /// A sequence: one node per frame (fluid and spheres merged into one mesh), shown in turn
 /// by a step-interpolated scale animation (scale 1 during its frame, 0 otherwise) at
 /// `fps` frames per second.
-pub(super) fn build_sequence(frames: &[TriMesh], fps: f32, normals: bool) -> Document {
+pub(super) fn build_sequence(frames: &[TriMesh], fps: f32, normals: bool) -> Document<'_> {
     let mut b = Builder::default();
     let mut meshes = Vec::new();
     let mut nodes = Vec::new();
@@ -179,7 +224,7 @@ pub(super) fn build_sequence(frames: &[TriMesh], fps: f32, normals: bool) -> Doc
     for k in 0..n {
         times.extend_from_slice(&(k as f32 / fps).to_le_bytes());
     }
-    let view = b.push_view_untargeted(&times);
+    let view = b.push_view(Payload::Bytes(times), None);
     let input = b.push_accessor(json!({
         "bufferView": view, "componentType": FLOAT, "count": n, "type": "SCALAR",
         "min": [0.0], "max": [(n.saturating_sub(1)) as f32 / fps]
@@ -194,15 +239,12 @@ pub(super) fn build_sequence(frames: &[TriMesh], fps: f32, normals: bool) -> Doc
                 scales.extend_from_slice(&v.to_le_bytes());
             }
         }
-        let view = b.push_view_untargeted(&scales);
+        let view = b.push_view(Payload::Bytes(scales), None);
         let output = b.push_accessor(json!({
             "bufferView": view, "componentType": FLOAT, "count": n, "type": "VEC3"
         }));
         samplers.push(json!({"input": input, "output": output, "interpolation": "STEP"}));
         channels.push(json!({"sampler": i, "target": {"node": i, "path": "scale"}}));
-    }
-    while b.bin.len() % 4 != 0 {
-        b.bin.push(0);
     }
     let roots: Vec<usize> = (0..n).collect();
     let mut json = json!({
@@ -212,57 +254,129 @@ pub(super) fn build_sequence(frames: &[TriMesh], fps: f32, normals: bool) -> Doc
         "nodes": nodes,
         "accessors": b.accessors,
         "bufferViews": b.views,
-        "buffers": [{"byteLength": b.bin.len()}],
+        "buffers": [{"byteLength": b.bin_len}],
         "animations": [{"name": "sequence", "samplers": samplers, "channels": channels}],
     });
     if !meshes.is_empty() {
         json["meshes"] = json!(meshes);
     }
-    Document {
-        json,
-        bin: b.bin,
-        vertices,
-    }
+    b.finish(json, vertices)
 }
 
-impl Document {
+impl Document<'_> {
+    /// Streams the buffer: every view at its offset, zero padding between and at the end.
+    fn write_bin(&self, w: &mut impl Write) -> Result<()> {
+        let mut at = 0usize;
+        for payload in &self.payloads {
+            let offset = at.next_multiple_of(4);
+            w.write_all(&[0u8; 3][..offset - at])?;
+            payload.write(w)?;
+            at = offset + payload.byte_len();
+        }
+        w.write_all(&[0u8; 3][..self.bin_len - at])
+    }
+
     pub fn write_glb(&self, w: &mut impl Write) -> Result<()> {
         let mut json = serde_json::to_vec(&self.json).map_err(std::io::Error::other)?;
         while json.len() % 4 != 0 {
             json.push(b' ');
         }
-        let has_bin = !self.bin.is_empty();
-        let total = 12 + 8 + json.len() + if has_bin { 8 + self.bin.len() } else { 0 };
+        let has_bin = self.bin_len > 0;
+        let total = 12 + 8 + json.len() + if has_bin { 8 + self.bin_len } else { 0 };
+        let total = u32::try_from(total).map_err(|_| {
+            std::io::Error::other(format!(
+                "{total} bytes: a .glb holds at most 4 GiB; write .ply or .vtk instead"
+            ))
+        })?;
         w.write_all(b"glTF")?;
         w.write_all(&2u32.to_le_bytes())?;
-        w.write_all(&(total as u32).to_le_bytes())?;
+        w.write_all(&total.to_le_bytes())?;
         w.write_all(&(json.len() as u32).to_le_bytes())?;
         w.write_all(b"JSON")?;
         w.write_all(&json)?;
         if has_bin {
-            w.write_all(&(self.bin.len() as u32).to_le_bytes())?;
+            w.write_all(&(self.bin_len as u32).to_le_bytes())?;
             w.write_all(b"BIN\0")?;
-            w.write_all(&self.bin)?;
+            self.write_bin(w)?;
         }
         Ok(())
     }
 
     pub fn write_gltf(&self, w: &mut impl Write) -> Result<()> {
-        let mut json = self.json.clone();
-        if !self.bin.is_empty() {
-            json["buffers"][0]["uri"] = json!(format!(
-                "data:application/octet-stream;base64,{}",
-                base64(&self.bin)
-            ));
+        if self.bin_len == 0 {
+            serde_json::to_writer(&mut *w, &self.json).map_err(std::io::Error::other)?;
+            return w.write_all(b"\n");
         }
-        serde_json::to_writer(&mut *w, &json).map_err(std::io::Error::other)?;
+        // The JSON with a placeholder URI, split around it; the base64 data is streamed in
+        // between.
+        const PLACEHOLDER: &str = "meniscus-buffer-data";
+        let mut json = self.json.clone();
+        json["buffers"][0]["uri"] = json!(PLACEHOLDER);
+        let text = serde_json::to_string(&json).map_err(std::io::Error::other)?;
+        let (before, after) = text
+            .split_once(PLACEHOLDER)
+            .expect("the placeholder is in the JSON");
+        w.write_all(before.as_bytes())?;
+        w.write_all(b"data:application/octet-stream;base64,")?;
+        let mut encoder = Base64Writer {
+            inner: &mut *w,
+            carry: Vec::with_capacity(3),
+            out: Vec::with_capacity(CHUNK_BYTES / 3 * 4 + 8),
+        };
+        self.write_bin(&mut encoder)?;
+        encoder.finish()?;
+        w.write_all(after.as_bytes())?;
         w.write_all(b"\n")
     }
 }
 
-fn base64(bytes: &[u8]) -> String {
+/// Base64-encodes what is written to it (standard alphabet, `=` padding on `finish`).
+struct Base64Writer<W: Write> {
+    inner: W,
+    carry: Vec<u8>,
+    out: Vec<u8>,
+}
+
+impl<W: Write> Write for Base64Writer<W> {
+    fn write(&mut self, bytes: &[u8]) -> Result<usize> {
+        let mut rest = bytes;
+        if !self.carry.is_empty() {
+            let take = (3 - self.carry.len()).min(rest.len());
+            self.carry.extend_from_slice(&rest[..take]);
+            rest = &rest[take..];
+            if self.carry.len() < 3 {
+                return Ok(bytes.len());
+            }
+            let group = std::mem::take(&mut self.carry);
+            encode_base64(&group, &mut self.out);
+        }
+        let whole = rest.len() / 3 * 3;
+        encode_base64(&rest[..whole], &mut self.out);
+        self.carry.extend_from_slice(&rest[whole..]);
+        if self.out.len() >= CHUNK_BYTES {
+            self.inner.write_all(&self.out)?;
+            self.out.clear();
+        }
+        Ok(bytes.len())
+    }
+
+    fn flush(&mut self) -> Result<()> {
+        self.inner.flush()
+    }
+}
+
+impl<W: Write> Base64Writer<W> {
+    fn finish(mut self) -> Result<()> {
+        let tail = std::mem::take(&mut self.carry);
+        encode_base64(&tail, &mut self.out);
+        self.inner.write_all(&self.out)
+    }
+}
+
+/// Appends the base64 text of `bytes` to `out` (padded when `bytes.len()` is not a
+/// multiple of 3).
+fn encode_base64(bytes: &[u8], out: &mut Vec<u8>) {
     const TABLE: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
     for chunk in bytes.chunks(3) {
         let b = [
             chunk[0],
@@ -272,23 +386,52 @@ fn base64(bytes: &[u8]) -> String {
         let n = ((b[0] as u32) << 16) | ((b[1] as u32) << 8) | b[2] as u32;
         for k in 0..4 {
             if k <= chunk.len() {
-                out.push(TABLE[((n >> (18 - 6 * k)) & 63) as usize] as char);
+                out.push(TABLE[((n >> (18 - 6 * k)) & 63) as usize]);
             } else {
-                out.push('=');
+                out.push(b'=');
             }
         }
     }
-    out
 }
 
 #[cfg(test)]
 mod tests {
+    use std::io::Write;
+
+    fn base64(bytes: &[u8]) -> String {
+        let mut out = Vec::new();
+        super::encode_base64(bytes, &mut out);
+        String::from_utf8(out).unwrap()
+    }
+
     #[test]
     fn base64_matches_known_vectors() {
-        assert_eq!(super::base64(b""), "");
-        assert_eq!(super::base64(b"f"), "Zg==");
-        assert_eq!(super::base64(b"fo"), "Zm8=");
-        assert_eq!(super::base64(b"foo"), "Zm9v");
-        assert_eq!(super::base64(b"foobar"), "Zm9vYmFy");
+        assert_eq!(base64(b""), "");
+        assert_eq!(base64(b"f"), "Zg==");
+        assert_eq!(base64(b"fo"), "Zm8=");
+        assert_eq!(base64(b"foo"), "Zm9v");
+        assert_eq!(base64(b"foobar"), "Zm9vYmFy");
+    }
+
+    #[test]
+    fn streamed_base64_equals_one_shot_for_any_split() {
+        let data: Vec<u8> = (0..1000u32).map(|i| (i * 7919 % 251) as u8).collect();
+        for split in [1, 2, 3, 4, 5, 7, 64, 999] {
+            let mut out = Vec::new();
+            let mut w = super::Base64Writer {
+                inner: &mut out,
+                carry: Vec::new(),
+                out: Vec::new(),
+            };
+            for piece in data.chunks(split) {
+                w.write_all(piece).unwrap();
+            }
+            w.finish().unwrap();
+            assert_eq!(
+                String::from_utf8(out).unwrap(),
+                base64(&data),
+                "split {split}"
+            );
+        }
     }
 }
