@@ -61,10 +61,13 @@
 //! pure function of the state, and collapses run in sorted order on one thread, so the
 //! output is deterministic and does not depend on the thread count.
 
+mod pieces;
 mod quadric;
 
 use crate::mesh::TriMesh;
 use glam::{DVec3, Vec3};
+pub(crate) use pieces::place_survivors;
+pub use pieces::{decimate_band, BAND_RINGS};
 use quadric::Quadric;
 use rayon::prelude::*;
 
@@ -87,6 +90,16 @@ pub struct DecimateOptions {
 
 fn default_region_triangles() -> usize {
     1 << 18
+}
+
+impl DecimateOptions {
+    /// Triangles to keep out of `triangles`: the fraction's share, rounded up, or 0 when
+    /// only the error bound stops the decimation.
+    pub fn target_triangles(&self, triangles: usize) -> usize {
+        self.target_reduction
+            .map(|f| ((1.0 - f.clamp(0.0, 1.0) as f64) * triangles as f64).ceil() as usize)
+            .unwrap_or(0)
+    }
 }
 
 impl Default for DecimateOptions {
@@ -122,6 +135,18 @@ pub struct DecimateStats {
     pub regions: usize,
 }
 
+impl DecimateStats {
+    /// Adds the work of another run (collapses, refusals, passes; the larger error) to
+    /// this one, for decimations done piece by piece.
+    pub(crate) fn add_work(&mut self, other: &DecimateStats) {
+        self.collapses += other.collapses;
+        self.refused_topology += other.refused_topology;
+        self.refused_geometry += other.refused_geometry;
+        self.max_error = self.max_error.max(other.max_error);
+        self.passes += other.passes;
+    }
+}
+
 /// Triangles per chunk of the parallel walk. Fixed, so the output does not depend on the
 /// number of threads.
 pub const CHUNK_TRIANGLES: usize = 16 * 1024;
@@ -150,163 +175,12 @@ struct WalkTally {
 
 /// Decimates `mesh` in place.
 pub fn decimate(mesh: &mut TriMesh, options: &DecimateOptions) -> DecimateStats {
-    let target = options
-        .target_reduction
-        .map(|f| ((1.0 - f.clamp(0.0, 1.0) as f64) * mesh.triangle_count() as f64).ceil() as usize)
-        .unwrap_or(0);
+    let target = options.target_triangles(mesh.triangle_count());
     if options.region_triangles > 0 && mesh.triangle_count() > 2 * options.region_triangles {
-        decimate_by_regions(mesh, options, target)
+        pieces::decimate_by_regions(mesh, options, target)
     } else {
         decimate_locked(mesh, target, options.max_error, &[]).0
     }
-}
-
-/// Decimates region by region, seams locked, then the whole mesh to `target` triangles.
-fn decimate_by_regions(
-    mesh: &mut TriMesh,
-    options: &DecimateOptions,
-    target: usize,
-) -> DecimateStats {
-    let before = mesh.triangle_count();
-    let nv = mesh.vertex_count();
-    // Regions: runs of `region_triangles / 2` vertices in Morton order of position (a
-    // closed surface has about two triangles per vertex), so each is a compact piece.
-    let (lo, hi) = bounds(&mesh.positions);
-    let extent = (hi - lo).max_element().max(f64::MIN_POSITIVE);
-    let mut order: Vec<(u32, u32)> = mesh
-        .positions
-        .par_iter()
-        .enumerate()
-        .map(|(v, p)| {
-            let q =
-                ((p.as_dvec3() - lo) / extent * 1023.0).clamp(DVec3::ZERO, DVec3::splat(1023.0));
-            (morton3(q.x as u32, q.y as u32, q.z as u32), v as u32)
-        })
-        .collect();
-    order.par_sort_unstable();
-    let region_vertices = (options.region_triangles / 2).max(1);
-    let mut region_of = vec![0u32; nv];
-    for (rank, &(_, v)) in order.iter().enumerate() {
-        region_of[v as usize] = (rank / region_vertices) as u32;
-    }
-    drop(order);
-    let regions = nv.div_ceil(region_vertices);
-    // Triangles with all three vertices in one region are that region's; the others are
-    // seam triangles, and their vertices stay locked until the final pass.
-    let mut region_tris: Vec<Vec<u32>> = vec![Vec::new(); regions];
-    let mut seam_tris = Vec::new();
-    let mut on_seam = vec![false; nv];
-    for (t, tri) in mesh.triangles.iter().enumerate() {
-        let r = region_of[tri[0] as usize];
-        if tri.iter().all(|&v| region_of[v as usize] == r) {
-            region_tris[r as usize].push(t as u32);
-        } else {
-            seam_tris.push(t as u32);
-            for &v in tri {
-                on_seam[v as usize] = true;
-            }
-        }
-    }
-    drop(region_of);
-
-    let mut stats = DecimateStats {
-        triangles_before: before,
-        regions,
-        ..Default::default()
-    };
-    let mut positions: Vec<Vec3> = Vec::new();
-    let mut triangles: Vec<[u32; 3]> = Vec::new();
-    // Output index of each seam vertex, once placed.
-    let mut seam_index = vec![u32::MAX; nv];
-    let mut local_index = vec![u32::MAX; nv];
-    for tris in &mut region_tris {
-        let tris = std::mem::take(tris);
-        if tris.is_empty() {
-            continue;
-        }
-        let mut local = TriMesh::default();
-        let mut global_of: Vec<u32> = Vec::new();
-        local.triangles = tris
-            .iter()
-            .map(|&t| {
-                mesh.triangles[t as usize].map(|v| {
-                    if local_index[v as usize] == u32::MAX {
-                        local_index[v as usize] = global_of.len() as u32;
-                        global_of.push(v);
-                        local.positions.push(mesh.positions[v as usize]);
-                    }
-                    local_index[v as usize]
-                })
-            })
-            .collect();
-        drop(tris);
-        for &g in &global_of {
-            local_index[g as usize] = u32::MAX;
-        }
-        let locked: Vec<bool> = global_of.iter().map(|&g| on_seam[g as usize]).collect();
-        let region_target = options
-            .target_reduction
-            .map(|f| {
-                ((1.0 - f.clamp(0.0, 1.0) as f64) * local.triangle_count() as f64).ceil() as usize
-            })
-            .unwrap_or(0);
-        let (region_stats, remap) =
-            decimate_locked(&mut local, region_target, options.max_error, &locked);
-        stats.collapses += region_stats.collapses;
-        stats.refused_topology += region_stats.refused_topology;
-        stats.refused_geometry += region_stats.refused_geometry;
-        stats.max_error = stats.max_error.max(region_stats.max_error);
-        stats.passes += region_stats.passes;
-        // Seam vertices keep their identity (and their exact input position); the
-        // region's other surviving vertices are new.
-        let mut output_of = vec![u32::MAX; local.vertex_count()];
-        for (old, &new) in remap.iter().enumerate() {
-            let g = global_of[old] as usize;
-            if new != u32::MAX && on_seam[g] {
-                if seam_index[g] == u32::MAX {
-                    seam_index[g] = positions.len() as u32;
-                    positions.push(mesh.positions[g]);
-                }
-                output_of[new as usize] = seam_index[g];
-            }
-        }
-        for (new, p) in local.positions.iter().enumerate() {
-            if output_of[new] == u32::MAX {
-                output_of[new] = positions.len() as u32;
-                positions.push(*p);
-            }
-        }
-        triangles.extend(
-            local
-                .triangles
-                .iter()
-                .map(|t| t.map(|v| output_of[v as usize])),
-        );
-    }
-    for &t in &seam_tris {
-        let tri = mesh.triangles[t as usize].map(|v| {
-            if seam_index[v as usize] == u32::MAX {
-                seam_index[v as usize] = positions.len() as u32;
-                positions.push(mesh.positions[v as usize]);
-            }
-            seam_index[v as usize]
-        });
-        triangles.push(tri);
-    }
-    *mesh = TriMesh {
-        positions,
-        triangles,
-        normals: Vec::new(),
-    };
-    let (last, _) = decimate_locked(mesh, target, options.max_error, &[]);
-    stats.collapses += last.collapses;
-    stats.refused_topology += last.refused_topology;
-    stats.refused_geometry += last.refused_geometry;
-    stats.refused_boundary = last.refused_boundary;
-    stats.max_error = stats.max_error.max(last.max_error);
-    stats.passes += last.passes;
-    stats.triangles_after = last.triangles_after;
-    stats
 }
 
 fn bounds(positions: &[Vec3]) -> (DVec3, DVec3) {
@@ -315,130 +189,6 @@ fn bounds(positions: &[Vec3]) -> (DVec3, DVec3) {
         .fold((DVec3::MAX, DVec3::MIN), |(l, h), p| {
             (l.min(p.as_dvec3()), h.max(p.as_dvec3()))
         })
-}
-
-/// Rings of triangles around the flagged vertices that [`decimate_band`] works on.
-pub const BAND_RINGS: usize = 2;
-
-/// Decimates only the band of triangles around the `flagged` vertices (the triangles
-/// within [`BAND_RINGS`] + 1 rings of one) until the whole mesh has
-/// `target` triangles or the error bound stops it; the rest of the mesh is untouched and
-/// the band's border does not move. Memory follows the band, not the mesh: this is the
-/// pass across tile seams after each tile was decimated with its seam vertices locked
-/// ([`crate::tiles`]). Unused vertices are removed; the order of the untouched triangles
-/// and vertices is kept, the band's triangles come last.
-pub fn decimate_band(
-    mesh: &mut TriMesh,
-    flagged: &[bool],
-    target: usize,
-    max_error: Option<f32>,
-) -> DecimateStats {
-    let nv = mesh.vertex_count();
-    let before = mesh.triangle_count();
-    // The flagged vertices grown by `BAND_RINGS` rings.
-    let mut near = flagged.to_vec();
-    for _ in 0..BAND_RINGS {
-        let mut grown = near.clone();
-        for t in &mesh.triangles {
-            if t.iter().any(|&v| near[v as usize]) {
-                for &v in t {
-                    grown[v as usize] = true;
-                }
-            }
-        }
-        near = grown;
-    }
-    let (band, rest): (Vec<[u32; 3]>, Vec<[u32; 3]>) = mesh
-        .triangles
-        .iter()
-        .partition(|t| t.iter().any(|&v| near[v as usize]));
-    drop(near);
-    let stats = DecimateStats {
-        triangles_before: before,
-        triangles_after: before,
-        ..Default::default()
-    };
-    if band.is_empty() || before <= target {
-        return stats;
-    }
-    // The band's border: vertices the rest also uses.
-    let mut in_rest = vec![false; nv];
-    for t in &rest {
-        for &v in t {
-            in_rest[v as usize] = true;
-        }
-    }
-    let mut local_index = vec![u32::MAX; nv];
-    let mut global_of: Vec<u32> = Vec::new();
-    let mut local = TriMesh::default();
-    local.triangles = band
-        .iter()
-        .map(|t| {
-            t.map(|v| {
-                if local_index[v as usize] == u32::MAX {
-                    local_index[v as usize] = global_of.len() as u32;
-                    global_of.push(v);
-                    local.positions.push(mesh.positions[v as usize]);
-                }
-                local_index[v as usize]
-            })
-        })
-        .collect();
-    drop(band);
-    drop(local_index);
-    let locked: Vec<bool> = global_of.iter().map(|&g| in_rest[g as usize]).collect();
-    let band_target = local.triangle_count().saturating_sub(before - target);
-    let (band_stats, remap) = decimate_locked(&mut local, band_target, max_error, &locked);
-    // Locked survivors keep their vertex; the band's other survivors are appended.
-    let mut output_of = vec![u32::MAX; local.vertex_count()];
-    for (old, &new) in remap.iter().enumerate() {
-        if new != u32::MAX && locked[old] {
-            output_of[new as usize] = global_of[old];
-        }
-    }
-    let mut positions = std::mem::take(&mut mesh.positions);
-    for (new, p) in local.positions.iter().enumerate() {
-        if output_of[new] == u32::MAX {
-            output_of[new] = positions.len() as u32;
-            positions.push(*p);
-        }
-    }
-    let mut triangles = rest;
-    triangles.extend(
-        local
-            .triangles
-            .iter()
-            .map(|t| t.map(|v| output_of[v as usize])),
-    );
-    // Drop the vertices no triangle uses any more, keeping the order.
-    let mut new_index = vec![u32::MAX; positions.len()];
-    for t in &triangles {
-        for &v in t {
-            new_index[v as usize] = 0;
-        }
-    }
-    let mut kept = Vec::with_capacity(positions.len());
-    for (v, p) in positions.iter().enumerate() {
-        if new_index[v] != u32::MAX {
-            new_index[v] = kept.len() as u32;
-            kept.push(*p);
-        }
-    }
-    for t in &mut triangles {
-        for v in t.iter_mut() {
-            *v = new_index[*v as usize];
-        }
-    }
-    *mesh = TriMesh {
-        positions: kept,
-        triangles,
-        normals: Vec::new(),
-    };
-    DecimateStats {
-        triangles_before: before,
-        triangles_after: mesh.triangle_count(),
-        ..band_stats
-    }
 }
 
 /// Decimates to `target` triangles or the error bound, with the `extra_locked` vertices

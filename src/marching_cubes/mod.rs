@@ -109,16 +109,7 @@ pub fn march_blocks(field: &SparseField, range: Option<BlockRange>) -> Vec<Block
 /// so the result is the same however the blocks were grouped into tiles.
 pub fn stitch(mut surfaces: Vec<BlockSurface>) -> (TriMesh, MarchingCubesStats) {
     surfaces.sort_unstable_by_key(|s| [s.key[2], s.key[1], s.key[0]]);
-    let mut base = Vec::with_capacity(surfaces.len() + 1);
-    base.push(0u32);
-    for s in &surfaces {
-        base.push(base.last().unwrap() + s.owned.len() as u32);
-    }
-    let index_of: HashMap<BlockKey, usize> = surfaces
-        .iter()
-        .enumerate()
-        .map(|(i, s)| (s.key, i))
-        .collect();
+    let (base, index_of) = number_blocks(&surfaces);
     let (surfaces_ref, index_ref, base_ref) = (&surfaces, &index_of, &base);
     let triangles: Vec<[u32; 3]> = surfaces
         .par_iter()
@@ -145,6 +136,22 @@ pub fn stitch(mut surfaces: Vec<BlockSurface>) -> (TriMesh, MarchingCubesStats) 
         },
         stats,
     )
+}
+
+/// The vertex numbering of `surfaces` in their order: the first index of each block's
+/// owned vertices (plus the total at the end), and each block's position in the list.
+fn number_blocks(surfaces: &[BlockSurface]) -> (Vec<u32>, HashMap<BlockKey, usize>) {
+    let mut base = Vec::with_capacity(surfaces.len() + 1);
+    base.push(0u32);
+    for s in surfaces {
+        base.push(base.last().unwrap() + s.owned.len() as u32);
+    }
+    let index_of = surfaces
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (s.key, i))
+        .collect();
+    (base, index_of)
 }
 
 /// The index of the vertex `r` of a triangle of block `key`, in a numbering where block
@@ -182,16 +189,7 @@ fn resolve(
 /// order like [`stitch`]; a vertex's position depends only on its edge's two end values,
 /// so a seam vertex has the same position in every tile that uses it.
 pub fn stitch_range(surfaces: &[BlockSurface], own: BlockRange) -> RangeMesh {
-    let mut base = Vec::with_capacity(surfaces.len() + 1);
-    base.push(0u32);
-    for s in surfaces {
-        base.push(base.last().unwrap() + s.owned.len() as u32);
-    }
-    let index_of: HashMap<BlockKey, usize> = surfaces
-        .iter()
-        .enumerate()
-        .map(|(i, s)| (s.key, i))
-        .collect();
+    let (base, index_of) = number_blocks(surfaces);
     let total = *base.last().unwrap() as usize;
     let mut triangles: Vec<[u32; 3]> = Vec::new();
     for s in surfaces.iter().filter(|s| own.contains(s.key)) {

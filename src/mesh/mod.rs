@@ -88,6 +88,38 @@ impl TriMesh {
             .sum()
     }
 
+    /// Removes the vertices no triangle uses, keeping the order of the others (and their
+    /// normals, when the mesh has them).
+    pub fn remove_unused_vertices(&mut self) {
+        let mut new_index = vec![u32::MAX; self.positions.len()];
+        for t in &self.triangles {
+            for &v in t {
+                new_index[v as usize] = 0;
+            }
+        }
+        let has_normals = self.normals.len() == self.positions.len();
+        let mut kept = 0;
+        for (v, index) in new_index.iter_mut().enumerate() {
+            if *index != u32::MAX {
+                *index = kept as u32;
+                self.positions[kept] = self.positions[v];
+                if has_normals {
+                    self.normals[kept] = self.normals[v];
+                }
+                kept += 1;
+            }
+        }
+        self.positions.truncate(kept);
+        if has_normals {
+            self.normals.truncate(kept);
+        }
+        for t in &mut self.triangles {
+            for v in t.iter_mut() {
+                *v = new_index[*v as usize];
+            }
+        }
+    }
+
     /// Appends another mesh (its vertices and triangles, re-indexed). Normals are kept only
     /// when both meshes have them.
     pub fn append(&mut self, other: &TriMesh) {

@@ -32,8 +32,7 @@
 //! **Memory budget.** [`TileOptions::memory_budget_bytes`] picks the tile size (the largest
 //! power-of-two number of blocks whose densest tile fits next to the expected output) or
 //! refuses, before any work, a run whose smallest tile cannot fit. The estimate is a
-//! per-particle model calibrated on real frames ([`UNTILED_BYTES_PER_PARTICLE`],
-//! [`TILE_BYTES_PER_PARTICLE`], [`output_bytes_per_particle`]).
+//! per-particle model calibrated on real frames ([`budget`]).
 //!
 //! **Decimation in tiles.** With decimation requested and more than one tile, every tile
 //! decimates its own piece of the marching-cubes mesh as soon as it is meshed, the
@@ -44,21 +43,26 @@
 //! deterministic and independent of the thread count, but depends on the tile size;
 //! without decimation the stitched marching-cubes mesh is bit-identical for every tiling.
 
+pub mod budget;
 pub mod source;
 pub mod spill;
 
-use crate::decimation::{decimate_band, decimate_locked, DecimateOptions, DecimateStats};
+use crate::decimation::{
+    decimate_band, decimate_locked, place_survivors, DecimateOptions, DecimateStats,
+};
 use crate::error::{Error, Result};
 use crate::field::{
     apply_coverage, apply_iso_offset, block_reach, check_positions_from, compute_blocks,
     home_block, BlockRange, FieldOptions, FieldStats,
 };
-use crate::grid::{BlockKey, BLOCK_EDGE};
+use crate::grid::BlockKey;
 use crate::marching_cubes::{
     march_blocks, stitch, stitch_range, BlockSurface, MarchingCubesStats, VertexKey,
 };
 use crate::mesh::TriMesh;
 use crate::neighbors::find_isolated_where;
+use budget::choose_tile_blocks;
+pub use budget::{default_memory_budget, output_bytes_per_particle, parse_memory_size};
 use glam::Vec3;
 use hashbrown::{HashMap, HashSet};
 use rayon::prelude::*;
@@ -71,46 +75,6 @@ use std::time::Instant;
 /// Set (by the CLI's Ctrl-C handler) to stop a run between tiles with
 /// [`Error::Interrupted`]; temporary files are removed as the error unwinds.
 pub static INTERRUPTED: AtomicBool = AtomicBool::new(false);
-
-/// Peak memory of an untiled run with full post-processing, bytes per particle (4M
-/// particles of `dambreak_small` copies: 720 MB, on top of [`BASE_BYTES`]).
-pub const UNTILED_BYTES_PER_PARTICLE: u64 = 170;
-/// Peak memory of one tile, bytes per particle it loads (own and ghost): particles,
-/// neighbour grid, field blocks, block surfaces and the tile's decimation state.
-pub const TILE_BYTES_PER_PARTICLE: u64 = 600;
-/// Marching-cubes triangles per particle of a fluid body at h = r (`dambreak_small`:
-/// 2.67).
-pub const MC_TRIANGLES_PER_PARTICLE: f64 = 2.7;
-/// Peak working set of one Loop step, bytes per input triangle (the input, side → edge
-/// indices, the output mesh; measured 104 on 32M particles, 134 on 4M where heap left
-/// over from the tiles counts more).
-pub const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 120.0;
-/// Memory of the process before any particle (code, thread stacks, allocator), bytes.
-pub const BASE_BYTES: u64 = 64 << 20;
-/// Bytes per triangle of a finished mesh with normals (12 for indices, half a vertex of
-/// 24 for position and normal).
-pub const MESH_BYTES_PER_TRIANGLE: f64 = 24.0;
-
-/// Memory the surface needs after the tiles (the post-processing's peak), bytes per
-/// particle, for decimation removing `reduction` of the triangles (`None`: no
-/// decimation; an error-bounded run counts as 0.8) and `subdivide_levels` Loop steps.
-pub fn output_bytes_per_particle(reduction: Option<f32>, subdivide_levels: u32) -> u64 {
-    let mut triangles = MC_TRIANGLES_PER_PARTICLE;
-    // Without decimation the block surfaces (≈ 20 B per triangle) and the stitched mesh
-    // (≈ 18 B) exist together.
-    let mut peak = match reduction {
-        None => triangles * 38.0,
-        Some(f) => {
-            triangles *= 1.0 - f.clamp(0.0, 1.0) as f64;
-            triangles * MESH_BYTES_PER_TRIANGLE
-        }
-    };
-    for _ in 0..subdivide_levels {
-        peak = peak.max(triangles * SUBDIVISION_BYTES_PER_INPUT_TRIANGLE);
-        triangles *= 4.0;
-    }
-    peak.max(triangles * MESH_BYTES_PER_TRIANGLE).ceil() as u64
-}
 
 /// Error bound of collapses in tiles and in the seam pass when the decimation options set
 /// none, multiples of r. Measured on `dambreak_small` frame 25 in 64-cell tiles: without
@@ -340,7 +304,8 @@ pub fn reconstruct_tiled<S: ParticleSource>(
     let mut field_stats = FieldStats::default();
     let mut mc_stats = MarchingCubesStats::default();
     let mut decimate_stats = DecimateStats::default();
-    let mut loaded: Vec<(Vec3, u32)> = Vec::new();
+    // Particles of the current tile: (home block, input index, position).
+    let mut loaded: Vec<(BlockKey, u32, Vec3)> = Vec::new();
     for (n, &tile) in tiles.iter().enumerate() {
         interrupted()?;
         on_tile(n, tiles.len());
@@ -362,68 +327,34 @@ pub fn reconstruct_tiled<S: ParticleSource>(
         let zone2 = zone1.grown(reach, reach);
 
         // Load zone 2 in the canonical order (home block, input index): spatially
-        // coherent, and the same in every tiling.
+        // coherent, and the same in every tiling. Home blocks are computed once here.
         loaded.clear();
+        let homed = |(p, i): (Vec3, u32)| (home_block(p, inv_h), i, p);
         match &spilled {
             Some(spill) => {
-                let cells = BlockRange {
-                    lo: cell_of(zone2.lo),
-                    hi: cell_of(zone2.hi),
-                };
-                // Visit the zone's cells, or the populated cells when those are fewer
-                // (a tile much larger than the scene).
-                let volume = (0..3)
-                    .map(|a| (cells.hi[a] - cells.lo[a] + 1) as u64)
-                    .product::<u64>();
-                let wanted: Vec<BlockKey> = if volume <= spill.cell_count() as u64 {
-                    let mut v = Vec::new();
-                    for cz in cells.lo[2]..=cells.hi[2] {
-                        for cy in cells.lo[1]..=cells.hi[1] {
-                            for cx in cells.lo[0]..=cells.hi[0] {
-                                v.push([cx, cy, cz]);
-                            }
-                        }
-                    }
-                    v
-                } else {
-                    spill
-                        .cells()
-                        .filter(|c| cells.contains(**c))
-                        .copied()
-                        .collect()
-                };
-                let mut cell_records = Vec::new();
-                for cell in wanted {
-                    cell_records.clear();
-                    spill.read_cell(cell, &mut cell_records)?;
-                    loaded.extend(
-                        cell_records
-                            .iter()
-                            .filter(|(p, _)| zone2.contains(home_block(*p, inv_h))),
-                    );
-                }
+                let mut records = Vec::new();
+                spill.read_cells(cell_of(zone2.lo), cell_of(zone2.hi), &mut records)?;
+                loaded.extend(
+                    records
+                        .into_iter()
+                        .map(homed)
+                        .filter(|(h, _, _)| zone2.contains(*h)),
+                );
             }
-            None => loaded.extend(all.iter().enumerate().map(|(i, p)| (*p, i as u32))),
+            None => loaded.extend(all.iter().enumerate().map(|(i, p)| homed((*p, i as u32)))),
         }
-        loaded.par_sort_unstable_by_key(|&(p, i)| {
-            let h = home_block(p, inv_h);
-            (h[2], h[1], h[0], i)
-        });
+        loaded.par_sort_unstable_by_key(|&(h, i, _)| (h[2], h[1], h[0], i));
         stats.max_tile_particles = stats.max_tile_particles.max(loaded.len());
-        let local: Vec<Vec3> = loaded.iter().map(|r| r.0).collect();
+        let local: Vec<Vec3> = loaded.iter().map(|r| r.2).collect();
 
         // Flags are needed for zone 1 only; zone 2 is there to complete their neighbours.
-        let in_zone1: Vec<bool> = local
-            .par_iter()
-            .map(|p| zone1.contains(home_block(*p, inv_h)))
-            .collect();
+        let in_zone1: Vec<bool> = loaded.iter().map(|r| zone1.contains(r.0)).collect();
         let lonely = match isolation_radius {
             Some(radius) => find_isolated_where(&local, radius, &in_zone1),
             None => vec![false; local.len()],
         };
         let mut field_particles = Vec::new();
-        for (k, &(p, gi)) in loaded.iter().enumerate() {
-            let h = home_block(p, inv_h);
+        for (k, &(h, gi, p)) in loaded.iter().enumerate() {
             if lonely[k] {
                 if own.contains(h) {
                     isolated.push((gi, p));
@@ -464,11 +395,7 @@ pub fn reconstruct_tiled<S: ParticleSource>(
                 stats.marching_seconds += clock.elapsed().as_secs_f64();
                 let clock = Instant::now();
                 let tile_stats = decimate_piece(piece, &tile_decimation, &mut joined);
-                decimate_stats.collapses += tile_stats.collapses;
-                decimate_stats.refused_topology += tile_stats.refused_topology;
-                decimate_stats.refused_geometry += tile_stats.refused_geometry;
-                decimate_stats.max_error = decimate_stats.max_error.max(tile_stats.max_error);
-                decimate_stats.passes += tile_stats.passes;
+                decimate_stats.add_work(&tile_stats);
                 decimate_stats.regions += 1;
                 stats.decimation_seconds += clock.elapsed().as_secs_f64();
             }
@@ -493,23 +420,14 @@ pub fn reconstruct_tiled<S: ParticleSource>(
                 normals: Vec::new(),
             };
             drop(joined.seam_index);
-            let target = options
-                .target_reduction
-                .map(|f| {
-                    ((1.0 - f.clamp(0.0, 1.0) as f64) * mc_stats.triangles as f64).ceil() as usize
-                })
-                .unwrap_or(0);
+            let target = options.target_triangles(mc_stats.triangles);
             let band = decimate_band(
                 &mut mesh,
                 &joined.was_seam,
                 target,
                 tile_decimation.max_error,
             );
-            decimate_stats.collapses += band.collapses;
-            decimate_stats.refused_topology += band.refused_topology;
-            decimate_stats.refused_geometry += band.refused_geometry;
-            decimate_stats.max_error = decimate_stats.max_error.max(band.max_error);
-            decimate_stats.passes += band.passes;
+            decimate_stats.add_work(&band);
             decimate_stats.triangles_before = mc_stats.triangles;
             decimate_stats.triangles_after = mesh.triangle_count();
             stats.decimation_seconds += clock.elapsed().as_secs_f64();
@@ -558,38 +476,27 @@ fn decimate_piece(
 ) -> DecimateStats {
     let mut mesh = piece.mesh;
     let locked: Vec<bool> = piece.seam_keys.iter().map(Option::is_some).collect();
-    let target = options
-        .target_reduction
-        .map(|f| ((1.0 - f.clamp(0.0, 1.0) as f64) * mesh.triangle_count() as f64).ceil() as usize)
-        .unwrap_or(0);
-    let original: Vec<Vec3> = piece
-        .seam_keys
-        .iter()
-        .zip(&mesh.positions)
-        .map(|(_, p)| *p)
-        .collect();
+    let target = options.target_triangles(mesh.triangle_count());
+    // Border vertices keep their exact input position (decimation rescales internally).
+    let original = mesh.positions.clone();
     let (stats, remap) = decimate_locked(&mut mesh, target, options.max_error, &locked);
-    let mut output_of = vec![u32::MAX; mesh.vertex_count()];
-    for (old, &new) in remap.iter().enumerate() {
-        if new == u32::MAX {
-            continue;
-        }
-        if let Some(key) = piece.seam_keys[old] {
-            let index = *joined.seam_index.entry(key).or_insert_with(|| {
-                joined.positions.push(original[old]);
-                joined.was_seam.push(true);
-                (joined.positions.len() - 1) as u32
-            });
-            output_of[new as usize] = index;
-        }
-    }
-    for (new, p) in mesh.positions.iter().enumerate() {
-        if output_of[new] == u32::MAX {
-            output_of[new] = joined.positions.len() as u32;
-            joined.positions.push(*p);
-            joined.was_seam.push(false);
-        }
-    }
+    let (seam_index, was_seam) = (&mut joined.seam_index, &mut joined.was_seam);
+    let output_of = place_survivors(
+        &mesh,
+        &remap,
+        |old, positions| {
+            piece.seam_keys[old].map(|key| {
+                *seam_index.entry(key).or_insert_with(|| {
+                    positions.push(original[old]);
+                    was_seam.push(true);
+                    (positions.len() - 1) as u32
+                })
+            })
+        },
+        &mut joined.positions,
+    );
+    // The piece's own vertices, appended after its new border vertices.
+    joined.was_seam.resize(joined.positions.len(), false);
     joined.triangles.extend(
         mesh.triangles
             .iter()
@@ -600,144 +507,9 @@ fn decimate_piece(
 
 /// The lowest block any tile processes: the lowest populated block, less the field's
 /// reach and the marching layer.
-fn tile_origin(block_counts: &HashMap<BlockKey, u64>, reach: i32) -> BlockKey {
+pub(crate) fn tile_origin(block_counts: &HashMap<BlockKey, u64>, reach: i32) -> BlockKey {
     block_counts
         .keys()
         .fold([i32::MAX; 3], |o, b| [0, 1, 2].map(|a| o[a].min(b[a])))
         .map(|c| c.saturating_sub(reach + 1))
-}
-
-/// Picks the tile edge in blocks (`None`: one tile) and estimates the run's peak memory.
-fn choose_tile_blocks(
-    block_counts: &HashMap<BlockKey, u64>,
-    particles: u64,
-    reach: i32,
-    output_bytes_per_particle: u64,
-    decimated_in_tiles: bool,
-    options: &TileOptions,
-) -> Result<(Option<i32>, u64)> {
-    // After the tiles: the post-processing's peak. During the tiles: one tile plus what
-    // the tiles have produced so far (decimated pieces, or the raw block surfaces).
-    let output = BASE_BYTES + particles * output_bytes_per_particle;
-    let produced = BASE_BYTES
-        + particles
-            * if decimated_in_tiles {
-                (MC_TRIANGLES_PER_PARTICLE * 0.2 * MESH_BYTES_PER_TRIANGLE) as u64
-            } else {
-                (MC_TRIANGLES_PER_PARTICLE * 20.0) as u64
-            };
-    let untiled = BASE_BYTES + particles * UNTILED_BYTES_PER_PARTICLE;
-    // Zone 2 of a tile reaches 2·reach + 1 blocks below its own blocks and 2·reach + 2
-    // above (see the module docs). Exact particle count of the fullest zone 2: every
-    // populated block adds its count to each tile whose zone 2 holds it.
-    let (below, above) = (2 * reach + 1, 2 * reach + 2);
-    let origin = tile_origin(block_counts, reach);
-    let tile_estimate = |t: i32| -> u64 {
-        let mut zone: HashMap<BlockKey, u64> = HashMap::new();
-        for (b, n) in block_counts {
-            let lo = [0, 1, 2].map(|a| (b[a] - origin[a] - above).div_euclid(t));
-            let hi = [0, 1, 2].map(|a| (b[a] - origin[a] + below).div_euclid(t));
-            for tz in lo[2]..=hi[2] {
-                for ty in lo[1]..=hi[1] {
-                    for tx in lo[0]..=hi[0] {
-                        *zone.entry([tx, ty, tz]).or_default() += n;
-                    }
-                }
-            }
-        }
-        zone.values().copied().max().unwrap_or(0) * TILE_BYTES_PER_PARTICLE
-    };
-    let mib = |b: u64| b.div_ceil(1 << 20);
-    if let Some(budget) = options.memory_budget_bytes {
-        if output > budget {
-            return Err(Error::MemoryBudget {
-                budget_mib: mib(budget),
-                message: format!(
-                    "the process and the surface of {particles} particles need ≈ {} MiB after the tiles (decimation and subdivision); raise --memory-budget, or use --subdivide 0",
-                    mib(output)
-                ),
-            });
-        }
-    }
-    match (options.tile_size_cells, options.memory_budget_bytes) {
-        (Some(cells), budget) => {
-            let t = (cells.max(1) as i32 + BLOCK_EDGE - 1) / BLOCK_EDGE;
-            let estimate = (tile_estimate(t) + produced).max(output);
-            if let Some(budget) = budget {
-                if estimate > budget {
-                    return Err(Error::MemoryBudget {
-                        budget_mib: mib(budget),
-                        message: format!(
-                            "tiles of {cells} cells need ≈ {} MiB (densest tile ≈ {} MiB, the process and the surface so far ≈ {} MiB); use a smaller --tile-size or a larger --memory-budget",
-                            mib(estimate),
-                            mib(tile_estimate(t)),
-                            mib(produced)
-                        ),
-                    });
-                }
-            }
-            Ok((Some(t), estimate))
-        }
-        (None, None) => Ok((None, untiled)),
-        (None, Some(budget)) => {
-            if untiled <= budget {
-                return Ok((None, untiled));
-            }
-            let mut smallest = 0;
-            for t in [64, 32, 16, 8, 4, 2, 1] {
-                let estimate = (tile_estimate(t) + produced).max(output);
-                smallest = estimate;
-                if estimate <= budget {
-                    return Ok((Some(t), estimate));
-                }
-            }
-            Err(Error::MemoryBudget {
-                budget_mib: mib(budget),
-                message: format!(
-                    "even one-block tiles need ≈ {} MiB for {particles} particles (the process and the surface so far ≈ {} MiB)",
-                    mib(smallest),
-                    mib(produced)
-                ),
-            })
-        }
-    }
-}
-
-/// Parses a memory size: a number with an optional unit `B`, `KiB`, `MiB`, `GiB`, `TiB`
-/// (powers of 1024; `K`, `M`, `G`, `T`, `KB`, `MB`, `GB`, `TB` are read the same way).
-pub fn parse_memory_size(text: &str) -> std::result::Result<u64, String> {
-    let t = text.trim();
-    let split = t
-        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
-        .unwrap_or(t.len());
-    let (number, unit) = t.split_at(split);
-    let value: f64 = number
-        .parse()
-        .map_err(|_| format!("{text:?} is not a size like 512MiB or 2GiB"))?;
-    let scale: u64 = match unit.trim().to_ascii_lowercase().as_str() {
-        "" | "b" => 1,
-        "k" | "kb" | "kib" => 1 << 10,
-        "m" | "mb" | "mib" => 1 << 20,
-        "g" | "gb" | "gib" => 1 << 30,
-        "t" | "tb" | "tib" => 1 << 40,
-        other => {
-            return Err(format!(
-                "unknown size unit {other:?} in {text:?} (use MiB or GiB)"
-            ))
-        }
-    };
-    let bytes = value * scale as f64;
-    if !(bytes >= 1.0 && bytes < u64::MAX as f64) {
-        return Err(format!("{text:?} is not a positive size"));
-    }
-    Ok(bytes as u64)
-}
-
-/// Half the memory the system reports available (`MemAvailable`, Linux), the CLI's default
-/// budget; `None` where it cannot be read.
-pub fn default_memory_budget() -> Option<u64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024 / 2)
 }

@@ -67,16 +67,6 @@ impl SpillFile {
         })
     }
 
-    /// The cells holding particles.
-    pub fn cells(&self) -> impl Iterator<Item = &BlockKey> {
-        self.regions.keys()
-    }
-
-    /// Number of cells holding particles.
-    pub fn cell_count(&self) -> usize {
-        self.regions.len()
-    }
-
     /// Bytes of particle records in the file.
     pub fn bytes(&self) -> u64 {
         self.regions.values().map(|r| r.1).sum::<u64>() * RECORD_BYTES as u64
@@ -89,10 +79,36 @@ impl SpillFile {
             (BUFFER_BYTES / self.regions.len().max(1)).clamp(256, 64 << 10) / RECORD_BYTES;
         SpillWriter {
             spill: self,
-            cursors: self.regions.iter().map(|(k, r)| (*k, r.0)).collect(),
-            buffers: HashMap::new(),
+            pending: HashMap::new(),
             per_cell,
         }
+    }
+
+    /// The records of every cell from `lo` to `hi` (inclusive, per axis), cell by cell.
+    /// Visits the box's cells, or the populated cells when those are fewer (a tile much
+    /// larger than the scene).
+    pub fn read_cells(&self, lo: BlockKey, hi: BlockKey, out: &mut Vec<(Vec3, u32)>) -> Result<()> {
+        let volume: u64 = (0..3).map(|a| (hi[a] - lo[a] + 1).max(0) as u64).product();
+        let mut wanted: Vec<BlockKey> = Vec::new();
+        if volume <= self.regions.len() as u64 {
+            for z in lo[2]..=hi[2] {
+                for y in lo[1]..=hi[1] {
+                    for x in lo[0]..=hi[0] {
+                        wanted.push([x, y, z]);
+                    }
+                }
+            }
+        } else {
+            wanted.extend(
+                self.regions
+                    .keys()
+                    .filter(|c| (0..3).all(|a| (lo[a]..=hi[a]).contains(&c[a]))),
+            );
+        }
+        for cell in wanted {
+            self.read_cell(cell, out)?;
+        }
+        Ok(())
     }
 
     /// The records of one cell (empty when the cell holds no particle).
@@ -118,65 +134,64 @@ impl SpillFile {
 /// Buffered writes into the regions of a [`SpillFile`].
 pub struct SpillWriter<'a> {
     spill: &'a SpillFile,
-    cursors: HashMap<BlockKey, u64>,
-    buffers: HashMap<BlockKey, Vec<u8>>,
+    /// Per cell written to: the next record of its region and the records not yet
+    /// written.
+    pending: HashMap<BlockKey, (u64, Vec<u8>)>,
     per_cell: usize,
 }
 
 impl SpillWriter<'_> {
     /// Appends one particle to its cell's region.
     pub fn push(&mut self, cell: BlockKey, position: Vec3, index: u32) -> Result<()> {
-        let buffer = self
-            .buffers
-            .entry(cell)
-            .or_insert_with(|| Vec::with_capacity(self.per_cell * RECORD_BYTES));
+        let (spill, per_cell) = (self.spill, self.per_cell);
+        let (cursor, buffer) = self.pending.entry(cell).or_insert_with(|| {
+            let first = spill.regions.get(&cell).map_or(0, |r| r.0);
+            (first, Vec::with_capacity(per_cell * RECORD_BYTES))
+        });
         for v in position.to_array() {
             buffer.extend_from_slice(&v.to_le_bytes());
         }
         buffer.extend_from_slice(&index.to_le_bytes());
-        if buffer.len() >= self.per_cell * RECORD_BYTES {
-            let bytes = std::mem::take(buffer);
-            self.flush(cell, &bytes)?;
-            let buffer = self.buffers.get_mut(&cell).expect("just used");
-            *buffer = bytes;
-            buffer.clear();
+        if buffer.len() >= per_cell * RECORD_BYTES {
+            spill.write_records(cell, cursor, buffer)?;
         }
-        Ok(())
-    }
-
-    fn flush(&mut self, cell: BlockKey, bytes: &[u8]) -> Result<()> {
-        let cursor = self
-            .cursors
-            .get_mut(&cell)
-            .expect("every pushed cell was counted");
-        let (first, count) = self.spill.regions[&cell];
-        let records = (bytes.len() / RECORD_BYTES) as u64;
-        if *cursor + records > first + count {
-            return Err(Error::Spill {
-                path: self.spill.path.clone(),
-                source: std::io::Error::other(
-                    "the input changed between the counting and the binning pass",
-                ),
-            });
-        }
-        self.spill
-            .file
-            .write_all_at(bytes, *cursor * RECORD_BYTES as u64)
-            .map_err(|e| spill_error(&self.spill.path, e))?;
-        *cursor += records;
         Ok(())
     }
 
     /// Writes what is still buffered.
     pub fn finish(mut self) -> Result<()> {
-        let mut cells: Vec<BlockKey> = self.buffers.keys().copied().collect();
+        let mut cells: Vec<BlockKey> = self.pending.keys().copied().collect();
         cells.sort_unstable();
         for cell in cells {
-            let bytes = std::mem::take(self.buffers.get_mut(&cell).expect("listed"));
-            if !bytes.is_empty() {
-                self.flush(cell, &bytes)?;
-            }
+            let (cursor, buffer) = self.pending.get_mut(&cell).expect("listed");
+            self.spill.write_records(cell, cursor, buffer)?;
         }
+        Ok(())
+    }
+}
+
+impl SpillFile {
+    /// Writes the records in `buffer` at `cursor` of `cell`'s region, advances the cursor
+    /// and empties the buffer.
+    fn write_records(&self, cell: BlockKey, cursor: &mut u64, buffer: &mut Vec<u8>) -> Result<()> {
+        let records = (buffer.len() / RECORD_BYTES) as u64;
+        let fits = self
+            .regions
+            .get(&cell)
+            .is_some_and(|&(first, count)| *cursor + records <= first + count);
+        if !fits {
+            return Err(Error::Spill {
+                path: self.path.clone(),
+                source: std::io::Error::other(
+                    "the input changed between the counting and the binning pass",
+                ),
+            });
+        }
+        self.file
+            .write_all_at(buffer, *cursor * RECORD_BYTES as u64)
+            .map_err(|e| spill_error(&self.path, e))?;
+        *cursor += records;
+        buffer.clear();
         Ok(())
     }
 }

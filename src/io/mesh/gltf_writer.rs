@@ -6,6 +6,7 @@
 //! go where, and writing streams them in chunks of [`CHUNK_BYTES`] (base64-encoded on the
 //! fly for `.gltf`), so a 70 M-triangle surface is written without a 1.7 GB copy.
 
+use super::simple::{write_chunked, CHUNK_BYTES};
 use crate::mesh::{Surface, TriMesh};
 use glam::Vec3;
 use serde_json::{json, Value};
@@ -15,8 +16,6 @@ const FLOAT: u32 = 5126;
 const UNSIGNED_INT: u32 = 5125;
 const ARRAY_BUFFER: u32 = 34962;
 const ELEMENT_ARRAY_BUFFER: u32 = 34963;
-/// Bytes encoded before each write.
-const CHUNK_BYTES: usize = 1 << 20;
 
 /// Data of one buffer view, borrowed from the meshes until it is written.
 enum Payload<'a> {
@@ -36,34 +35,19 @@ impl Payload<'_> {
 
     /// Writes the little-endian bytes in chunks.
     fn write(&self, w: &mut impl Write) -> Result<()> {
-        let mut buf = Vec::with_capacity(CHUNK_BYTES + 16);
-        let flush = |buf: &mut Vec<u8>, w: &mut dyn Write, last: bool| -> Result<()> {
-            if last || buf.len() >= CHUNK_BYTES {
-                w.write_all(buf)?;
-                buf.clear();
-            }
-            Ok(())
-        };
         match self {
-            Payload::Vectors(v) => {
-                for p in *v {
-                    for c in p.to_array() {
-                        buf.extend_from_slice(&c.to_le_bytes());
-                    }
-                    flush(&mut buf, w, false)?;
+            Payload::Vectors(v) => write_chunked(w, v.iter(), |buf, p| {
+                for c in p.to_array() {
+                    buf.extend_from_slice(&c.to_le_bytes());
                 }
-            }
-            Payload::Triangles(t) => {
-                for tri in *t {
-                    for i in tri {
-                        buf.extend_from_slice(&i.to_le_bytes());
-                    }
-                    flush(&mut buf, w, false)?;
+            }),
+            Payload::Triangles(t) => write_chunked(w, t.iter(), |buf, tri| {
+                for i in tri {
+                    buf.extend_from_slice(&i.to_le_bytes());
                 }
-            }
-            Payload::Bytes(b) => buf.extend_from_slice(b),
+            }),
+            Payload::Bytes(b) => w.write_all(b),
         }
-        flush(&mut buf, w, true)
     }
 }
 

@@ -67,7 +67,7 @@ impl Part<'_> {
 }
 
 /// Bytes encoded before each write.
-const CHUNK_BYTES: usize = 1 << 20;
+pub(super) const CHUNK_BYTES: usize = 1 << 20;
 
 fn counts(parts: &[Part]) -> (usize, usize) {
     parts.iter().fold((0, 0), |(v, t), m| {
@@ -76,7 +76,7 @@ fn counts(parts: &[Part]) -> (usize, usize) {
 }
 
 /// Encodes `items` with `encode` into chunks and writes them.
-fn write_chunked<T>(
+pub(super) fn write_chunked<T>(
     w: &mut impl Write,
     items: impl Iterator<Item = T>,
     mut encode: impl FnMut(&mut Vec<u8>, T),

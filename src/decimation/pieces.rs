@@ -1,0 +1,283 @@
+//! Decimation piece by piece, so that the state follows the piece, not the mesh: regions
+//! of a large mesh ([`decimate_by_regions`]) and the band around the seams of tiles that
+//! were decimated on their own ([`decimate_band`], called by [`crate::tiles`]).
+//!
+//! A piece is taken out of the mesh ([`extract`]), decimated by
+//! [`super::decimate_locked`] with the vertices it shares with the rest of the mesh
+//! locked, and put back ([`place_survivors`]): a locked survivor keeps its identity, the
+//! piece's other survivors are new vertices.
+
+use super::{bounds, decimate_locked, morton3, DecimateOptions, DecimateStats};
+use crate::mesh::TriMesh;
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+
+/// Rings of triangles around the flagged vertices that [`decimate_band`] works on.
+pub const BAND_RINGS: usize = 2;
+
+/// A piece of a mesh, numbered on its own.
+struct Piece {
+    mesh: TriMesh,
+    /// Mesh vertex of every piece vertex.
+    global_of: Vec<u32>,
+}
+
+/// Takes `triangles` (of `mesh`) out as a piece. `scratch` has one entry per mesh vertex,
+/// all `u32::MAX`, and is left that way.
+fn extract(
+    mesh: &TriMesh,
+    triangles: impl Iterator<Item = [u32; 3]>,
+    scratch: &mut [u32],
+) -> Piece {
+    let mut piece = TriMesh::default();
+    let mut global_of: Vec<u32> = Vec::new();
+    piece.triangles = triangles
+        .map(|t| {
+            t.map(|v| {
+                if scratch[v as usize] == u32::MAX {
+                    scratch[v as usize] = global_of.len() as u32;
+                    global_of.push(v);
+                    piece.positions.push(mesh.positions[v as usize]);
+                }
+                scratch[v as usize]
+            })
+        })
+        .collect();
+    for &g in &global_of {
+        scratch[g as usize] = u32::MAX;
+    }
+    Piece {
+        mesh: piece,
+        global_of,
+    }
+}
+
+/// The output index of every vertex of a decimated piece (`remap` from
+/// [`super::decimate_locked`]): first each surviving vertex `old` for which
+/// `locked_index(old, positions)` gives an index (it may push to `positions`), in input
+/// order; then the piece's other vertices, appended to `positions`.
+pub(crate) fn place_survivors(
+    piece: &TriMesh,
+    remap: &[u32],
+    mut locked_index: impl FnMut(usize, &mut Vec<Vec3>) -> Option<u32>,
+    positions: &mut Vec<Vec3>,
+) -> Vec<u32> {
+    let mut output_of = vec![u32::MAX; piece.vertex_count()];
+    for (old, &new) in remap.iter().enumerate() {
+        if new != u32::MAX {
+            if let Some(index) = locked_index(old, positions) {
+                output_of[new as usize] = index;
+            }
+        }
+    }
+    for (new, p) in piece.positions.iter().enumerate() {
+        if output_of[new] == u32::MAX {
+            output_of[new] = positions.len() as u32;
+            positions.push(*p);
+        }
+    }
+    output_of
+}
+
+/// Decimates region by region, seams locked, then the whole mesh to `target` triangles.
+pub(super) fn decimate_by_regions(
+    mesh: &mut TriMesh,
+    options: &DecimateOptions,
+    target: usize,
+) -> DecimateStats {
+    let before = mesh.triangle_count();
+    let nv = mesh.vertex_count();
+    // Regions: runs of `region_triangles / 2` vertices in Morton order of position (a
+    // closed surface has about two triangles per vertex), so each is a compact piece.
+    let (lo, hi) = bounds(&mesh.positions);
+    let extent = (hi - lo).max_element().max(f64::MIN_POSITIVE);
+    let mut order: Vec<(u32, u32)> = mesh
+        .positions
+        .par_iter()
+        .enumerate()
+        .map(|(v, p)| {
+            let q =
+                ((p.as_dvec3() - lo) / extent * 1023.0).clamp(DVec3::ZERO, DVec3::splat(1023.0));
+            (morton3(q.x as u32, q.y as u32, q.z as u32), v as u32)
+        })
+        .collect();
+    order.par_sort_unstable();
+    let region_vertices = (options.region_triangles / 2).max(1);
+    let mut region_of = vec![0u32; nv];
+    for (rank, &(_, v)) in order.iter().enumerate() {
+        region_of[v as usize] = (rank / region_vertices) as u32;
+    }
+    drop(order);
+    let regions = nv.div_ceil(region_vertices);
+    // Triangles with all three vertices in one region are that region's; the others are
+    // seam triangles, and their vertices stay locked until the final pass.
+    let mut region_tris: Vec<Vec<u32>> = vec![Vec::new(); regions];
+    let mut seam_tris = Vec::new();
+    let mut on_seam = vec![false; nv];
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        let r = region_of[tri[0] as usize];
+        if tri.iter().all(|&v| region_of[v as usize] == r) {
+            region_tris[r as usize].push(t as u32);
+        } else {
+            seam_tris.push(t as u32);
+            for &v in tri {
+                on_seam[v as usize] = true;
+            }
+        }
+    }
+    drop(region_of);
+
+    let mut stats = DecimateStats {
+        triangles_before: before,
+        regions,
+        ..Default::default()
+    };
+    let mut positions: Vec<Vec3> = Vec::new();
+    let mut triangles: Vec<[u32; 3]> = Vec::new();
+    // Output index of each seam vertex, once placed; seam vertices keep their exact input
+    // position.
+    let mut seam_index = vec![u32::MAX; nv];
+    let mut place_seam = |g: usize, positions: &mut Vec<Vec3>| -> u32 {
+        if seam_index[g] == u32::MAX {
+            seam_index[g] = positions.len() as u32;
+            positions.push(mesh.positions[g]);
+        }
+        seam_index[g]
+    };
+    let mut scratch = vec![u32::MAX; nv];
+    for tris in &mut region_tris {
+        let tris = std::mem::take(tris);
+        if tris.is_empty() {
+            continue;
+        }
+        let mut piece = extract(
+            mesh,
+            tris.iter().map(|&t| mesh.triangles[t as usize]),
+            &mut scratch,
+        );
+        drop(tris);
+        let locked: Vec<bool> = piece
+            .global_of
+            .iter()
+            .map(|&g| on_seam[g as usize])
+            .collect();
+        let region_target = options.target_triangles(piece.mesh.triangle_count());
+        let (region_stats, remap) =
+            decimate_locked(&mut piece.mesh, region_target, options.max_error, &locked);
+        stats.add_work(&region_stats);
+        let output_of = place_survivors(
+            &piece.mesh,
+            &remap,
+            |old, positions| {
+                let g = piece.global_of[old] as usize;
+                on_seam[g].then(|| place_seam(g, positions))
+            },
+            &mut positions,
+        );
+        triangles.extend(
+            piece
+                .mesh
+                .triangles
+                .iter()
+                .map(|t| t.map(|v| output_of[v as usize])),
+        );
+    }
+    for &t in &seam_tris {
+        let tri = mesh.triangles[t as usize].map(|v| place_seam(v as usize, &mut positions));
+        triangles.push(tri);
+    }
+    *mesh = TriMesh {
+        positions,
+        triangles,
+        normals: Vec::new(),
+    };
+    let (last, _) = decimate_locked(mesh, target, options.max_error, &[]);
+    stats.add_work(&last);
+    stats.refused_boundary = last.refused_boundary;
+    stats.triangles_after = last.triangles_after;
+    stats
+}
+
+/// Decimates only the band of triangles around the `flagged` vertices (the triangles
+/// within [`BAND_RINGS`] + 1 rings of one) until the whole mesh has
+/// `target` triangles or the error bound stops it; the rest of the mesh is untouched and
+/// the band's border does not move. Memory follows the band, not the mesh: this is the
+/// pass across tile seams after each tile was decimated with its seam vertices locked
+/// ([`crate::tiles`]). Unused vertices are removed; the order of the untouched triangles
+/// and vertices is kept, the band's triangles come last.
+pub fn decimate_band(
+    mesh: &mut TriMesh,
+    flagged: &[bool],
+    target: usize,
+    max_error: Option<f32>,
+) -> DecimateStats {
+    let nv = mesh.vertex_count();
+    let before = mesh.triangle_count();
+    // The flagged vertices grown by `BAND_RINGS` rings.
+    let mut near = flagged.to_vec();
+    for _ in 0..BAND_RINGS {
+        let mut grown = near.clone();
+        for t in &mesh.triangles {
+            if t.iter().any(|&v| near[v as usize]) {
+                for &v in t {
+                    grown[v as usize] = true;
+                }
+            }
+        }
+        near = grown;
+    }
+    let (band, rest): (Vec<[u32; 3]>, Vec<[u32; 3]>) = mesh
+        .triangles
+        .iter()
+        .partition(|t| t.iter().any(|&v| near[v as usize]));
+    drop(near);
+    let stats = DecimateStats {
+        triangles_before: before,
+        triangles_after: before,
+        ..Default::default()
+    };
+    if band.is_empty() || before <= target {
+        return stats;
+    }
+    // The band's border: vertices the rest also uses.
+    let mut in_rest = vec![false; nv];
+    for t in &rest {
+        for &v in t {
+            in_rest[v as usize] = true;
+        }
+    }
+    let mut piece = extract(mesh, band.into_iter(), &mut vec![u32::MAX; nv]);
+    let locked: Vec<bool> = piece
+        .global_of
+        .iter()
+        .map(|&g| in_rest[g as usize])
+        .collect();
+    let band_target = piece.mesh.triangle_count().saturating_sub(before - target);
+    let (band_stats, remap) = decimate_locked(&mut piece.mesh, band_target, max_error, &locked);
+    let mut positions = std::mem::take(&mut mesh.positions);
+    let output_of = place_survivors(
+        &piece.mesh,
+        &remap,
+        |old, _| locked[old].then(|| piece.global_of[old]),
+        &mut positions,
+    );
+    let mut triangles = rest;
+    triangles.extend(
+        piece
+            .mesh
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| output_of[v as usize])),
+    );
+    *mesh = TriMesh {
+        positions,
+        triangles,
+        normals: Vec::new(),
+    };
+    mesh.remove_unused_vertices();
+    DecimateStats {
+        triangles_before: before,
+        triangles_after: mesh.triangle_count(),
+        ..band_stats
+    }
+}

@@ -1,0 +1,184 @@
+//! The memory model of a tiled run: how much a run needs, per particle, at each phase,
+//! and the tile size that fits a budget (`choose_tile_blocks`). Calibrated on copies of
+//! `dambreak_small` frame 25 (1M to 32M particles, `benches/scale.sh`); within about 10 %
+//! there, and an underestimate for scenes with much more surface per particle.
+
+use super::tile_origin;
+use crate::error::{Error, Result};
+use crate::grid::{BlockKey, BLOCK_EDGE};
+use hashbrown::HashMap;
+
+/// Peak memory of an untiled run with full post-processing, bytes per particle (4M
+/// particles of `dambreak_small` copies: 720 MB, on top of [`BASE_BYTES`]).
+pub const UNTILED_BYTES_PER_PARTICLE: u64 = 170;
+/// Peak memory of one tile, bytes per particle it loads (own and ghost): particles,
+/// neighbour grid, field blocks, block surfaces and the tile's decimation state.
+pub const TILE_BYTES_PER_PARTICLE: u64 = 600;
+/// Marching-cubes triangles per particle of a fluid body at h = r (`dambreak_small`:
+/// 2.67).
+pub const MC_TRIANGLES_PER_PARTICLE: f64 = 2.7;
+/// Peak working set of one Loop step, bytes per input triangle (the input, side → edge
+/// indices, the output mesh; measured 104 on 32M particles, 134 on 4M where heap left
+/// over from the tiles counts more).
+pub const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 120.0;
+/// Memory of the process before any particle (code, thread stacks, allocator), bytes.
+pub const BASE_BYTES: u64 = 64 << 20;
+/// Bytes per triangle of a finished mesh with normals (12 for indices, half a vertex of
+/// 24 for position and normal).
+pub const MESH_BYTES_PER_TRIANGLE: f64 = 24.0;
+
+/// Memory the surface needs after the tiles (the post-processing's peak), bytes per
+/// particle, for decimation removing `reduction` of the triangles (`None`: no
+/// decimation; an error-bounded run counts as 0.8) and `subdivide_levels` Loop steps.
+pub fn output_bytes_per_particle(reduction: Option<f32>, subdivide_levels: u32) -> u64 {
+    let mut triangles = MC_TRIANGLES_PER_PARTICLE;
+    // Without decimation the block surfaces (≈ 20 B per triangle) and the stitched mesh
+    // (≈ 18 B) exist together.
+    let mut peak = match reduction {
+        None => triangles * 38.0,
+        Some(f) => {
+            triangles *= 1.0 - f.clamp(0.0, 1.0) as f64;
+            triangles * MESH_BYTES_PER_TRIANGLE
+        }
+    };
+    for _ in 0..subdivide_levels {
+        peak = peak.max(triangles * SUBDIVISION_BYTES_PER_INPUT_TRIANGLE);
+        triangles *= 4.0;
+    }
+    peak.max(triangles * MESH_BYTES_PER_TRIANGLE).ceil() as u64
+}
+
+/// Picks the tile edge in blocks (`None`: one tile) and estimates the run's peak memory.
+pub(super) fn choose_tile_blocks(
+    block_counts: &HashMap<BlockKey, u64>,
+    particles: u64,
+    reach: i32,
+    output_bytes_per_particle: u64,
+    decimated_in_tiles: bool,
+    options: &super::TileOptions,
+) -> Result<(Option<i32>, u64)> {
+    // After the tiles: the post-processing's peak. During the tiles: one tile plus what
+    // the tiles have produced so far (decimated pieces, or the raw block surfaces).
+    let output = BASE_BYTES + particles * output_bytes_per_particle;
+    let produced = BASE_BYTES
+        + particles
+            * if decimated_in_tiles {
+                (MC_TRIANGLES_PER_PARTICLE * 0.2 * MESH_BYTES_PER_TRIANGLE) as u64
+            } else {
+                (MC_TRIANGLES_PER_PARTICLE * 20.0) as u64
+            };
+    let untiled = BASE_BYTES + particles * UNTILED_BYTES_PER_PARTICLE;
+    // Zone 2 of a tile reaches 2·reach + 1 blocks below its own blocks and 2·reach + 2
+    // above (see the module docs). Exact particle count of the fullest zone 2: every
+    // populated block adds its count to each tile whose zone 2 holds it.
+    let (below, above) = (2 * reach + 1, 2 * reach + 2);
+    let origin = tile_origin(block_counts, reach);
+    let tile_estimate = |t: i32| -> u64 {
+        let mut zone: HashMap<BlockKey, u64> = HashMap::new();
+        for (b, n) in block_counts {
+            let lo = [0, 1, 2].map(|a| (b[a] - origin[a] - above).div_euclid(t));
+            let hi = [0, 1, 2].map(|a| (b[a] - origin[a] + below).div_euclid(t));
+            for tz in lo[2]..=hi[2] {
+                for ty in lo[1]..=hi[1] {
+                    for tx in lo[0]..=hi[0] {
+                        *zone.entry([tx, ty, tz]).or_default() += n;
+                    }
+                }
+            }
+        }
+        zone.values().copied().max().unwrap_or(0) * TILE_BYTES_PER_PARTICLE
+    };
+    let mib = |b: u64| b.div_ceil(1 << 20);
+    if let Some(budget) = options.memory_budget_bytes {
+        if output > budget {
+            return Err(Error::MemoryBudget {
+                budget_mib: mib(budget),
+                message: format!(
+                    "the process and the surface of {particles} particles need ≈ {} MiB after the tiles (decimation and subdivision); raise --memory-budget, or use --subdivide 0",
+                    mib(output)
+                ),
+            });
+        }
+    }
+    match (options.tile_size_cells, options.memory_budget_bytes) {
+        (Some(cells), budget) => {
+            let t = (cells.max(1) as i32 + BLOCK_EDGE - 1) / BLOCK_EDGE;
+            let estimate = (tile_estimate(t) + produced).max(output);
+            if let Some(budget) = budget {
+                if estimate > budget {
+                    return Err(Error::MemoryBudget {
+                        budget_mib: mib(budget),
+                        message: format!(
+                            "tiles of {cells} cells need ≈ {} MiB (densest tile ≈ {} MiB, the process and the surface so far ≈ {} MiB); use a smaller --tile-size or a larger --memory-budget",
+                            mib(estimate),
+                            mib(tile_estimate(t)),
+                            mib(produced)
+                        ),
+                    });
+                }
+            }
+            Ok((Some(t), estimate))
+        }
+        (None, None) => Ok((None, untiled)),
+        (None, Some(budget)) => {
+            if untiled <= budget {
+                return Ok((None, untiled));
+            }
+            let mut smallest = 0;
+            for t in [64, 32, 16, 8, 4, 2, 1] {
+                let estimate = (tile_estimate(t) + produced).max(output);
+                smallest = estimate;
+                if estimate <= budget {
+                    return Ok((Some(t), estimate));
+                }
+            }
+            Err(Error::MemoryBudget {
+                budget_mib: mib(budget),
+                message: format!(
+                    "even one-block tiles need ≈ {} MiB for {particles} particles (the process and the surface so far ≈ {} MiB)",
+                    mib(smallest),
+                    mib(produced)
+                ),
+            })
+        }
+    }
+}
+
+/// Parses a memory size: a number with an optional unit `B`, `KiB`, `MiB`, `GiB`, `TiB`
+/// (powers of 1024; `K`, `M`, `G`, `T`, `KB`, `MB`, `GB`, `TB` are read the same way).
+pub fn parse_memory_size(text: &str) -> std::result::Result<u64, String> {
+    let t = text.trim();
+    let split = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (number, unit) = t.split_at(split);
+    let value: f64 = number
+        .parse()
+        .map_err(|_| format!("{text:?} is not a size like 512MiB or 2GiB"))?;
+    let scale: u64 = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 1,
+        "k" | "kb" | "kib" => 1 << 10,
+        "m" | "mb" | "mib" => 1 << 20,
+        "g" | "gb" | "gib" => 1 << 30,
+        "t" | "tb" | "tib" => 1 << 40,
+        other => {
+            return Err(format!(
+                "unknown size unit {other:?} in {text:?} (use MiB or GiB)"
+            ))
+        }
+    };
+    let bytes = value * scale as f64;
+    if !(bytes >= 1.0 && bytes < u64::MAX as f64) {
+        return Err(format!("{text:?} is not a positive size"));
+    }
+    Ok(bytes as u64)
+}
+
+/// Half the memory the system reports available (`MemAvailable`, Linux), the CLI's default
+/// budget; `None` where it cannot be read.
+pub fn default_memory_budget() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024 / 2)
+}
