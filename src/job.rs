@@ -1,7 +1,7 @@
 //! File-level jobs: read a particle file, reconstruct, write the surface; and whole
 //! sequences of frames. The CLI is a thin layer over [`run_frames`].
 
-use crate::archive::{ArchiveOptions, ArchiveWriter};
+use crate::archive::{ArchiveFrame, ArchiveOptions, ArchiveWriter};
 use crate::error::{Error, Result};
 use crate::io::mesh::{write_sequence_gltf, write_surface, MeshWriteOptions};
 use crate::io::particles::{read_particles, ParticleFormat};
@@ -66,7 +66,8 @@ pub struct FrameReport {
 }
 
 /// Reads `input`, reconstructs it and sends it to `sink`: the file `output`, an archive
-/// (as frame `frame_number`, fluid and spheres merged) or a collection. `on_stage` is told
+/// (as frame `frame_number`; Loop subdivision is left to the archive's decoder, which
+/// stores the control mesh) or a collection. `on_stage` is told
 /// when a phase starts ("read", "reconstruct", "write").
 pub fn reconstruct_file(
     input: &Path,
@@ -99,6 +100,21 @@ pub fn reconstruct_file(
     };
     let read_seconds = clock.elapsed().as_secs_f64();
     on_stage("reconstruct");
+    // An archive stores the control mesh and subdivides on decoding (a quarter of the
+    // triangles per level to store); the pipeline stops before subdivision.
+    let deferred_levels = match sink {
+        Sink::Archive(_) => options.subdivide.levels,
+        _ => 0,
+    };
+    let deferred_options;
+    let options = if deferred_levels > 0 {
+        let mut o = options.clone();
+        o.subdivide.levels = 0;
+        deferred_options = o;
+        &deferred_options
+    } else {
+        options
+    };
     let (surface, mut reconstruction) = {
         let progress = std::cell::RefCell::new(&mut *on_stage);
         let progress = |stage: &str| (progress.borrow_mut())(stage);
@@ -111,7 +127,23 @@ pub fn reconstruct_file(
     on_stage("write");
     let clock = Instant::now();
     let written = match sink {
-        Sink::Archive(writer) => writer.append(frame_number, &surface.merged())?,
+        Sink::Archive(writer) => {
+            let frame = ArchiveFrame {
+                fluid: &surface.fluid,
+                subdivision_levels: deferred_levels,
+                spheres: &surface.spheres,
+            };
+            let bytes = writer.append_frame(frame_number, &frame)?;
+            if deferred_levels > 0 {
+                reconstruction.fluid_triangles <<= 2 * deferred_levels;
+                reconstruction.push_stage(
+                    "subdivision (on decoding)",
+                    0.0,
+                    reconstruction.fluid_triangles,
+                );
+            }
+            bytes
+        }
         Sink::Collect(frames) => {
             frames.push(surface.merged());
             0

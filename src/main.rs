@@ -9,7 +9,6 @@ use meniscus::io::mesh::MeshWriteOptions;
 use meniscus::io::mesh::{read_mesh, write_surface};
 use meniscus::io::particles::ParticleFormat;
 use meniscus::job::{peak_rss_bytes, plan_frames, run_frames, FrameReport, JobOptions};
-use meniscus::mesh::Surface;
 use meniscus::pipeline::ReconstructOptions;
 
 /// Error bound of `--decimate adaptive`, multiples of r.
@@ -286,11 +285,7 @@ fn archive(command: ArchiveCommand) -> Result<(), String> {
             output,
         } => {
             let r = ArchiveReader::open(&file).map_err(text)?;
-            let mesh = r.read_frame(frame).map_err(text)?;
-            let surface = Surface {
-                fluid: mesh,
-                ..Default::default()
-            };
+            let surface = r.read_surface(frame).map_err(text)?;
             write_surface(&output, &surface, &MeshWriteOptions::default()).map_err(text)?;
         }
         ArchiveCommand::Pack {

@@ -23,7 +23,7 @@
 use crate::mesh::TriMesh;
 use glam::Vec3;
 
-fn put_varint(out: &mut Vec<u8>, mut v: u64) {
+pub(crate) fn put_varint(out: &mut Vec<u8>, mut v: u64) {
     while v >= 0x80 {
         out.push((v as u8) | 0x80);
         v >>= 7;
@@ -31,7 +31,7 @@ fn put_varint(out: &mut Vec<u8>, mut v: u64) {
     out.push(v as u8);
 }
 
-fn get_varint(bytes: &[u8], pos: &mut usize) -> Option<u64> {
+pub(crate) fn get_varint(bytes: &[u8], pos: &mut usize) -> Option<u64> {
     let mut v = 0u64;
     for shift in (0..64).step_by(7) {
         let b = *bytes.get(*pos)?;
@@ -44,11 +44,11 @@ fn get_varint(bytes: &[u8], pos: &mut usize) -> Option<u64> {
     None
 }
 
-fn zigzag(v: i64) -> u64 {
+pub(crate) fn zigzag(v: i64) -> u64 {
     ((v << 1) ^ (v >> 63)) as u64
 }
 
-fn unzigzag(v: u64) -> i64 {
+pub(crate) fn unzigzag(v: u64) -> i64 {
     ((v >> 1) as i64) ^ -((v & 1) as i64)
 }
 
@@ -104,13 +104,41 @@ fn push_gates(stack: &mut Vec<Gate>, t: [u32; 3], skip_first: bool) {
     }
 }
 
-/// Encodes `mesh` with quantization step `step` (world units) and zstd `level`. Returns
-/// the payload and the vertex and triangle counts it holds.
-pub(crate) fn encode(
+/// Version-1 payload: the three streams of `mesh` (quantization step `step`, world
+/// units) compressed with zstd `level`. Returns the payload and the vertex and triangle
+/// counts it holds.
+pub(crate) fn encode_v1(
     mesh: &TriMesh,
     step: f64,
     level: i32,
 ) -> std::io::Result<(Vec<u8>, u32, u32)> {
+    let mut raw = Vec::new();
+    let coded = encode_streams(mesh, step, &mut raw);
+    Ok((
+        zstd::bulk::compress(&raw, level)?,
+        coded.vertices,
+        coded.triangles,
+    ))
+}
+
+/// What [`encode_streams`] wrote, and what Loop subdivision of it will make.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct CodedMesh {
+    /// Vertices coded (the referenced ones).
+    pub vertices: u32,
+    /// Triangles coded.
+    pub triangles: u32,
+    /// Distinct undirected edges.
+    pub edges: u64,
+    /// True when no triangle repeats a corner and no two triangles have the same three
+    /// vertices: then one Loop step makes exactly `vertices + edges` vertices and
+    /// `2 edges + 3 triangles` edges, and the result has the same property.
+    pub loop_countable: bool,
+}
+
+/// Appends the flag, vertex-code and residual streams of `mesh` (positions quantized
+/// with step `step`, world units), each prefixed with its byte length, to `out`.
+pub(crate) fn encode_streams(mesh: &TriMesh, step: f64, out: &mut Vec<u8>) -> CodedMesh {
     let tris = &mesh.triangles;
     let n = tris.len();
     // Half-edge h = 3t + k runs from corner k to corner k+1 of triangle t. Half-edges are
@@ -228,36 +256,86 @@ pub(crate) fn encode(
             put_varint(&mut residuals, zigzag(q[k] - pred[k]));
         }
     }
-    let mut raw = Vec::with_capacity(flags.len() + codes.len() + residuals.len() + 16);
+    out.reserve(flags.len() + codes.len() + residuals.len() + 16);
     for stream in [&flags, &codes, &residuals] {
-        put_varint(&mut raw, stream.len() as u64);
-        raw.extend_from_slice(stream);
+        put_varint(out, stream.len() as u64);
+        out.extend_from_slice(stream);
     }
-    Ok((zstd::bulk::compress(&raw, level)?, numbering.next, n as u32))
+    // Edges and the conditions of exact Loop counts, from the buckets: the sides of one
+    // undirected edge share a bucket.
+    let mut edges = 0u64;
+    let mut loop_countable = tris
+        .iter()
+        .all(|t| t[0] != t[1] && t[1] != t[2] && t[2] != t[0]);
+    let mut seen: Vec<(u32, u32)> = Vec::new();
+    for v in 0..mesh.positions.len() {
+        seen.clear();
+        for &h in &bucket[bucket_start[v] as usize..bucket_start[v + 1] as usize] {
+            let (a, b) = half_edge(h as usize);
+            let other = a.max(b);
+            let opposite = tris[h as usize / 3][(h as usize % 3 + 2) % 3];
+            if seen.iter().any(|&(o, w)| o == other && w == opposite) {
+                loop_countable = false;
+            }
+            if !seen.iter().any(|&(o, _)| o == other) {
+                edges += 1;
+            }
+            seen.push((other, opposite));
+        }
+    }
+    CodedMesh {
+        vertices: numbering.next,
+        triangles: n as u32,
+        edges,
+        loop_countable,
+    }
 }
 
-/// Decodes a payload of `vertices` vertices and `triangles` triangles.
-pub(crate) fn decode(
+/// Decodes a version-1 payload of `vertices` vertices and `triangles` triangles. No
+/// normals.
+pub(crate) fn decode_v1(
     payload: &[u8],
     vertices: usize,
     triangles: usize,
     step: f64,
 ) -> Result<TriMesh, String> {
-    let capacity = triangles * 8 + vertices * 30 + 64;
-    let raw = zstd::bulk::decompress(payload, capacity).map_err(|e| format!("zstd: {e}"))?;
+    let raw = decompress(payload, raw_capacity(vertices, triangles))?;
     let mut pos = 0;
-    let mut streams: Vec<&[u8]> = Vec::with_capacity(3);
-    for name in ["flag", "vertex code", "position"] {
-        let len =
-            get_varint(&raw, &mut pos).ok_or(format!("{name} stream length missing"))? as usize;
-        let s = raw
-            .get(pos..pos + len)
-            .ok_or(format!("{name} stream cut off"))?;
-        streams.push(s);
-        pos += len;
-    }
+    let mesh = decode_streams(&raw, &mut pos, vertices, triangles, step)?;
     if pos != raw.len() {
         return Err("trailing bytes after the streams".into());
+    }
+    Ok(mesh)
+}
+
+/// An upper bound of the stream bytes of a mesh (varints of at most 5 bytes per vertex
+/// code and 10 per coordinate residual).
+pub(crate) fn raw_capacity(vertices: usize, triangles: usize) -> usize {
+    triangles * 8 + vertices * 30 + 64
+}
+
+/// zstd decompression of at most `capacity` bytes.
+pub(crate) fn decompress(payload: &[u8], capacity: usize) -> Result<Vec<u8>, String> {
+    zstd::bulk::decompress(payload, capacity).map_err(|e| format!("zstd: {e}"))
+}
+
+/// Reads the streams [`encode_streams`] wrote at `raw[*pos..]` (a mesh of `vertices`
+/// vertices and `triangles` triangles) and moves `pos` past them. No normals.
+pub(crate) fn decode_streams(
+    raw: &[u8],
+    pos: &mut usize,
+    vertices: usize,
+    triangles: usize,
+    step: f64,
+) -> Result<TriMesh, String> {
+    let mut streams: Vec<&[u8]> = Vec::with_capacity(3);
+    for name in ["flag", "vertex code", "position"] {
+        let len = get_varint(raw, pos).ok_or(format!("{name} stream length missing"))? as usize;
+        let s = raw
+            .get(*pos..pos.saturating_add(len))
+            .ok_or(format!("{name} stream cut off"))?;
+        streams.push(s);
+        *pos += len;
     }
     let (flags, codes, residual_bytes) = (streams[0], streams[1], streams[2]);
     let (mut fpos, mut cpos) = (0usize, 0usize);
@@ -326,13 +404,11 @@ pub(crate) fn decode(
         .iter()
         .map(|q| Vec3::from_array(q.map(|c| (c as f64 * step) as f32)))
         .collect();
-    let mut mesh = TriMesh {
+    Ok(TriMesh {
         positions,
         triangles: tris,
         normals: Vec::new(),
-    };
-    mesh.compute_normals();
-    Ok(mesh)
+    })
 }
 
 #[cfg(test)]
@@ -375,9 +451,9 @@ mod tests {
             triangles: triangles.clone(),
             normals: vec![],
         };
-        let (payload, nv, nt) = encode(&mesh, 0.01, 3).unwrap();
+        let (payload, nv, nt) = encode_v1(&mesh, 0.01, 3).unwrap();
         assert_eq!((nv, nt), (8, 6));
-        let back = decode(&payload, nv as usize, nt as usize, 0.01).unwrap();
+        let back = decode_v1(&payload, nv as usize, nt as usize, 0.01).unwrap();
         let canon = |m: &TriMesh| {
             let mut set: Vec<[[i64; 3]; 3]> = m
                 .triangles

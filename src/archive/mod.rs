@@ -9,21 +9,31 @@
 //! [`ArchiveReader::read_frame`] is O(1) by frame number; [`ArchiveReader::verify`]
 //! decodes everything and names damaged frames.
 //!
+//! **Frames** ([`ArchiveFrame`]): the pipeline's fluid surface is stored as its Loop
+//! control mesh (the decimated mesh, a quarter of the triangles) and subdivided again on
+//! decoding; isolated-particle spheres as one template and their centres. Meshes from
+//! other tools ([`ArchiveWriter::append`]) are stored as they are.
+//!
 //! Round trip: connectivity exactly, up to a permutation of the triangles (traversal
 //! order), a rotation of each triangle's corners (orientation kept) and a renumbering of
 //! the vertices (order of first use; unreferenced vertices are dropped); every coordinate
 //! within the error bound; normals recomputed (area-weighted) on decoding.
 
 mod codec;
+mod frame;
+
+pub use frame::ArchiveFrame;
 
 use crate::error::{Error, Result};
-use crate::mesh::TriMesh;
+use crate::mesh::{SphereInstances, Surface, TriMesh};
 use std::fs::{File, OpenOptions};
 use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 const MAGIC: &[u8; 8] = b"MNSCMSEQ";
-const VERSION: u32 = 1;
+/// The version new archives get. Version 1 (one plain mesh per frame) is still read and
+/// appended to.
+const VERSION: u32 = 2;
 const HEADER_LEN: u64 = 16;
 const RECORD_MAGIC: &[u8; 4] = b"FRAM";
 const RECORD_HEADER_LEN: usize = 48;
@@ -134,6 +144,7 @@ impl RecordHeader {
 /// Reads an archive.
 pub struct ArchiveReader {
     path: PathBuf,
+    version: u32,
     bytes: Vec<u8>,
     frames: Vec<FrameInfo>,
     /// Payload CRCs, parallel to `frames`.
@@ -158,14 +169,17 @@ impl ArchiveReader {
             ));
         }
         let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
-        if version != VERSION {
+        if !(1..=VERSION).contains(&version) {
             return Err(Error::UnsupportedFormat {
                 path: path.to_path_buf(),
-                message: format!(".mseq version {version}; this build reads version {VERSION}"),
+                message: format!(
+                    ".mseq version {version}; this build reads versions 1 to {VERSION}"
+                ),
             });
         }
         let mut reader = ArchiveReader {
             path: path.to_path_buf(),
+            version,
             bytes,
             frames: Vec::new(),
             crcs: Vec::new(),
@@ -270,8 +284,29 @@ impl ArchiveReader {
         self.recovered_by_scan
     }
 
-    /// Decodes frame `number`.
+    /// Format version of the file (1 or 2).
+    pub fn version(&self) -> u32 {
+        self.version
+    }
+
+    /// Decodes frame `number`: fluid and spheres merged into one mesh, with normals.
     pub fn read_frame(&self, number: i64) -> Result<TriMesh> {
+        Ok(self.read_surface(number)?.merged())
+    }
+
+    /// Decodes frame `number` as fluid surface plus sphere instances, with normals.
+    pub fn read_surface(&self, number: i64) -> Result<Surface> {
+        let mut surface = self.read_geometry(number)?;
+        surface.fluid.compute_normals();
+        if surface.spheres.template.normals.is_empty() {
+            surface.spheres.template.compute_normals();
+        }
+        Ok(surface)
+    }
+
+    /// Decodes frame `number` as fluid surface plus sphere instances: positions and
+    /// triangles only, no normals (what a renderer that makes its own normals needs).
+    pub fn read_geometry(&self, number: i64) -> Result<Surface> {
         let k = self
             .frames
             .iter()
@@ -282,7 +317,7 @@ impl ArchiveReader {
         self.decode(k)
     }
 
-    fn decode(&self, k: usize) -> Result<TriMesh> {
+    fn decode(&self, k: usize) -> Result<Surface> {
         let f = &self.frames[k];
         let start = f.offset as usize + RECORD_HEADER_LEN;
         let payload = self
@@ -302,20 +337,33 @@ impl ArchiveReader {
                 "checksum mismatch: the frame is damaged",
             ));
         }
-        codec::decode(payload, f.vertices as usize, f.triangles as usize, f.step)
-            .map_err(|m| archive_error(&self.path, Some(f.number), m))
+        let (vertices, triangles) = (f.vertices as usize, f.triangles as usize);
+        match self.version {
+            1 => codec::decode_v1(payload, vertices, triangles, f.step).map(|fluid| Surface {
+                fluid,
+                spheres: SphereInstances::default(),
+            }),
+            _ => frame::decode_frame(payload, vertices, triangles, f.step),
+        }
+        .map_err(|m| archive_error(&self.path, Some(f.number), m))
     }
 
-    /// Decodes every frame and reports the damaged ones.
+    /// Decodes every frame (in parallel; the report is in file order) and reports the
+    /// damaged ones.
     pub fn verify(&self) -> VerifyReport {
+        use rayon::prelude::*;
         let mut report = VerifyReport {
             recovered_by_scan: self.recovered_by_scan,
             ..Default::default()
         };
-        for (k, f) in self.frames.iter().enumerate() {
-            match self.decode(k) {
-                Ok(_) => report.good.push(f.number),
-                Err(e) => report.damaged.push((f.number, e.to_string())),
+        let outcomes: Vec<Option<String>> = (0..self.frames.len())
+            .into_par_iter()
+            .map(|k| self.decode(k).err().map(|e| e.to_string()))
+            .collect();
+        for (f, outcome) in self.frames.iter().zip(outcomes) {
+            match outcome {
+                None => report.good.push(f.number),
+                Some(e) => report.damaged.push((f.number, e)),
             }
         }
         if self.recovered_by_scan {
@@ -328,6 +376,7 @@ impl ArchiveReader {
 /// Appends frames to an archive.
 pub struct ArchiveWriter {
     path: PathBuf,
+    version: u32,
     file: File,
     options: ArchiveOptions,
     index: Vec<(i64, u64)>,
@@ -350,6 +399,7 @@ impl ArchiveWriter {
         file.write_all(&header).map_err(|e| Error::io(path, e))?;
         Ok(ArchiveWriter {
             path: path.to_path_buf(),
+            version: VERSION,
             file,
             options: options.clone(),
             index: Vec::new(),
@@ -379,6 +429,7 @@ impl ArchiveWriter {
             .map_err(|e| Error::io(path, e))?;
         let mut writer = ArchiveWriter {
             path: path.to_path_buf(),
+            version: reader.version,
             file,
             options: options.clone(),
             index: reader.frames.iter().map(|f| (f.number, f.offset)).collect(),
@@ -396,8 +447,21 @@ impl ArchiveWriter {
         self.index.iter().map(|e| e.0).collect()
     }
 
-    /// Appends one frame; returns its bytes in the archive.
+    /// Appends one mesh as frame `number`; returns its bytes in the archive.
     pub fn append(&mut self, number: i64, mesh: &TriMesh) -> Result<u64> {
+        self.append_frame(
+            number,
+            &ArchiveFrame {
+                fluid: mesh,
+                subdivision_levels: 0,
+                spheres: &SphereInstances::default(),
+            },
+        )
+    }
+
+    /// Appends one frame: a fluid surface (possibly as a Loop control mesh, subdivided
+    /// on decoding) and sphere instances. Returns its bytes in the archive.
+    pub fn append_frame(&mut self, number: i64, frame: &ArchiveFrame) -> Result<u64> {
         if self.index.iter().any(|e| e.0 == number) {
             return Err(archive_error(
                 &self.path,
@@ -406,8 +470,24 @@ impl ArchiveWriter {
             ));
         }
         let step = 2.0 * self.options.error_bound;
-        let (payload, vertices, triangles) = codec::encode(mesh, step, self.options.zstd_level)
-            .map_err(|e| Error::io(&self.path, e))?;
+        let level = self.options.zstd_level;
+        let (payload, vertices, triangles) = if self.version == 1 {
+            // An old archive keeps its format: one plain mesh per frame.
+            let mut merged = frame.fluid.clone();
+            crate::subdivision::subdivide(
+                &mut merged,
+                &crate::subdivision::SubdivideOptions {
+                    levels: frame.subdivision_levels,
+                },
+            );
+            if !frame.spheres.centers.is_empty() {
+                merged.append(&frame.spheres.merged());
+            }
+            codec::encode_v1(&merged, step, level)
+        } else {
+            frame::encode_frame(frame, step, level)
+        }
+        .map_err(|e| Error::io(&self.path, e))?;
         let header = RecordHeader {
             number,
             vertices,
@@ -443,5 +523,84 @@ impl ArchiveWriter {
             .write_all(&index)
             .and_then(|_| self.file.sync_all())
             .map_err(|e| Error::io(&self.path, e))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::isolated::icosphere;
+
+    #[test]
+    fn version_1_archives_are_read_and_appended_in_their_format() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("old.mseq");
+        // An empty version-1 archive, as the first release wrote it.
+        let mut header = [0u8; HEADER_LEN as usize];
+        header[0..8].copy_from_slice(MAGIC);
+        header[8..12].copy_from_slice(&1u32.to_le_bytes());
+        std::fs::write(&path, header).unwrap();
+        let options = ArchiveOptions::new(1e-4);
+        let mut w = ArchiveWriter::open_append(&path, &options).unwrap();
+        let control = icosphere(1, 1.0);
+        let spheres = SphereInstances {
+            template: icosphere(0, 0.1),
+            centers: vec![glam::Vec3::new(5.0, 0.0, 0.0)],
+        };
+        let frame = ArchiveFrame {
+            fluid: &control,
+            subdivision_levels: 1,
+            spheres: &spheres,
+        };
+        w.append_frame(3, &frame).unwrap();
+        w.finish().unwrap();
+        let r = ArchiveReader::open(&path).unwrap();
+        assert_eq!(r.version(), 1);
+        // Stored flat: the subdivided fluid and the sphere merged into one mesh.
+        let back = r.read_surface(3).unwrap();
+        assert!(back.spheres.centers.is_empty());
+        assert_eq!(back.fluid.triangle_count(), 80 * 4 + 20);
+        assert_eq!(r.frames()[0].triangles, 80 * 4 + 20);
+        // The same frame in a new archive: control mesh and one sphere instance.
+        let new_path = dir.path().join("new.mseq");
+        let mut w = ArchiveWriter::create(&new_path, &options).unwrap();
+        w.append_frame(3, &frame).unwrap();
+        w.finish().unwrap();
+        let r2 = ArchiveReader::open(&new_path).unwrap();
+        assert_eq!(r2.version(), VERSION);
+        let back2 = r2.read_surface(3).unwrap();
+        assert_eq!(back2.spheres.centers.len(), 1);
+        assert_eq!(back2.merged().triangle_count(), 80 * 4 + 20);
+        assert!(
+            std::fs::metadata(&new_path).unwrap().len() < std::fs::metadata(&path).unwrap().len()
+        );
+    }
+
+    #[test]
+    fn a_control_mesh_loop_counts_cannot_describe_is_stored_subdivided() {
+        // Two triangles on the same three vertices: one Loop step shares their inner
+        // edges, so the counts of a clean mesh would be wrong.
+        let mut control = icosphere(0, 1.0);
+        control.triangles.push([0, 5, 11]);
+        let mut expected = control.clone();
+        crate::subdivision::subdivide(
+            &mut expected,
+            &crate::subdivision::SubdivideOptions { levels: 1 },
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("odd.mseq");
+        let mut w = ArchiveWriter::create(&path, &ArchiveOptions::new(1e-4)).unwrap();
+        let frame = ArchiveFrame {
+            fluid: &control,
+            subdivision_levels: 1,
+            spheres: &SphereInstances::default(),
+        };
+        w.append_frame(0, &frame).unwrap();
+        w.finish().unwrap();
+        let r = ArchiveReader::open(&path).unwrap();
+        let back = r.read_surface(0).unwrap();
+        assert_eq!(back.fluid.triangle_count(), expected.triangle_count());
+        assert_eq!(back.fluid.vertex_count(), expected.vertex_count());
+        assert_eq!(r.frames()[0].vertices as usize, expected.vertex_count());
     }
 }

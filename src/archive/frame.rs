@@ -1,0 +1,169 @@
+//! The version-2 frame payload: a fluid surface that may be stored as the control mesh of
+//! Loop subdivision, plus instanced spheres.
+//!
+//! meniscus's own output is the Loop subdivision of the decimated mesh (Akinci et al.
+//! 2013, § 3.3), and Loop subdivision is deterministic: a frame is stored as its control
+//! mesh (a quarter of the triangles per level) and the number of Loop steps, and the
+//! decoder runs [`crate::subdivision::subdivide`] on the decoded control mesh. Loop's
+//! masks are convex combinations (all weights ≥ 0, summing to 1), so a control mesh whose
+//! coordinates are within the bound gives subdivided coordinates within the same bound of
+//! the subdivision of the exact control mesh. The isolated-particle spheres are stored as
+//! one template and their centres, each quantized with half the step so that template
+//! vertex plus centre stays within the bound.
+//!
+//! ```text
+//! raw := varint(levels) varint(fluid vertices) varint(fluid triangles) fluid_streams
+//!        varint(sphere count)
+//!        [ varint(template vertices) varint(template triangles) template_streams
+//!          count × 3 zigzag varints: centre − previous centre, on the lattice step / 2 ]
+//! payload := zstd(raw)
+//! ```
+//! The streams are those of [`super::codec::encode_streams`].
+
+use super::codec::{
+    decode_streams, decompress, encode_streams, get_varint, put_varint, raw_capacity, unzigzag,
+    zigzag,
+};
+use crate::mesh::{SphereInstances, Surface, TriMesh};
+use crate::subdivision::{subdivide, SubdivideOptions};
+use glam::Vec3;
+
+/// A frame to archive.
+#[derive(Clone, Copy, Debug)]
+pub struct ArchiveFrame<'a> {
+    /// The fluid surface, or the control mesh that `subdivision_levels` Loop steps turn
+    /// into it.
+    pub fluid: &'a TriMesh,
+    /// Loop subdivision steps the decoder applies to `fluid` (0: `fluid` is stored as is).
+    pub subdivision_levels: u32,
+    /// Isolated-particle spheres (may be empty).
+    pub spheres: &'a SphereInstances,
+}
+
+/// Vertex and triangle counts after `levels` Loop steps of a coded mesh, when exact.
+fn loop_counts(coded: super::codec::CodedMesh, levels: u32) -> Option<(u64, u64)> {
+    if !coded.loop_countable {
+        return None;
+    }
+    let (mut v, mut e, mut t) = (coded.vertices as u64, coded.edges, coded.triangles as u64);
+    for _ in 0..levels {
+        (v, e, t) = (v + e, 2 * e + 3 * t, 4 * t);
+    }
+    Some((v, t))
+}
+
+/// Encodes a frame; returns the payload and the vertex and triangle counts it decodes to.
+pub(crate) fn encode_frame(
+    frame: &ArchiveFrame,
+    step: f64,
+    zstd_level: i32,
+) -> std::io::Result<(Vec<u8>, u32, u32)> {
+    let mut raw = Vec::new();
+    let mut levels = frame.subdivision_levels;
+    let mut fluid_streams = Vec::new();
+    let mut coded = encode_streams(frame.fluid, step, &mut fluid_streams);
+    let mut counts = loop_counts(coded, levels);
+    if counts.is_none() {
+        // A control mesh whose subdivision the counts cannot describe (a degenerate or a
+        // repeated triangle): subdivide here and store the result as it is.
+        let mut fine = frame.fluid.clone();
+        subdivide(&mut fine, &SubdivideOptions { levels });
+        fluid_streams.clear();
+        coded = encode_streams(&fine, step, &mut fluid_streams);
+        levels = 0;
+        counts = Some((coded.vertices as u64, coded.triangles as u64));
+    }
+    let (mut vertices, mut triangles) = counts.expect("set above");
+    put_varint(&mut raw, levels as u64);
+    put_varint(&mut raw, coded.vertices as u64);
+    put_varint(&mut raw, coded.triangles as u64);
+    raw.extend_from_slice(&fluid_streams);
+    drop(fluid_streams);
+    let spheres = frame.spheres;
+    let count = if spheres.template.triangles.is_empty() {
+        0
+    } else {
+        spheres.centers.len()
+    };
+    put_varint(&mut raw, count as u64);
+    if count > 0 {
+        let half = step / 2.0;
+        let mut template_streams = Vec::new();
+        let template = encode_streams(&spheres.template, half, &mut template_streams);
+        put_varint(&mut raw, template.vertices as u64);
+        put_varint(&mut raw, template.triangles as u64);
+        raw.extend_from_slice(&template_streams);
+        let mut previous = [0i64; 3];
+        for c in &spheres.centers {
+            let q = c.to_array().map(|x| (x as f64 / half).round() as i64);
+            for k in 0..3 {
+                put_varint(&mut raw, zigzag(q[k] - previous[k]));
+            }
+            previous = q;
+        }
+        vertices += count as u64 * template.vertices as u64;
+        triangles += count as u64 * template.triangles as u64;
+    }
+    match (u32::try_from(vertices), u32::try_from(triangles)) {
+        (Ok(v), Ok(t)) => Ok((zstd::bulk::compress(&raw, zstd_level)?, v, t)),
+        _ => Err(std::io::Error::other(
+            "frame too large for the archive (over 2^32 vertices or triangles)",
+        )),
+    }
+}
+
+fn read_count(raw: &[u8], pos: &mut usize, what: &str, limit: u64) -> Result<usize, String> {
+    let v = get_varint(raw, pos).ok_or(format!("{what} missing"))?;
+    if v > limit {
+        return Err(format!("{what} {v} exceeds the frame's {limit}"));
+    }
+    Ok(v as usize)
+}
+
+/// Decodes a payload that the record header says holds `vertices` vertices and
+/// `triangles` triangles (after subdivision, spheres included). No normals.
+pub(crate) fn decode_frame(
+    payload: &[u8],
+    vertices: usize,
+    triangles: usize,
+    step: f64,
+) -> Result<Surface, String> {
+    // The raw size is bounded by the stored (control) mesh, at most the final one.
+    let raw = decompress(payload, raw_capacity(vertices, triangles))?;
+    let pos = &mut 0usize;
+    let (nv, nt) = (vertices as u64, triangles as u64);
+    let levels = read_count(&raw, pos, "subdivision levels", 16)? as u32;
+    let fluid_vertices = read_count(&raw, pos, "fluid vertex count", nv)?;
+    let fluid_triangles = read_count(&raw, pos, "fluid triangle count", nt)?;
+    let mut fluid = decode_streams(&raw, pos, fluid_vertices, fluid_triangles, step)?;
+    subdivide(&mut fluid, &SubdivideOptions { levels });
+    let count = read_count(&raw, pos, "sphere count", nt)?;
+    let mut spheres = SphereInstances::default();
+    if count > 0 {
+        let half = step / 2.0;
+        let tv = read_count(&raw, pos, "sphere template vertex count", nv)?;
+        let tt = read_count(&raw, pos, "sphere template triangle count", nt)?;
+        spheres.template = decode_streams(&raw, pos, tv, tt, half)?;
+        spheres.centers.reserve(count);
+        let mut q = [0i64; 3];
+        for _ in 0..count {
+            for c in &mut q {
+                *c += unzigzag(get_varint(&raw, pos).ok_or("sphere centres cut off")?);
+            }
+            spheres
+                .centers
+                .push(Vec3::from_array(q.map(|c| (c as f64 * half) as f32)));
+        }
+    }
+    if *pos != raw.len() {
+        return Err("trailing bytes after the frame".into());
+    }
+    let got_vertices = fluid.vertex_count() + count * spheres.template.vertex_count();
+    let got_triangles = fluid.triangle_count() + count * spheres.template.triangle_count();
+    if (got_vertices, got_triangles) != (vertices, triangles) {
+        return Err(format!(
+            "decodes to {got_vertices} vertices and {got_triangles} triangles, header says {vertices} and {triangles}"
+        ));
+    }
+    Ok(Surface { fluid, spheres })
+}
