@@ -83,57 +83,75 @@ fn subdivide_once(mesh: &TriMesh) -> TriMesh {
             fill[a] += 1;
         }
     }
-    for v in 0..nv {
-        // Stable: sides of one edge stay in side order.
-        sides[bucket_start[v] as usize..bucket_start[v + 1] as usize].sort_by_key(|&s| ends(s).1);
-    }
-    drop(bucket_start);
-    // Unique edges: start index in `sides` of each edge.
-    let mut edge_start: Vec<u32> = Vec::with_capacity(sides.len() / 2 + 1);
-    for i in 0..sides.len() {
-        if i == 0 || ends(sides[i]) != ends(sides[i - 1]) {
-            edge_start.push(i as u32);
-        }
-    }
-    let ne = edge_start.len();
-    edge_start.push(sides.len() as u32);
-    // Edge index of every triangle side.
-    let mut side_edge = vec![0u32; tris.len() * 3];
-    for e in 0..ne {
-        for &s in &sides[edge_start[e] as usize..edge_start[e + 1] as usize] {
-            side_edge[s as usize] = e as u32;
-        }
-    }
     let pos = |i: u32| mesh.positions[i as usize].as_dvec3();
     let opposite = |s: u32| tris[s as usize / 3][(s as usize % 3 + 2) % 3];
-
-    // Vertex neighbourhoods: valence, neighbour sum, boundary neighbours.
+    // One pass over the buckets in vertex order: sort each by the larger vertex (sides of
+    // one edge stay in side order), number the edges in (min, max) order, give every side
+    // its edge, and gather the vertex neighbourhoods (valence, neighbour sum, boundary
+    // neighbours) edge by edge.
+    let mut edge_start: Vec<u32> = Vec::with_capacity(sides.len() / 2 + 1);
+    let mut side_edge = vec![0u32; tris.len() * 3];
     let mut valence = vec![0u32; nv];
     let mut sum = vec![DVec3::ZERO; nv];
     let mut boundary_count = vec![0u32; nv];
     let mut boundary_sum = vec![DVec3::ZERO; nv];
     let mut non_manifold = vec![false; nv];
-    for e in 0..ne {
-        let (a, b) = ends(sides[edge_start[e] as usize]);
-        let count = edge_start[e + 1] - edge_start[e];
-        valence[a as usize] += 1;
-        valence[b as usize] += 1;
-        sum[a as usize] += pos(b);
-        sum[b as usize] += pos(a);
-        match count {
-            1 => {
-                boundary_count[a as usize] += 1;
-                boundary_count[b as usize] += 1;
-                boundary_sum[a as usize] += pos(b);
-                boundary_sum[b as usize] += pos(a);
+    let mut bucket: Vec<(u32, u32)> = Vec::new();
+    for a in 0..nv {
+        let range = bucket_start[a] as usize..bucket_start[a + 1] as usize;
+        bucket.clear();
+        bucket.extend(sides[range.clone()].iter().map(|&s| (ends(s).1, s)));
+        // Sides were filled in ascending order: (larger vertex, side) is the stable order.
+        bucket.sort_unstable();
+        for (slot, &(_, s)) in sides[range.clone()].iter_mut().zip(&bucket) {
+            *slot = s;
+        }
+        let mut i = 0;
+        while i < bucket.len() {
+            let b = bucket[i].0;
+            let mut j = i + 1;
+            while j < bucket.len() && bucket[j].0 == b {
+                j += 1;
             }
-            2 => {}
-            _ => {
-                non_manifold[a as usize] = true;
-                non_manifold[b as usize] = true;
+            let e = edge_start.len() as u32;
+            edge_start.push((range.start + i) as u32);
+            for &(_, s) in &bucket[i..j] {
+                side_edge[s as usize] = e;
             }
+            let (a32, b) = (a as u32, b as usize);
+            valence[a] += 1;
+            valence[b] += 1;
+            sum[a] += pos(b as u32);
+            sum[b] += pos(a32);
+            match j - i {
+                1 => {
+                    boundary_count[a] += 1;
+                    boundary_count[b] += 1;
+                    boundary_sum[a] += pos(b as u32);
+                    boundary_sum[b] += pos(a32);
+                }
+                2 => {}
+                _ => {
+                    non_manifold[a] = true;
+                    non_manifold[b] = true;
+                }
+            }
+            i = j;
         }
     }
+    drop(bucket);
+    drop(bucket_start);
+    let ne = edge_start.len();
+    edge_start.push(sides.len() as u32);
+    // Loop's β for every valence that occurs, computed once.
+    let max_valence = valence.iter().copied().max().unwrap_or(0) as usize;
+    let beta: Vec<f64> = (0..=max_valence)
+        .map(|n| {
+            let nf = n.max(1) as f64;
+            let c = 0.375 + 0.25 * (2.0 * std::f64::consts::PI / nf).cos();
+            (0.625 - c * c) / nf
+        })
+        .collect();
     let mut positions: Vec<glam::Vec3> = (0..nv)
         .into_par_iter()
         .map(|v| {
@@ -144,9 +162,7 @@ fn subdivide_once(mesh: &TriMesh) -> TriMesh {
             } else if boundary_count[v] == 2 {
                 0.75 * p + 0.125 * boundary_sum[v]
             } else if boundary_count[v] == 0 {
-                let nf = n as f64;
-                let c = 0.375 + 0.25 * (2.0 * std::f64::consts::PI / nf).cos();
-                let beta = (0.625 - c * c) / nf;
+                let (nf, beta) = (n as f64, beta[n as usize]);
                 (1.0 - nf * beta) * p + beta * sum[v]
             } else {
                 p
