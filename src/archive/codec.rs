@@ -54,14 +54,14 @@ pub(crate) fn unzigzag(v: u64) -> i64 {
 
 /// How a vertex is predicted from vertices introduced before it.
 #[derive(Clone, Copy)]
-enum Prediction {
+pub(crate) enum Prediction {
     Origin,
     Vertex(u32),
     Parallelogram(u32, u32, u32),
 }
 
 impl Prediction {
-    fn resolve(self, q: &[[i64; 3]]) -> [i64; 3] {
+    pub(crate) fn resolve(self, q: &[[i64; 3]]) -> [i64; 3] {
         match self {
             Prediction::Origin => [0; 3],
             Prediction::Vertex(v) => q[v as usize],
@@ -74,15 +74,15 @@ impl Prediction {
 }
 
 /// The shared bookkeeping of encoder and decoder: new vertex numbers and predictions.
-struct Numbering {
-    next: u32,
-    plan: Vec<Prediction>,
+pub(crate) struct Numbering {
+    pub(crate) next: u32,
+    pub(crate) plan: Vec<Prediction>,
 }
 
 impl Numbering {
     /// The prediction of a traversal's first-triangle corner: a known corner, else the
     /// previous vertex.
-    fn root_prediction(&self, known_corner: Option<u32>) -> Prediction {
+    pub(crate) fn root_prediction(&self, known_corner: Option<u32>) -> Prediction {
         match known_corner {
             Some(v) => Prediction::Vertex(v),
             None if self.next == 0 => Prediction::Origin,
@@ -92,9 +92,9 @@ impl Numbering {
 }
 
 /// A gate: directed edge `(x, y)` of a coded triangle whose third vertex is `z` (new ids).
-type Gate = [u32; 3];
+pub(crate) type Gate = [u32; 3];
 
-fn push_gates(stack: &mut Vec<Gate>, t: [u32; 3], skip_first: bool) {
+pub(crate) fn push_gates(stack: &mut Vec<Gate>, t: [u32; 3], skip_first: bool) {
     // Pushed in reverse so that the triangle's first edge is explored first.
     for k in (0..3).rev() {
         if skip_first && k == 0 {
@@ -134,6 +134,9 @@ pub(crate) struct CodedMesh {
     /// vertices: then one Loop step makes exactly `vertices + edges` vertices and
     /// `2 edges + 3 triangles` edges, and the result has the same property.
     pub loop_countable: bool,
+    /// True when every edge has exactly two sides running in opposite directions (a
+    /// closed, consistently oriented 2-manifold) and the mesh is `loop_countable`.
+    pub closed_oriented: bool,
 }
 
 /// Appends the flag, vertex-code and residual streams of `mesh` (positions quantized
@@ -267,9 +270,14 @@ pub(crate) fn encode_streams(mesh: &TriMesh, step: f64, out: &mut Vec<u8>) -> Co
     let mut loop_countable = tris
         .iter()
         .all(|t| t[0] != t[1] && t[1] != t[2] && t[2] != t[0]);
+    let mut closed_oriented = loop_countable;
+    // Per half-edge of the bucket: (larger vertex, apex); per edge: (larger vertex,
+    // sides, sides running from the smaller vertex).
     let mut seen: Vec<(u32, u32)> = Vec::new();
+    let mut edge_sides: Vec<(u32, u32, u32)> = Vec::new();
     for v in 0..mesh.positions.len() {
         seen.clear();
+        edge_sides.clear();
         for &h in &bucket[bucket_start[v] as usize..bucket_start[v + 1] as usize] {
             let (a, b) = half_edge(h as usize);
             let other = a.max(b);
@@ -277,17 +285,27 @@ pub(crate) fn encode_streams(mesh: &TriMesh, step: f64, out: &mut Vec<u8>) -> Co
             if seen.iter().any(|&(o, w)| o == other && w == opposite) {
                 loop_countable = false;
             }
-            if !seen.iter().any(|&(o, _)| o == other) {
-                edges += 1;
-            }
             seen.push((other, opposite));
+            let forward = (a < b) as u32;
+            match edge_sides.iter_mut().find(|e| e.0 == other) {
+                Some(e) => {
+                    e.1 += 1;
+                    e.2 += forward;
+                }
+                None => {
+                    edges += 1;
+                    edge_sides.push((other, 1, forward));
+                }
+            }
         }
+        closed_oriented &= edge_sides.iter().all(|&(_, n, f)| n == 2 && f == 1);
     }
     CodedMesh {
         vertices: numbering.next,
         triangles: n as u32,
         edges,
         loop_countable,
+        closed_oriented: closed_oriented && loop_countable,
     }
 }
 
@@ -319,6 +337,19 @@ pub(crate) fn decompress(payload: &[u8], capacity: usize) -> Result<Vec<u8>, Str
     zstd::bulk::decompress(payload, capacity).map_err(|e| format!("zstd: {e}"))
 }
 
+/// The flag, vertex-code and residual streams at `raw[*pos..]`; moves `pos` past them.
+pub(crate) fn split_streams<'a>(raw: &'a [u8], pos: &mut usize) -> Result<[&'a [u8]; 3], String> {
+    let mut streams: [&[u8]; 3] = [&[]; 3];
+    for (k, name) in ["flag", "vertex code", "position"].iter().enumerate() {
+        let len = get_varint(raw, pos).ok_or(format!("{name} stream length missing"))? as usize;
+        streams[k] = raw
+            .get(*pos..pos.saturating_add(len))
+            .ok_or(format!("{name} stream cut off"))?;
+        *pos += len;
+    }
+    Ok(streams)
+}
+
 /// Reads the streams [`encode_streams`] wrote at `raw[*pos..]` (a mesh of `vertices`
 /// vertices and `triangles` triangles) and moves `pos` past them. No normals.
 pub(crate) fn decode_streams(
@@ -328,16 +359,7 @@ pub(crate) fn decode_streams(
     triangles: usize,
     step: f64,
 ) -> Result<TriMesh, String> {
-    let mut streams: Vec<&[u8]> = Vec::with_capacity(3);
-    for name in ["flag", "vertex code", "position"] {
-        let len = get_varint(raw, pos).ok_or(format!("{name} stream length missing"))? as usize;
-        let s = raw
-            .get(*pos..pos.saturating_add(len))
-            .ok_or(format!("{name} stream cut off"))?;
-        streams.push(s);
-        *pos += len;
-    }
-    let (flags, codes, residual_bytes) = (streams[0], streams[1], streams[2]);
+    let [flags, codes, residual_bytes] = split_streams(raw, pos)?;
     let (mut fpos, mut cpos) = (0usize, 0usize);
     let mut numbering = Numbering {
         next: 0,

@@ -12,18 +12,21 @@
 //! vertex plus centre stays within the bound.
 //!
 //! ```text
-//! raw := varint(levels) varint(fluid vertices) varint(fluid triangles) fluid_streams
+//! raw := varint(levels) u8(closed) varint(fluid vertices) varint(fluid triangles) fluid_streams
 //!        varint(sphere count)
 //!        [ varint(template vertices) varint(template triangles) template_streams
 //!          count × 3 zigzag varints: centre − previous centre, on the lattice step / 2 ]
 //! payload := zstd(raw)
 //! ```
-//! The streams are those of [`super::codec::encode_streams`].
+//! The streams are those of [`super::codec::encode_streams`]. `closed` is 1 when the
+//! stored fluid mesh is a closed, consistently oriented 2-manifold: then the first Loop
+//! step runs while decoding ([`super::fused`]).
 
 use super::codec::{
     decode_streams, decompress, encode_streams, get_varint, put_varint, raw_capacity, unzigzag,
     zigzag,
 };
+use super::fused::decode_streams_subdivided;
 use crate::mesh::{SphereInstances, Surface, TriMesh};
 use crate::subdivision::{subdivide, SubdivideOptions};
 use glam::Vec3;
@@ -75,6 +78,7 @@ pub(crate) fn encode_frame(
     }
     let (mut vertices, mut triangles) = counts.expect("set above");
     put_varint(&mut raw, levels as u64);
+    raw.push(coded.closed_oriented as u8);
     put_varint(&mut raw, coded.vertices as u64);
     put_varint(&mut raw, coded.triangles as u64);
     raw.extend_from_slice(&fluid_streams);
@@ -133,10 +137,21 @@ pub(crate) fn decode_frame(
     let pos = &mut 0usize;
     let (nv, nt) = (vertices as u64, triangles as u64);
     let levels = read_count(&raw, pos, "subdivision levels", 16)? as u32;
+    let closed = *raw.get(*pos).ok_or("fluid shape flag missing")?;
+    *pos += 1;
     let fluid_vertices = read_count(&raw, pos, "fluid vertex count", nv)?;
     let fluid_triangles = read_count(&raw, pos, "fluid triangle count", nt)?;
-    let mut fluid = decode_streams(&raw, pos, fluid_vertices, fluid_triangles, step)?;
-    subdivide(&mut fluid, &SubdivideOptions { levels });
+    let fluid = if levels > 0 && closed == 1 {
+        // The first Loop step while decoding.
+        let mut fluid =
+            decode_streams_subdivided(&raw, pos, fluid_vertices, fluid_triangles, step)?;
+        subdivide(&mut fluid, &SubdivideOptions { levels: levels - 1 });
+        fluid
+    } else {
+        let mut fluid = decode_streams(&raw, pos, fluid_vertices, fluid_triangles, step)?;
+        subdivide(&mut fluid, &SubdivideOptions { levels });
+        fluid
+    };
     let count = read_count(&raw, pos, "sphere count", nt)?;
     let mut spheres = SphereInstances::default();
     if count > 0 {

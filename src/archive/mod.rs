@@ -21,6 +21,7 @@
 
 mod codec;
 mod frame;
+mod fused;
 
 pub use frame::ArchiveFrame;
 

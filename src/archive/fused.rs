@@ -1,0 +1,297 @@
+//! Decoding and one Loop step in a single pass, for closed, consistently oriented meshes
+//! (what the pipeline stores).
+//!
+//! The traversal that decodes the connectivity already knows most edges: a gate popped
+//! with flag 1 is the edge between its triangle and the one decoded across it. A gate
+//! popped with flag 0 lies on an edge whose other side is, or will be, popped with flag 0
+//! too; it waits in a short list at its smaller vertex until its partner comes. Positions
+//! are decoded as their vertices are introduced, so each edge point
+//! `3/8 (a + b) + 1/8 (c + d)` is made as soon as its edge is paired, and each vertex
+//! gathers its valence and neighbour sum on the way; Loop's vertex mask is one pass at the
+//! end. The result is [`crate::subdivision::subdivide`]'s (edge points are bit for bit the
+//! same; vertex points can differ in the last bit, since the neighbour sums are added in
+//! another order), with the edge points numbered in order of pairing.
+
+use super::codec::{get_varint, push_gates, split_streams, unzigzag, Gate, Prediction};
+use crate::mesh::TriMesh;
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+
+const NONE: u32 = u32::MAX;
+
+/// The decoder's state: the control mesh so far and the subdivision gathered from it.
+struct State<'a> {
+    codes: &'a [u8],
+    cpos: usize,
+    residuals: &'a [u8],
+    rpos: usize,
+    step: f64,
+    quantized: Vec<[i64; 3]>,
+    /// Control positions as decoded (f32), widened to f64 for the masks.
+    positions: Vec<DVec3>,
+    valence: Vec<u32>,
+    sum: Vec<DVec3>,
+    /// Sides waiting for their partner: the head of a list per smaller vertex, and the
+    /// entries (larger vertex, side, next entry).
+    waiting_head: Vec<u32>,
+    waiting: Vec<[u32; 3]>,
+    triangles: Vec<[u32; 3]>,
+    side_edge: Vec<[u32; 3]>,
+    edge_points: Vec<Vec3>,
+}
+
+impl State<'_> {
+    /// Reads a vertex code; a new vertex gets its position from the residual stream.
+    fn vertex(&mut self, prediction: Prediction) -> Result<u32, String> {
+        let d = get_varint(self.codes, &mut self.cpos).ok_or("vertex code stream ends early")?;
+        let next = self.quantized.len() as u32;
+        if d != 0 {
+            return next
+                .checked_sub(d as u32)
+                .ok_or_else(|| "vertex code refers before the first vertex".to_string());
+        }
+        let pred = prediction.resolve(&self.quantized);
+        let mut q = [0i64; 3];
+        for k in 0..3 {
+            let r =
+                get_varint(self.residuals, &mut self.rpos).ok_or("position stream ends early")?;
+            q[k] = pred[k] + unzigzag(r);
+        }
+        self.quantized.push(q);
+        let p = Vec3::from_array(q.map(|c| (c as f64 * self.step) as f32));
+        self.positions.push(p.as_dvec3());
+        self.valence.push(0);
+        self.sum.push(DVec3::ZERO);
+        self.waiting_head.push(NONE);
+        Ok(next)
+    }
+
+    fn corner(&self, side: u32) -> u32 {
+        self.triangles[side as usize / 3][side as usize % 3]
+    }
+
+    fn head(&self, side: u32) -> u32 {
+        self.triangles[side as usize / 3][(side as usize % 3 + 1) % 3]
+    }
+
+    fn apex(&self, side: u32) -> u32 {
+        self.triangles[side as usize / 3][(side as usize % 3 + 2) % 3]
+    }
+
+    /// Sides `s` and `t` are the two sides of one edge: number it, make its edge point,
+    /// add each end to the other's neighbourhood.
+    fn pair(&mut self, s: u32, t: u32) {
+        let e = self.edge_points.len() as u32;
+        self.side_edge[s as usize / 3][s as usize % 3] = e;
+        self.side_edge[t as usize / 3][t as usize % 3] = e;
+        let (a, b) = (self.corner(s) as usize, self.head(s) as usize);
+        let (c, d) = (self.apex(s) as usize, self.apex(t) as usize);
+        let p = &self.positions;
+        let (lo, hi) = (a.min(b), a.max(b));
+        let point = 0.375 * (p[lo] + p[hi]) + 0.125 * (p[c] + p[d]);
+        self.edge_points.push(point.as_vec3());
+        let (pa, pb) = (p[a], p[b]);
+        self.sum[a] += pb;
+        self.sum[b] += pa;
+        self.valence[a] += 1;
+        self.valence[b] += 1;
+    }
+
+    /// A side whose gate found no triangle across: pair it with its waiting partner, or
+    /// wait for it.
+    fn meet(&mut self, side: u32) {
+        let (a, b) = (self.corner(side), self.head(side));
+        let (lo, hi) = (a.min(b), a.max(b));
+        let mut previous = NONE;
+        let mut entry = self.waiting_head[lo as usize];
+        while entry != NONE {
+            let [other, partner, next] = self.waiting[entry as usize];
+            if other == hi {
+                if previous == NONE {
+                    self.waiting_head[lo as usize] = next;
+                } else {
+                    self.waiting[previous as usize][2] = next;
+                }
+                self.pair(partner, side);
+                return;
+            }
+            previous = entry;
+            entry = next;
+        }
+        self.waiting
+            .push([hi, side, self.waiting_head[lo as usize]]);
+        self.waiting_head[lo as usize] = self.waiting.len() as u32 - 1;
+    }
+}
+
+/// Decodes the streams at `raw[*pos..]` of a closed, consistently oriented mesh of
+/// `vertices` vertices and `triangles` triangles and returns its Loop subdivision (one
+/// step). Moves `pos` past the streams.
+pub(crate) fn decode_streams_subdivided(
+    raw: &[u8],
+    pos: &mut usize,
+    vertices: usize,
+    triangles: usize,
+    step: f64,
+) -> Result<TriMesh, String> {
+    let [flags, codes, residuals] = split_streams(raw, pos)?;
+    let mut st = State {
+        codes,
+        cpos: 0,
+        residuals,
+        rpos: 0,
+        step,
+        quantized: Vec::with_capacity(vertices),
+        positions: Vec::with_capacity(vertices),
+        valence: Vec::with_capacity(vertices),
+        sum: Vec::with_capacity(vertices),
+        waiting_head: Vec::with_capacity(vertices),
+        waiting: Vec::new(),
+        triangles: Vec::with_capacity(triangles),
+        side_edge: Vec::with_capacity(triangles),
+        edge_points: Vec::with_capacity(triangles * 3 / 2),
+    };
+    // Gates with the side they stand for (3 t + k: corner k to k + 1 of triangle t).
+    let mut stack: Vec<Gate> = Vec::new();
+    let mut stack_sides: Vec<u32> = Vec::new();
+    let mut fpos = 0usize;
+    while st.triangles.len() < triangles {
+        let t = st.triangles.len() as u32;
+        match stack.pop() {
+            None => {
+                let mut ids = [0u32; 3];
+                for k in 0..3 {
+                    let known = if k > 0 { Some(ids[0]) } else { None };
+                    let next = st.quantized.len() as u32;
+                    let p = match known {
+                        Some(v) => Prediction::Vertex(v),
+                        None if next == 0 => Prediction::Origin,
+                        None => Prediction::Vertex(next - 1),
+                    };
+                    ids[k] = st.vertex(p)?;
+                }
+                st.triangles.push(ids);
+                st.side_edge.push([NONE; 3]);
+                push_gates(&mut stack, ids, false);
+                stack_sides.extend([3 * t + 2, 3 * t + 1, 3 * t]);
+            }
+            Some([x, y, z]) => {
+                let side = stack_sides.pop().expect("parallel to the stack");
+                let flag = *flags.get(fpos).ok_or("flag stream ends early")?;
+                fpos += 1;
+                if flag == 0 {
+                    st.meet(side);
+                    continue;
+                }
+                let w = st.vertex(Prediction::Parallelogram(x, y, z))?;
+                let ids = [y, x, w];
+                st.triangles.push(ids);
+                st.side_edge.push([NONE; 3]);
+                st.pair(side, 3 * t);
+                push_gates(&mut stack, ids, true);
+                stack_sides.extend([3 * t + 2, 3 * t + 1]);
+            }
+        }
+    }
+    // Gates left when the last triangle came: their triangles across are all decoded.
+    while let Some(side) = stack_sides.pop() {
+        st.meet(side);
+    }
+    if st.quantized.len() != vertices {
+        return Err(format!(
+            "connectivity introduces {} vertices, header says {vertices}",
+            st.quantized.len()
+        ));
+    }
+    if st.edge_points.len() * 2 != triangles * 3 {
+        return Err("the mesh stored as closed has sides without a partner".into());
+    }
+    // Loop's vertex mask, β once per valence.
+    let max_valence = st.valence.iter().copied().max().unwrap_or(0) as usize;
+    let beta: Vec<f64> = (0..=max_valence)
+        .map(|n| {
+            let nf = n.max(1) as f64;
+            let c = 0.375 + 0.25 * (2.0 * std::f64::consts::PI / nf).cos();
+            (0.625 - c * c) / nf
+        })
+        .collect();
+    let mut positions: Vec<Vec3> = Vec::with_capacity(vertices + st.edge_points.len());
+    positions.par_extend((0..vertices).into_par_iter().map(|v| {
+        let (p, n) = (st.positions[v], st.valence[v]);
+        let (nf, b) = (n as f64, beta[n as usize]);
+        ((1.0 - nf * b) * p + b * st.sum[v]).as_vec3()
+    }));
+    positions.extend_from_slice(&st.edge_points);
+    let nv = vertices as u32;
+    let mut fine: Vec<[u32; 3]> = vec![[0; 3]; triangles * 4];
+    fine.par_chunks_mut(4)
+        .zip(st.triangles.par_iter().zip(st.side_edge.par_iter()))
+        .for_each(|(out, (tri, edges))| {
+            let m = edges.map(|e| nv + e);
+            out.copy_from_slice(&[
+                [tri[0], m[0], m[2]],
+                [tri[1], m[1], m[0]],
+                [tri[2], m[2], m[1]],
+                [m[0], m[1], m[2]],
+            ]);
+        });
+    Ok(TriMesh {
+        positions,
+        triangles: fine,
+        normals: Vec::new(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::archive::codec::{decode_streams, encode_streams};
+    use crate::isolated::icosphere;
+    use crate::subdivision::{subdivide, SubdivideOptions};
+
+    #[test]
+    fn the_fused_step_is_loop_subdivision_of_the_decoded_mesh() {
+        // Two closed components (valences 5 and 6, one vertex pulled out) so that the
+        // traversal starts twice.
+        let mut mesh = icosphere(2, 1.0);
+        mesh.positions[7] *= 1.4;
+        let mut second = icosphere(1, 0.5);
+        for p in &mut second.positions {
+            *p += Vec3::new(3.0, 0.0, 0.0);
+        }
+        mesh.append(&second);
+        let step = 1e-4;
+        let mut raw = Vec::new();
+        let coded = encode_streams(&mesh, step, &mut raw);
+        assert!(coded.closed_oriented);
+        let (nv, nt) = (coded.vertices as usize, coded.triangles as usize);
+        let mut generic = decode_streams(&raw, &mut 0, nv, nt, step).unwrap();
+        subdivide(&mut generic, &SubdivideOptions { levels: 1 });
+        let mut pos = 0;
+        let fused = decode_streams_subdivided(&raw, &mut pos, nv, nt, step).unwrap();
+        assert_eq!(pos, raw.len());
+        // Same control vertices and children; edge points may be numbered differently.
+        assert_eq!(fused.vertex_count(), generic.vertex_count());
+        assert_eq!(fused.triangle_count(), generic.triangle_count());
+        for v in 0..nv {
+            let d = (fused.positions[v] - generic.positions[v])
+                .abs()
+                .max_element();
+            assert!(d <= 1e-6, "vertex point {v} differs by {d}");
+        }
+        let key = |m: &TriMesh, t: usize| {
+            m.triangles[t].map(|v| {
+                m.positions[v as usize]
+                    .to_array()
+                    .map(|c| (c as f64 * 1e5).round() as i64)
+            })
+        };
+        for t in 0..nt * 4 {
+            assert_eq!(key(&fused, t), key(&generic, t), "child triangle {t}");
+        }
+        // An open mesh is not flagged closed.
+        let mut open = mesh.clone();
+        open.triangles.pop();
+        assert!(!encode_streams(&open, step, &mut Vec::new()).closed_oriented);
+    }
+}
