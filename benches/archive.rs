@@ -75,6 +75,15 @@ fn bench(c: &mut Criterion) {
             }
         })
     });
+    // A sequence on both cores: one frame per worker thread.
+    group.bench_function("decode_sequence_parallel", |b| {
+        use rayon::prelude::*;
+        b.iter(|| {
+            FRAMES.par_iter().for_each(|&n| {
+                reader.read_geometry(n).unwrap();
+            })
+        })
+    });
     // ... and with the area-weighted normals recomputed.
     group.bench_function("decode_with_normals", |b| {
         b.iter(|| {

@@ -54,16 +54,16 @@ enum ArchiveCommand {
         /// The archive.
         file: PathBuf,
     },
-    /// Write one frame as .glb, .gltf, .ply, .obj or .vtk.
+    /// Write one frame, or every frame, as .glb, .gltf, .ply, .obj or .vtk.
     Extract {
         /// The archive.
         file: PathBuf,
-        /// Frame number.
+        /// Frame number; without it every frame is written (OUTPUT needs a `{}`).
         #[arg(long, allow_negative_numbers = true)]
-        frame: i64,
-        /// Output mesh file.
+        frame: Option<i64>,
+        /// Output mesh file; `{}` stands for the frame number.
         #[arg(short, long)]
-        output: PathBuf,
+        output: String,
     },
     /// Pack existing mesh files (`{}` pattern; PLY, OBJ, glTF) into an archive.
     Pack {
@@ -285,8 +285,25 @@ fn archive(command: ArchiveCommand) -> Result<(), String> {
             output,
         } => {
             let r = ArchiveReader::open(&file).map_err(text)?;
-            let surface = r.read_surface(frame).map_err(text)?;
-            write_surface(&output, &surface, &MeshWriteOptions::default()).map_err(text)?;
+            let options = MeshWriteOptions::default();
+            match frame {
+                Some(n) if !meniscus::sequence::is_pattern(&output) => {
+                    let surface = r.read_surface(n).map_err(text)?;
+                    let path = std::path::Path::new(&output);
+                    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+                        std::fs::create_dir_all(dir)
+                            .map_err(|e| format!("{}: {e}", dir.display()))?;
+                    }
+                    write_surface(path, &surface, &options).map_err(text)?;
+                }
+                _ => {
+                    let numbers = frame.map(|n| vec![n]);
+                    let written = r
+                        .extract(numbers.as_deref(), &output, &options)
+                        .map_err(text)?;
+                    eprintln!("{} frame(s) written", written.len());
+                }
+            }
         }
         ArchiveCommand::Pack {
             input,

@@ -214,6 +214,18 @@ fn archives_collect_a_sequence_and_extract_frames() {
     ]);
     assert!(ok, "{err}");
     assert!(std::fs::metadata(&glb).unwrap().len() > 1000);
+    // Every frame at once, into a directory that does not exist yet.
+    let pattern = dir.path().join("all/frame_{}.ply");
+    let (ok, err) = run(&["archive", "extract", a, "-o", pattern.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    let extracted = files_in(&dir.path().join("all"));
+    assert_eq!(extracted.len(), 3, "{extracted:?}");
+    assert!(extracted
+        .iter()
+        .all(|f| f.starts_with("frame_") && f.ends_with(".ply")));
+    // Several frames need a {} in the output.
+    let (ok, err) = run(&["archive", "extract", a, "-o", glb.to_str().unwrap()]);
+    assert!(!ok && err.contains("{}"), "{err}");
     // Pack the extracted mesh back into a second archive.
     let packed = dir.path().join("packed.mseq");
     let pattern = format!("{}/f{{}}.glb", dir.path().display());

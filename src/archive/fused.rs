@@ -32,9 +32,9 @@ struct State<'a> {
     valence: Vec<u32>,
     sum: Vec<DVec3>,
     /// Sides waiting for their partner: the head of a list per smaller vertex, and the
-    /// entries (larger vertex, side, next entry).
+    /// entries (larger vertex, side, its apex, next entry).
     waiting_head: Vec<u32>,
-    waiting: Vec<[u32; 3]>,
+    waiting: Vec<[u32; 4]>,
     triangles: Vec<[u32; 3]>,
     side_edge: Vec<[u32; 3]>,
     edge_points: Vec<Vec3>,
@@ -66,60 +66,48 @@ impl State<'_> {
         Ok(next)
     }
 
-    fn corner(&self, side: u32) -> u32 {
-        self.triangles[side as usize / 3][side as usize % 3]
-    }
-
-    fn head(&self, side: u32) -> u32 {
-        self.triangles[side as usize / 3][(side as usize % 3 + 1) % 3]
-    }
-
-    fn apex(&self, side: u32) -> u32 {
-        self.triangles[side as usize / 3][(side as usize % 3 + 2) % 3]
-    }
-
-    /// Sides `s` and `t` are the two sides of one edge: number it, make its edge point,
-    /// add each end to the other's neighbourhood.
-    fn pair(&mut self, s: u32, t: u32) {
+    /// Sides `s` (from `a` to `b`, apex `c`) and `t` (from `b` to `a`, apex `d`) are the
+    /// two sides of one edge: number it, make its edge point, add each end to the
+    /// other's neighbourhood.
+    fn pair(&mut self, s: u32, t: u32, [a, b, c, d]: [u32; 4]) {
         let e = self.edge_points.len() as u32;
         self.side_edge[s as usize / 3][s as usize % 3] = e;
         self.side_edge[t as usize / 3][t as usize % 3] = e;
-        let (a, b) = (self.corner(s) as usize, self.head(s) as usize);
-        let (c, d) = (self.apex(s) as usize, self.apex(t) as usize);
         let p = &self.positions;
-        let (lo, hi) = (a.min(b), a.max(b));
-        let point = 0.375 * (p[lo] + p[hi]) + 0.125 * (p[c] + p[d]);
-        self.edge_points.push(point.as_vec3());
+        let (a, b, c, d) = (a as usize, b as usize, c as usize, d as usize);
         let (pa, pb) = (p[a], p[b]);
+        // Summed as the general subdivision does: smaller vertex first.
+        let ends = if a < b { pa + pb } else { pb + pa };
+        let point = 0.375 * ends + 0.125 * (p[c] + p[d]);
+        self.edge_points.push(point.as_vec3());
         self.sum[a] += pb;
         self.sum[b] += pa;
         self.valence[a] += 1;
         self.valence[b] += 1;
     }
 
-    /// A side whose gate found no triangle across: pair it with its waiting partner, or
-    /// wait for it.
-    fn meet(&mut self, side: u32) {
-        let (a, b) = (self.corner(side), self.head(side));
+    /// A side (gate `[a, b, c]`: from `a` to `b`, apex `c`) whose gate found no triangle
+    /// across: pair it with its waiting partner, or wait for it.
+    fn meet(&mut self, side: u32, [a, b, c]: Gate) {
         let (lo, hi) = (a.min(b), a.max(b));
         let mut previous = NONE;
         let mut entry = self.waiting_head[lo as usize];
         while entry != NONE {
-            let [other, partner, next] = self.waiting[entry as usize];
+            let [other, partner, apex, next] = self.waiting[entry as usize];
             if other == hi {
                 if previous == NONE {
                     self.waiting_head[lo as usize] = next;
                 } else {
-                    self.waiting[previous as usize][2] = next;
+                    self.waiting[previous as usize][3] = next;
                 }
-                self.pair(partner, side);
+                self.pair(side, partner, [a, b, c, apex]);
                 return;
             }
             previous = entry;
             entry = next;
         }
         self.waiting
-            .push([hi, side, self.waiting_head[lo as usize]]);
+            .push([hi, side, c, self.waiting_head[lo as usize]]);
         self.waiting_head[lo as usize] = self.waiting.len() as u32 - 1;
     }
 }
@@ -180,22 +168,22 @@ pub(crate) fn decode_streams_subdivided(
                 let flag = *flags.get(fpos).ok_or("flag stream ends early")?;
                 fpos += 1;
                 if flag == 0 {
-                    st.meet(side);
+                    st.meet(side, [x, y, z]);
                     continue;
                 }
                 let w = st.vertex(Prediction::Parallelogram(x, y, z))?;
                 let ids = [y, x, w];
                 st.triangles.push(ids);
                 st.side_edge.push([NONE; 3]);
-                st.pair(side, 3 * t);
+                st.pair(side, 3 * t, [x, y, z, w]);
                 push_gates(&mut stack, ids, true);
                 stack_sides.extend([3 * t + 2, 3 * t + 1]);
             }
         }
     }
     // Gates left when the last triangle came: their triangles across are all decoded.
-    while let Some(side) = stack_sides.pop() {
-        st.meet(side);
+    while let (Some(side), Some(gate)) = (stack_sides.pop(), stack.pop()) {
+        st.meet(side, gate);
     }
     if st.quantized.len() != vertices {
         return Err(format!(

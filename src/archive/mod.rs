@@ -349,6 +349,61 @@ impl ArchiveReader {
         .map_err(|m| archive_error(&self.path, Some(f.number), m))
     }
 
+    /// Decodes the frames `numbers`, two or more at a time (one per worker thread), in
+    /// the order given.
+    pub fn read_surfaces(&self, numbers: &[i64]) -> Result<Vec<Surface>> {
+        use rayon::prelude::*;
+        numbers.par_iter().map(|&n| self.read_surface(n)).collect()
+    }
+
+    /// Writes the frames `numbers` (all frames when `None`) to the files `output_pattern`
+    /// names, its `{}` replaced by the frame number, in any format
+    /// [`crate::io::mesh::write_surface`] writes; frames are decoded and written in
+    /// parallel, each file complete or absent. Returns the files in frame order.
+    pub fn extract(
+        &self,
+        numbers: Option<&[i64]>,
+        output_pattern: &str,
+        options: &crate::io::mesh::MeshWriteOptions,
+    ) -> Result<Vec<PathBuf>> {
+        use rayon::prelude::*;
+        if !crate::sequence::is_pattern(output_pattern) {
+            return Err(Error::InvalidOption {
+                option: "--output",
+                message: format!(
+                    "{output_pattern:?} needs a {{}} for the frame number to hold several frames"
+                ),
+            });
+        }
+        let all: Vec<i64>;
+        let numbers = match numbers {
+            Some(n) => n,
+            None => {
+                all = self.frames.iter().map(|f| f.number).collect();
+                &all
+            }
+        };
+        let paths: Vec<PathBuf> = numbers
+            .iter()
+            .map(|n| crate::sequence::substitute(output_pattern, &n.to_string()))
+            .collect();
+        for dir in paths.iter().filter_map(|p| p.parent()) {
+            if !dir.as_os_str().is_empty() {
+                std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+            }
+        }
+        numbers
+            .par_iter()
+            .zip(&paths)
+            .try_for_each(|(&n, path)| -> Result<()> {
+                crate::tiles::interrupted()?;
+                let surface = self.read_surface(n)?;
+                crate::io::mesh::write_surface(path, &surface, options)?;
+                Ok(())
+            })?;
+        Ok(paths)
+    }
+
     /// Decodes every frame (in parallel; the report is in file order) and reports the
     /// damaged ones.
     pub fn verify(&self) -> VerifyReport {
