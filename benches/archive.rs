@@ -15,6 +15,8 @@ use std::path::Path;
 const FRAMES: [i64; 6] = [1, 9, 17, 25, 31, 45];
 
 fn bench(c: &mut Criterion) {
+    // As the `meniscus` command runs.
+    meniscus::tune_allocator();
     let r = 0.012;
     let mut options = ReconstructOptions::new(r);
     let levels = options.subdivide.levels;

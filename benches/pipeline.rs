@@ -16,6 +16,8 @@ use std::time::Instant;
 const CHILD_ENV: &str = "MENISCUS_BENCH_CHILD";
 
 fn main() {
+    // As the `meniscus` command runs.
+    meniscus::tune_allocator();
     // Cargo passes `--bench`; criterion-style filters are ignored.
     if let Ok(spec) = std::env::var(CHILD_ENV) {
         let (path, radius) = spec.rsplit_once(':').expect("path:radius");

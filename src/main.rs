@@ -177,6 +177,7 @@ struct ReconstructArgs {
 }
 
 fn main() -> ExitCode {
+    meniscus::tune_allocator();
     let cli = Cli::parse();
     // Ctrl-C: the first stops the run at the next tile or stage (temporary files are
     // removed, no partial output is left); a second one exits at once.

@@ -31,7 +31,18 @@ pub(crate) fn put_varint(out: &mut Vec<u8>, mut v: u64) {
     out.push(v as u8);
 }
 
+#[inline]
 pub(crate) fn get_varint(bytes: &[u8], pos: &mut usize) -> Option<u64> {
+    // One byte is the common case (flags, vertex codes, most residuals).
+    let first = *bytes.get(*pos)?;
+    if first < 0x80 {
+        *pos += 1;
+        return Some(first as u64);
+    }
+    get_varint_long(bytes, pos)
+}
+
+fn get_varint_long(bytes: &[u8], pos: &mut usize) -> Option<u64> {
     let mut v = 0u64;
     for shift in (0..64).step_by(7) {
         let b = *bytes.get(*pos)?;
