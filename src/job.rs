@@ -8,13 +8,14 @@ use crate::io::particles::{read_particles, ParticleFormat};
 use crate::mesh::TriMesh;
 use crate::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
 use crate::sequence::{self, Frame};
-use crate::tiles::MappedXyz;
+use crate::tiles::{MappedXyz, SpooledXyz};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// A frame's particles as the job hands them to the pipeline.
 enum Input {
     Mapped(MappedXyz),
+    Spooled(SpooledXyz),
     Parsed(Vec<glam::Vec3>),
 }
 
@@ -80,7 +81,8 @@ pub fn reconstruct_file(
 ) -> Result<FrameReport> {
     on_stage("read");
     let clock = Instant::now();
-    // Raw .xyz is mapped window by window; other formats are parsed into memory and handed
+    // Raw .xyz is mapped window by window; BGEO is streamed once into a temporary .xyz
+    // that is then mapped the same way; VTK and PLY are parsed into memory and handed
     // over, so a tiled run can drop them once they are spilled.
     let format = match job.input_format {
         Some(f) => f,
@@ -88,6 +90,10 @@ pub fn reconstruct_file(
     };
     let positions = match format {
         ParticleFormat::Xyz => Input::Mapped(MappedXyz::open(input)?),
+        ParticleFormat::Bgeo => Input::Spooled(SpooledXyz::from_bgeo(
+            input,
+            options.tiles.temp_dir.as_deref(),
+        )?),
         _ => {
             let particles = read_particles(input, Some(format))?;
             if particles.positions.is_empty() {
@@ -120,6 +126,7 @@ pub fn reconstruct_file(
         let progress = |stage: &str| (progress.borrow_mut())(stage);
         match positions {
             Input::Mapped(file) => reconstruct_source(file, options, &progress)?,
+            Input::Spooled(file) => reconstruct_source(file, options, &progress)?,
             Input::Parsed(positions) => reconstruct_source(positions, options, &progress)?,
         }
     };

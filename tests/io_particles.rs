@@ -3,7 +3,8 @@
 
 use glam::Vec3;
 use meniscus::io::particles::{
-    read_particles, write_particles, ParticleFormat, Particles, PointAttribute,
+    read_particles, stream_bgeo_positions, write_particles, ParticleFormat, Particles,
+    PointAttribute,
 };
 use meniscus::Error;
 use std::path::{Path, PathBuf};
@@ -271,4 +272,76 @@ fn bad_inputs_are_rejected_with_their_location() {
     )
     .unwrap();
     assert_eq!(p.positions.len(), 41_912);
+}
+
+/// A classic BGEO (version 5) of `positions` with one vector attribute `v`, plain.
+fn bgeo_bytes(positions: &[Vec3]) -> Vec<u8> {
+    let mut b = b"BgeoV".to_vec();
+    for v in [5, positions.len() as i32, 0, 0, 0, 1, 0, 0, 0] {
+        b.extend_from_slice(&v.to_be_bytes());
+    }
+    b.extend_from_slice(&1u16.to_be_bytes());
+    b.push(b'v');
+    b.extend_from_slice(&3u16.to_be_bytes());
+    b.extend_from_slice(&5i32.to_be_bytes());
+    b.extend_from_slice(&[0u8; 12]);
+    for (i, p) in positions.iter().enumerate() {
+        for c in [p.x, p.y, p.z, 1.0, i as f32, -(i as f32), 0.5] {
+            b.extend_from_slice(&c.to_be_bytes());
+        }
+    }
+    b
+}
+
+#[test]
+fn bgeo_streams_in_chunks_like_it_reads_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    // 150 000 particles: three chunks of the streaming reader.
+    let positions: Vec<Vec3> = (0..150_000)
+        .map(|i| Vec3::new(i as f32 * 0.001, (i % 7) as f32, -(i as f32).sqrt()))
+        .collect();
+    let plain = bgeo_bytes(&positions);
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    std::io::Write::write_all(&mut gz, &plain).unwrap();
+    let gz = gz.finish().unwrap();
+    for (name, bytes) in [("big.bgeo", &plain), ("big.bgeo.gz", &gz)] {
+        let path = write(dir.path(), name, bytes);
+        let mut streamed = Vec::new();
+        let mut chunks = 0;
+        let count = stream_bgeo_positions(&path, &mut |chunk| {
+            chunks += 1;
+            streamed.extend_from_slice(chunk);
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(count, positions.len());
+        assert_eq!(chunks, 3, "{name}");
+        assert_eq!(bits(&streamed), bits(&positions), "{name}");
+        let whole = read_particles(&path, None).unwrap();
+        assert_eq!(bits(&whole.positions), bits(&positions), "{name}");
+        let v = &whole.attributes[0];
+        assert_eq!((v.name.as_str(), v.components), ("v", 3));
+        assert_eq!(&v.values[3..6], &[1.0, -1.0, 0.5]);
+    }
+    // The shipped frame streams to the positions the whole-file reader gives.
+    let shipped = data("dambreak_small/ParticleData_Fluid_25.bgeo");
+    let mut streamed = Vec::new();
+    stream_bgeo_positions(&shipped, &mut |chunk| {
+        streamed.extend_from_slice(chunk);
+        Ok(())
+    })
+    .unwrap();
+    assert_eq!(
+        bits(&streamed),
+        bits(&read_particles(&shipped, None).unwrap().positions)
+    );
+    // Cut in the particle data: a clear error naming the stream position.
+    let cut = write(dir.path(), "cut.bgeo.gz", &gz[..gz.len() / 2]);
+    let err = stream_bgeo_positions(&cut, &mut |_| Ok(()))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("cut.bgeo.gz") && err.contains("decompressed"),
+        "{err}"
+    );
 }

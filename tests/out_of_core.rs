@@ -330,3 +330,41 @@ fn marching_cubes_files_are_byte_identical_for_any_tiling_and_thread_count() {
         );
     }
 }
+
+#[test]
+fn a_gzip_bgeo_is_streamed_and_meshes_like_its_xyz() {
+    // The shipped BGEO holds the same positions as the .xyz of the frame: streamed into a
+    // temporary .xyz and mapped, it must give the same file, tiled or not, and leave no
+    // temporary file behind.
+    let dir = tempfile::tempdir().unwrap();
+    let temp = dir.path().join("temp");
+    std::fs::create_dir(&temp).unwrap();
+    for tiles in [None, Some("64")] {
+        let mut outputs = Vec::new();
+        for input in ["ParticleData_Fluid_25.bgeo", "ParticleData_Fluid_25.xyz"] {
+            let out = dir.path().join(format!("{input}.ply"));
+            let mut cmd = meniscus();
+            cmd.arg("reconstruct")
+                .arg(dataset(&format!("dambreak_small/{input}")))
+                .args(["-r", "0.012", "-q", "--temp-dir"])
+                .arg(&temp)
+                .arg("-o")
+                .arg(&out);
+            if let Some(t) = tiles {
+                cmd.args(["--tile-size", t]);
+            }
+            let result = cmd.output().unwrap();
+            assert!(
+                result.status.success(),
+                "{}",
+                String::from_utf8_lossy(&result.stderr)
+            );
+            outputs.push(std::fs::read(&out).unwrap());
+        }
+        assert!(
+            outputs[0] == outputs[1],
+            "tiles {tiles:?}: bgeo and xyz differ"
+        );
+        assert!(entries(&temp).is_empty(), "left {:?}", entries(&temp));
+    }
+}

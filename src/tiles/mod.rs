@@ -66,7 +66,7 @@ pub use budget::{default_memory_budget, output_bytes_per_particle, parse_memory_
 use glam::Vec3;
 use hashbrown::{HashMap, HashSet};
 use rayon::prelude::*;
-pub use source::{MappedXyz, ParticleSource};
+pub use source::{MappedXyz, ParticleSource, SpooledXyz};
 use spill::SpillFile;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -132,3 +132,64 @@ impl ParticleSource for MappedXyz {
         Ok(())
     }
 }
+
+/// Particles of a file that cannot be mapped (gzip BGEO), streamed once into a raw `.xyz`
+/// temporary file (positions only, 12 bytes per particle) and then read like
+/// [`MappedXyz`]: memory stays one chunk while converting and one window while reading,
+/// whatever the input size. The temporary file is removed when this is dropped (also on
+/// errors and Ctrl-C, as the error unwinds).
+pub struct SpooledXyz {
+    mapped: MappedXyz,
+    _file: tempfile::TempPath,
+}
+
+impl SpooledXyz {
+    /// Streams the positions of the BGEO file `path` into a temporary file in `temp_dir`
+    /// (`None`: the system's temporary directory).
+    pub fn from_bgeo(path: &Path, temp_dir: Option<&Path>) -> Result<SpooledXyz> {
+        let dir = temp_dir
+            .map(Path::to_path_buf)
+            .unwrap_or_else(std::env::temp_dir);
+        let file = tempfile::Builder::new()
+            .prefix("meniscus-input-")
+            .suffix(".xyz")
+            .tempfile_in(&dir)
+            .map_err(|e| Error::io(&dir, e))?;
+        let spool_path = file.path().to_path_buf();
+        let mut writer = std::io::BufWriter::with_capacity(1 << 20, file);
+        let mut bytes = Vec::new();
+        let count = crate::io::particles::stream_bgeo_positions(path, &mut |chunk| {
+            crate::tiles::interrupted()?;
+            bytes.clear();
+            for p in chunk {
+                for c in p.to_array() {
+                    bytes.extend_from_slice(&c.to_le_bytes());
+                }
+            }
+            std::io::Write::write_all(&mut writer, &bytes).map_err(|e| Error::io(&spool_path, e))
+        })?;
+        if count == 0 {
+            return Err(Error::EmptyInput {
+                path: path.to_path_buf(),
+            });
+        }
+        let file = writer
+            .into_inner()
+            .map_err(|e| Error::io(&spool_path, e.into_error()))?;
+        let temp_path = file.into_temp_path();
+        let mapped = MappedXyz::open(&temp_path)?;
+        Ok(SpooledXyz {
+            mapped,
+            _file: temp_path,
+        })
+    }
+}
+
+impl ParticleSource for SpooledXyz {
+    fn particle_count(&self) -> usize {
+        self.mapped.particle_count()
+    }
+    fn visit_chunks(&self, visit: &mut dyn FnMut(usize, &[Vec3]) -> Result<()>) -> Result<()> {
+        self.mapped.visit_chunks(visit)
+    }
+}

@@ -11,61 +11,81 @@
 use super::{Particles, PointAttribute};
 use crate::error::{Error, Result};
 use glam::Vec3;
-use std::io::Read;
+use std::io::{BufRead, Read};
 use std::path::Path;
 
-struct Reader<'a> {
+/// Points decoded per chunk by the streaming parser.
+const CHUNK_POINTS: usize = 1 << 16;
+
+/// The decompressed byte stream with its offset, for error locations.
+struct Stream<'a> {
     path: &'a Path,
-    bytes: &'a [u8],
-    pos: usize,
+    inner: Box<dyn Read + 'a>,
+    pos: u64,
 }
 
-impl Reader<'_> {
-    fn take(&mut self, n: usize, what: &str) -> Result<&[u8]> {
-        if self.bytes.len() - self.pos < n {
-            return Err(Error::parse(
-                self.path,
-                format!("byte offset {} (decompressed)", self.pos),
+impl Stream<'_> {
+    fn fill(&mut self, buf: &mut [u8], what: &str) -> Result<()> {
+        let at = self.pos;
+        self.inner.read_exact(buf).map_err(|e| {
+            let message = if e.kind() == std::io::ErrorKind::UnexpectedEof {
                 format!(
-                    "truncated while reading {what}: need {n} bytes, {} left",
-                    self.bytes.len() - self.pos
-                ),
-            ));
-        }
-        let s = &self.bytes[self.pos..self.pos + n];
-        self.pos += n;
-        Ok(s)
+                    "truncated while reading {what}: need {} bytes, the stream ends first",
+                    buf.len()
+                )
+            } else {
+                format!("cannot read {what}: {e}")
+            };
+            Error::parse(
+                self.path,
+                format!("byte offset {at} (decompressed)"),
+                message,
+            )
+        })?;
+        self.pos += buf.len() as u64;
+        Ok(())
+    }
+    fn bytes(&mut self, n: usize, what: &str) -> Result<Vec<u8>> {
+        let mut b = vec![0u8; n];
+        self.fill(&mut b, what)?;
+        Ok(b)
     }
     fn i32(&mut self, what: &str) -> Result<i32> {
-        Ok(i32::from_be_bytes(
-            self.take(4, what)?.try_into().expect("4 bytes"),
-        ))
+        let mut b = [0u8; 4];
+        self.fill(&mut b, what)?;
+        Ok(i32::from_be_bytes(b))
     }
     fn u16(&mut self, what: &str) -> Result<u16> {
-        Ok(u16::from_be_bytes(
-            self.take(2, what)?.try_into().expect("2 bytes"),
-        ))
+        let mut b = [0u8; 2];
+        self.fill(&mut b, what)?;
+        Ok(u16::from_be_bytes(b))
     }
 }
 
-pub(super) fn read(path: &Path, raw: &[u8]) -> Result<Particles> {
-    let decompressed;
-    let bytes: &[u8] = if raw.starts_with(&[0x1f, 0x8b]) {
-        let mut out = Vec::new();
-        flate2::read::MultiGzDecoder::new(raw)
-            .read_to_end(&mut out)
-            .map_err(|e| Error::parse(path, "gzip stream", format!("cannot decompress: {e}")))?;
-        decompressed = out;
-        &decompressed
+/// Parses a BGEO stream (gzip detected by its magic bytes) chunk by chunk: positions go
+/// to `positions` in chunks of at most [`CHUNK_POINTS`], the other attributes to
+/// `attributes` when given. Returns the point count. Memory: one chunk of records.
+fn parse<'a, R: BufRead + 'a>(
+    path: &'a Path,
+    mut source: R,
+    mut attributes: Option<&mut Vec<PointAttribute>>,
+    positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
+) -> Result<usize> {
+    let gzip = source
+        .fill_buf()
+        .map_err(|e| Error::io(path, e))?
+        .starts_with(&[0x1f, 0x8b]);
+    let inner: Box<dyn Read + 'a> = if gzip {
+        Box::new(flate2::bufread::MultiGzDecoder::new(source))
     } else {
-        raw
+        Box::new(source)
     };
-    let mut r = Reader {
+    let mut r = Stream {
         path,
-        bytes,
+        inner,
         pos: 0,
     };
-    let magic = r.take(5, "the magic number")?;
+    let magic = r.bytes(5, "the magic number")?;
     if magic != b"BgeoV" {
         return Err(Error::parse(
             path,
@@ -98,7 +118,7 @@ pub(super) fn read(path: &Path, raw: &[u8]) -> Result<Particles> {
     let mut defs: Vec<(String, usize, i32)> = Vec::new();
     for _ in 0..nattr {
         let len = r.u16("an attribute name length")? as usize;
-        let name = String::from_utf8_lossy(r.take(len, "an attribute name")?).into_owned();
+        let name = String::from_utf8_lossy(&r.bytes(len, "an attribute name")?).into_owned();
         let size = r.u16("an attribute size")? as usize;
         let ty = r.i32("an attribute type")?;
         if !matches!(ty, 0 | 1 | 5) {
@@ -109,54 +129,90 @@ pub(super) fn read(path: &Path, raw: &[u8]) -> Result<Particles> {
                 ),
             });
         }
-        r.take(4 * size, "attribute defaults")?;
+        r.bytes(4 * size, "attribute defaults")?;
         defs.push((name, size, ty));
     }
     let npoints = npoints as usize;
     let stride = 16 + defs.iter().map(|d| 4 * d.1).sum::<usize>();
-    let need = npoints
+    npoints
         .checked_mul(stride)
         .ok_or_else(|| Error::parse(path, "header", "point count overflows"))?;
-    let start = r.pos;
-    let data = r.take(need, &format!("{npoints} points of {stride} bytes"))?;
-    let f = |b: &[u8]| f32::from_be_bytes(b.try_into().expect("4 bytes"));
-    let mut positions = Vec::with_capacity(npoints);
-    let mut attributes: Vec<PointAttribute> = defs
-        .iter()
-        .map(|(name, size, _)| PointAttribute {
+    if let Some(out) = attributes.as_deref_mut() {
+        out.extend(defs.iter().map(|(name, size, _)| PointAttribute {
             name: name.clone(),
             components: *size,
             values: Vec::with_capacity(npoints * size),
-        })
-        .collect();
-    for (i, rec) in data.chunks_exact(stride).enumerate() {
-        let p = Vec3::new(f(&rec[0..4]), f(&rec[4..8]), f(&rec[8..12]));
-        if !p.is_finite() {
-            return Err(Error::parse(
-                path,
-                format!(
-                    "byte offset {} (decompressed), particle {i}",
-                    start + i * stride
-                ),
-                format!("non-finite coordinate {p}"),
-            ));
-        }
-        positions.push(p);
-        let mut o = 16;
-        for (attr, (_, size, ty)) in attributes.iter_mut().zip(&defs) {
-            for k in 0..*size {
-                let b = &rec[o + 4 * k..o + 4 * k + 4];
-                attr.values.push(if *ty == 1 {
-                    i32::from_be_bytes(b.try_into().expect("4 bytes")) as f32
-                } else {
-                    f(b)
-                });
-            }
-            o += 4 * size;
-        }
+        }));
     }
+    let f = |b: &[u8]| f32::from_be_bytes(b.try_into().expect("4 bytes"));
+    let mut records = vec![0u8; CHUNK_POINTS.min(npoints) * stride];
+    let mut chunk: Vec<Vec3> = Vec::with_capacity(CHUNK_POINTS.min(npoints));
+    let mut first = 0;
+    while first < npoints {
+        let count = CHUNK_POINTS.min(npoints - first);
+        let start = r.pos;
+        let data = &mut records[..count * stride];
+        r.fill(
+            data,
+            &format!("points {first}..{} of {stride} bytes", first + count),
+        )?;
+        chunk.clear();
+        for (k, rec) in data.chunks_exact(stride).enumerate() {
+            let p = Vec3::new(f(&rec[0..4]), f(&rec[4..8]), f(&rec[8..12]));
+            if !p.is_finite() {
+                return Err(Error::parse(
+                    path,
+                    format!(
+                        "byte offset {} (decompressed), particle {}",
+                        start + (k * stride) as u64,
+                        first + k
+                    ),
+                    format!("non-finite coordinate {p}"),
+                ));
+            }
+            chunk.push(p);
+            if let Some(out) = attributes.as_deref_mut() {
+                let mut o = 16;
+                for (attr, (_, size, ty)) in out.iter_mut().zip(&defs) {
+                    for k in 0..*size {
+                        let b = &rec[o + 4 * k..o + 4 * k + 4];
+                        attr.values.push(if *ty == 1 {
+                            i32::from_be_bytes(b.try_into().expect("4 bytes")) as f32
+                        } else {
+                            f(b)
+                        });
+                    }
+                    o += 4 * size;
+                }
+            }
+        }
+        positions(&chunk)?;
+        first += count;
+    }
+    Ok(npoints)
+}
+
+/// Reads a whole BGEO file held in memory (gzip-compressed or plain).
+pub(super) fn read(path: &Path, raw: &[u8]) -> Result<Particles> {
+    let mut positions = Vec::new();
+    let mut attributes = Vec::new();
+    parse(path, raw, Some(&mut attributes), &mut |chunk| {
+        positions.extend_from_slice(chunk);
+        Ok(())
+    })?;
     Ok(Particles {
         positions,
         attributes,
     })
+}
+
+/// Streams the positions of a BGEO file from disk in chunks of at most 65 536 particles,
+/// decompressing as it goes; other attributes are skipped. Returns the particle count.
+/// Memory: one chunk, whatever the file size.
+pub fn stream_positions(
+    path: &Path,
+    positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
+) -> Result<usize> {
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    parse(path, std::io::BufReader::new(file), None, positions)
 }

@@ -16,6 +16,8 @@ mod ply;
 mod vtk;
 mod xyz;
 
+pub use bgeo::stream_positions as stream_bgeo_positions;
+
 use crate::error::{Error, Result};
 use glam::Vec3;
 use std::path::Path;
