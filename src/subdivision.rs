@@ -143,15 +143,7 @@ fn subdivide_once(mesh: &TriMesh) -> TriMesh {
     drop(bucket_start);
     let ne = edge_start.len();
     edge_start.push(sides.len() as u32);
-    // Loop's β for every valence that occurs, computed once.
-    let max_valence = valence.iter().copied().max().unwrap_or(0) as usize;
-    let beta: Vec<f64> = (0..=max_valence)
-        .map(|n| {
-            let nf = n.max(1) as f64;
-            let c = 0.375 + 0.25 * (2.0 * std::f64::consts::PI / nf).cos();
-            (0.625 - c * c) / nf
-        })
-        .collect();
+    let beta = loop_betas(&valence);
     let mut positions: Vec<glam::Vec3> = (0..nv)
         .into_par_iter()
         .map(|v| {
@@ -195,19 +187,37 @@ fn subdivide_once(mesh: &TriMesh) -> TriMesh {
         .enumerate()
         .for_each(|(t, (out, tri))| {
             let m = [0, 1, 2].map(|k| nv as u32 + side_edge[t * 3 + k]);
-            // m[k] is the midpoint of side (tri[k], tri[k+1]).
-            out.copy_from_slice(&[
-                [tri[0], m[0], m[2]],
-                [tri[1], m[1], m[0]],
-                [tri[2], m[2], m[1]],
-                [m[0], m[1], m[2]],
-            ]);
+            out.copy_from_slice(&children(*tri, m));
         });
     TriMesh {
         positions,
         triangles,
         normals: Vec::new(),
     }
+}
+
+/// Loop's β for every valence up to the largest in `valence`, computed once:
+/// `β(n) = (5/8 − (3/8 + 1/4 cos(2π/n))²) / n` (entry 0 is never used).
+pub(crate) fn loop_betas(valence: &[u32]) -> Vec<f64> {
+    let max_valence = valence.iter().copied().max().unwrap_or(0) as usize;
+    (0..=max_valence)
+        .map(|n| {
+            let nf = n.max(1) as f64;
+            let c = 0.375 + 0.25 * (2.0 * std::f64::consts::PI / nf).cos();
+            (0.625 - c * c) / nf
+        })
+        .collect()
+}
+
+/// The four children of triangle `tri` whose sides have the edge points `m` (`m[k]` on
+/// side `(tri[k], tri[k+1])`), orientation kept.
+pub(crate) fn children(tri: [u32; 3], m: [u32; 3]) -> [[u32; 3]; 4] {
+    [
+        [tri[0], m[0], m[2]],
+        [tri[1], m[1], m[0]],
+        [tri[2], m[2], m[1]],
+        [m[0], m[1], m[2]],
+    ]
 }
 
 #[cfg(test)]

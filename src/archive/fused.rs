@@ -14,6 +14,7 @@
 
 use super::codec::{get_varint, push_gates, split_streams, unzigzag, Gate, Prediction};
 use crate::mesh::TriMesh;
+use crate::subdivision::{children, loop_betas};
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
@@ -194,15 +195,8 @@ pub(crate) fn decode_streams_subdivided(
     if st.edge_points.len() * 2 != triangles * 3 {
         return Err("the mesh stored as closed has sides without a partner".into());
     }
-    // Loop's vertex mask, β once per valence.
-    let max_valence = st.valence.iter().copied().max().unwrap_or(0) as usize;
-    let beta: Vec<f64> = (0..=max_valence)
-        .map(|n| {
-            let nf = n.max(1) as f64;
-            let c = 0.375 + 0.25 * (2.0 * std::f64::consts::PI / nf).cos();
-            (0.625 - c * c) / nf
-        })
-        .collect();
+    // Loop's vertex mask.
+    let beta = loop_betas(&st.valence);
     let mut positions: Vec<Vec3> = Vec::with_capacity(vertices + st.edge_points.len());
     positions.par_extend((0..vertices).into_par_iter().map(|v| {
         let (p, n) = (st.positions[v], st.valence[v]);
@@ -215,13 +209,7 @@ pub(crate) fn decode_streams_subdivided(
     fine.par_chunks_mut(4)
         .zip(st.triangles.par_iter().zip(st.side_edge.par_iter()))
         .for_each(|(out, (tri, edges))| {
-            let m = edges.map(|e| nv + e);
-            out.copy_from_slice(&[
-                [tri[0], m[0], m[2]],
-                [tri[1], m[1], m[0]],
-                [tri[2], m[2], m[1]],
-                [m[0], m[1], m[2]],
-            ]);
+            out.copy_from_slice(&children(*tri, edges.map(|e| nv + e)));
         });
     Ok(TriMesh {
         positions,
