@@ -19,6 +19,17 @@ enum Input {
     Parsed(Vec<glam::Vec3>),
 }
 
+/// A particle file parsed into memory.
+fn parsed(input: &Path, format: ParticleFormat) -> Result<Input> {
+    let particles = read_particles(input, Some(format))?;
+    if particles.positions.is_empty() {
+        return Err(Error::EmptyInput {
+            path: input.to_path_buf(),
+        });
+    }
+    Ok(Input::Parsed(particles.positions))
+}
+
 /// What to do with the files of a job.
 #[derive(Clone, Debug)]
 pub struct JobOptions {
@@ -81,9 +92,10 @@ pub fn reconstruct_file(
 ) -> Result<FrameReport> {
     on_stage("read");
     let clock = Instant::now();
-    // Raw .xyz is mapped window by window; BGEO is streamed once into a temporary .xyz
-    // that is then mapped the same way; VTK and PLY are parsed into memory and handed
-    // over, so a tiled run can drop them once they are spilled.
+    // Raw .xyz is mapped window by window; BGEO and binary VTK (points first) are
+    // streamed once into a temporary .xyz that is then mapped the same way; other VTK
+    // and PLY are parsed into memory and handed over, so a tiled run can drop them once
+    // they are spilled.
     let format = match job.input_format {
         Some(f) => f,
         None => ParticleFormat::from_path(input)?,
@@ -94,15 +106,13 @@ pub fn reconstruct_file(
             input,
             options.tiles.temp_dir.as_deref(),
         )?),
-        _ => {
-            let particles = read_particles(input, Some(format))?;
-            if particles.positions.is_empty() {
-                return Err(Error::EmptyInput {
-                    path: input.to_path_buf(),
-                });
+        ParticleFormat::Vtk => {
+            match SpooledXyz::from_vtk(input, options.tiles.temp_dir.as_deref())? {
+                Some(spooled) => Input::Spooled(spooled),
+                None => parsed(input, format)?,
             }
-            Input::Parsed(particles.positions)
         }
+        _ => parsed(input, format)?,
     };
     let read_seconds = clock.elapsed().as_secs_f64();
     on_stage("reconstruct");

@@ -3,8 +3,8 @@
 
 use glam::Vec3;
 use meniscus::io::particles::{
-    read_particles, stream_bgeo_positions, write_particles, ParticleFormat, Particles,
-    PointAttribute,
+    read_particles, stream_bgeo_positions, stream_vtk_positions, write_particles, ParticleFormat,
+    Particles, PointAttribute,
 };
 use meniscus::Error;
 use std::path::{Path, PathBuf};
@@ -344,4 +344,68 @@ fn bgeo_streams_in_chunks_like_it_reads_whole() {
         err.contains("cut.bgeo.gz") && err.contains("decompressed"),
         "{err}"
     );
+}
+
+#[test]
+fn binary_vtk_streams_its_points_like_it_reads_whole() {
+    let collect = |path: &Path| {
+        let mut out = Vec::new();
+        let n = stream_vtk_positions(path, &mut |chunk| {
+            out.extend_from_slice(chunk);
+            Ok(())
+        })
+        .unwrap();
+        (n, out)
+    };
+    // Shipped frames (SPlisHSPlasH layout, float points) and the written sample (with
+    // point data after the points).
+    let dir = tempfile::tempdir().unwrap();
+    let written = dir.path().join("sample.vtk");
+    write_particles(&written, &sample(), ParticleFormat::Vtk).unwrap();
+    for path in [
+        data("dambreak_small/ParticleData_Fluid_25.vtk"),
+        data("double_dambreak/ParticleData_Fluid_9.vtk"),
+        data("analytic/droplets.vtk"),
+        written,
+    ] {
+        let (n, streamed) = collect(&path);
+        let whole = read_particles(&path, None).unwrap().positions;
+        assert_eq!(n, Some(whole.len()), "{}", path.display());
+        assert_eq!(bits(&streamed), bits(&whole), "{}", path.display());
+    }
+    // More than one chunk, double precision.
+    let positions: Vec<Vec3> = (0..100_000)
+        .map(|i| Vec3::new(i as f32 * 0.01, -(i as f32), (i % 13) as f32 * 0.1))
+        .collect();
+    let mut doubles = b"# vtk DataFile Version 3.0\nbig\nBINARY\nDATASET POLYDATA\n".to_vec();
+    doubles.extend_from_slice(format!("POINTS {} double\n", positions.len()).as_bytes());
+    for p in &positions {
+        for c in p.to_array() {
+            doubles.extend_from_slice(&(c as f64).to_be_bytes());
+        }
+    }
+    let big = write(dir.path(), "big.vtk", &doubles);
+    let (n, streamed) = collect(&big);
+    assert_eq!(n, Some(positions.len()));
+    assert_eq!(bits(&streamed), bits(&positions));
+    assert_eq!(
+        bits(&read_particles(&big, None).unwrap().positions),
+        bits(&positions)
+    );
+    // Cut in the points: a clear error.
+    let cut = write(dir.path(), "cut.vtk", &doubles[..doubles.len() / 2]);
+    let err = stream_vtk_positions(&cut, &mut |_| Ok(()))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("cut.vtk") && err.contains("truncated"),
+        "{err}"
+    );
+    // ASCII is left to the whole-file reader.
+    let ascii = write(
+        dir.path(),
+        "a.vtk",
+        b"# vtk DataFile Version 3.0\na\nASCII\nDATASET POLYDATA\nPOINTS 1 float\n1 2 3\n",
+    );
+    assert_eq!(collect(&ascii).0, None);
 }

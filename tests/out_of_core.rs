@@ -332,16 +332,20 @@ fn marching_cubes_files_are_byte_identical_for_any_tiling_and_thread_count() {
 }
 
 #[test]
-fn a_gzip_bgeo_is_streamed_and_meshes_like_its_xyz() {
-    // The shipped BGEO holds the same positions as the .xyz of the frame: streamed into a
-    // temporary .xyz and mapped, it must give the same file, tiled or not, and leave no
-    // temporary file behind.
+fn gzip_bgeo_and_binary_vtk_are_streamed_and_mesh_like_their_xyz() {
+    // The shipped BGEO and VTK hold the same positions as the .xyz of the frame: streamed
+    // into a temporary .xyz and mapped, they must give the same file, tiled or not, and
+    // leave no temporary file behind.
     let dir = tempfile::tempdir().unwrap();
     let temp = dir.path().join("temp");
     std::fs::create_dir(&temp).unwrap();
     for tiles in [None, Some("64")] {
         let mut outputs = Vec::new();
-        for input in ["ParticleData_Fluid_25.bgeo", "ParticleData_Fluid_25.xyz"] {
+        for input in [
+            "ParticleData_Fluid_25.bgeo",
+            "ParticleData_Fluid_25.vtk",
+            "ParticleData_Fluid_25.xyz",
+        ] {
             let out = dir.path().join(format!("{input}.ply"));
             let mut cmd = meniscus();
             cmd.arg("reconstruct")

@@ -133,8 +133,8 @@ impl ParticleSource for MappedXyz {
     }
 }
 
-/// Particles of a file that cannot be mapped (gzip BGEO), streamed once into a raw `.xyz`
-/// temporary file (positions only, 12 bytes per particle) and then read like
+/// Particles of a file that cannot be mapped as it is (gzip BGEO; big-endian binary VTK),
+/// streamed once into a raw `.xyz` temporary file (positions only, 12 bytes per particle) and then read like
 /// [`MappedXyz`]: memory stays one chunk while converting and one window while reading,
 /// whatever the input size. The temporary file is removed when this is dropped (also on
 /// errors and Ctrl-C, as the error unwinds).
@@ -147,6 +147,28 @@ impl SpooledXyz {
     /// Streams the positions of the BGEO file `path` into a temporary file in `temp_dir`
     /// (`None`: the system's temporary directory).
     pub fn from_bgeo(path: &Path, temp_dir: Option<&Path>) -> Result<SpooledXyz> {
+        let spooled = Self::spool(path, temp_dir, &mut |sink| {
+            crate::io::particles::stream_bgeo_positions(path, sink).map(Some)
+        })?;
+        Ok(spooled.expect("BGEO always streams"))
+    }
+
+    /// Streams the positions of the binary legacy VTK file `path` into a temporary file
+    /// in `temp_dir`; `Ok(None)` when its layout is not the streamable one (see
+    /// [`crate::io::particles::stream_vtk_positions`]).
+    pub fn from_vtk(path: &Path, temp_dir: Option<&Path>) -> Result<Option<SpooledXyz>> {
+        Self::spool(path, temp_dir, &mut |sink| {
+            crate::io::particles::stream_vtk_positions(path, sink)
+        })
+    }
+
+    /// Runs `stream` with a sink that appends to a new temporary `.xyz`, then maps it.
+    #[allow(clippy::type_complexity)]
+    fn spool(
+        path: &Path,
+        temp_dir: Option<&Path>,
+        stream: &mut dyn FnMut(&mut dyn FnMut(&[Vec3]) -> Result<()>) -> Result<Option<usize>>,
+    ) -> Result<Option<SpooledXyz>> {
         let dir = temp_dir
             .map(Path::to_path_buf)
             .unwrap_or_else(std::env::temp_dir);
@@ -158,7 +180,7 @@ impl SpooledXyz {
         let spool_path = file.path().to_path_buf();
         let mut writer = std::io::BufWriter::with_capacity(1 << 20, file);
         let mut bytes = Vec::new();
-        let count = crate::io::particles::stream_bgeo_positions(path, &mut |chunk| {
+        let count = stream(&mut |chunk| {
             crate::tiles::interrupted()?;
             bytes.clear();
             for p in chunk {
@@ -168,6 +190,9 @@ impl SpooledXyz {
             }
             std::io::Write::write_all(&mut writer, &bytes).map_err(|e| Error::io(&spool_path, e))
         })?;
+        let Some(count) = count else {
+            return Ok(None);
+        };
         if count == 0 {
             return Err(Error::EmptyInput {
                 path: path.to_path_buf(),
@@ -178,10 +203,10 @@ impl SpooledXyz {
             .map_err(|e| Error::io(&spool_path, e.into_error()))?;
         let temp_path = file.into_temp_path();
         let mapped = MappedXyz::open(&temp_path)?;
-        Ok(SpooledXyz {
+        Ok(Some(SpooledXyz {
             mapped,
             _file: temp_path,
-        })
+        }))
     }
 }
 

@@ -263,3 +263,104 @@ pub(super) fn write(path: &Path, particles: &Particles) -> Result<()> {
     })
     .map(|_| ())
 }
+
+/// Points decoded per chunk by [`stream_positions`].
+const CHUNK_POINTS: usize = 1 << 16;
+
+/// Streams the positions of a BINARY legacy VTK file whose first data section is
+/// `POINTS n float|double` (what SPlisHSPlasH and DualSPHysics write) from disk in chunks
+/// of at most 65 536 particles; the rest of the file is not read. Returns `Ok(None)` for
+/// any other layout (ASCII, another section first, another point type), which the
+/// whole-file reader handles and reports on. Memory: one chunk, whatever the file size.
+pub fn stream_positions(
+    path: &Path,
+    positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
+) -> Result<Option<usize>> {
+    use std::io::{BufRead, Read};
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut r = std::io::BufReader::with_capacity(1 << 20, file);
+    let mut offset = 0u64;
+    let mut line = Vec::new();
+    let mut next_line =
+        |r: &mut std::io::BufReader<std::fs::File>, offset: &mut u64| -> Result<Option<String>> {
+            line.clear();
+            let n = r
+                .read_until(b'\n', &mut line)
+                .map_err(|e| Error::io(path, e))?;
+            *offset += n as u64;
+            if n == 0 || line.len() > 4096 {
+                return Ok(None);
+            }
+            Ok(Some(String::from_utf8_lossy(&line).trim().to_string()))
+        };
+    let header_ok = matches!(next_line(&mut r, &mut offset)?, Some(l) if l.starts_with("# vtk DataFile Version"));
+    let _title = next_line(&mut r, &mut offset)?;
+    let binary =
+        matches!(next_line(&mut r, &mut offset)?, Some(l) if l.eq_ignore_ascii_case("BINARY"));
+    if !(header_ok && binary) {
+        return Ok(None);
+    }
+    let (count, double) = loop {
+        let Some(l) = next_line(&mut r, &mut offset)? else {
+            return Ok(None);
+        };
+        let tokens: Vec<&str> = l.split_whitespace().collect();
+        match tokens.as_slice() {
+            [] => continue,
+            [k, _] if k.eq_ignore_ascii_case("DATASET") => continue,
+            [k, n, ty] if k.eq_ignore_ascii_case("POINTS") => {
+                let Ok(n) = n.parse::<usize>() else {
+                    return Ok(None);
+                };
+                match ty.to_ascii_lowercase().as_str() {
+                    "float" => break (n, false),
+                    "double" => break (n, true),
+                    _ => return Ok(None),
+                }
+            }
+            _ => return Ok(None),
+        }
+    };
+    let size = if double { 24 } else { 12 };
+    let mut bytes = vec![0u8; CHUNK_POINTS.min(count) * size];
+    let mut chunk: Vec<Vec3> = Vec::with_capacity(CHUNK_POINTS.min(count));
+    let mut first = 0;
+    while first < count {
+        let n = CHUNK_POINTS.min(count - first);
+        let data = &mut bytes[..n * size];
+        r.read_exact(data).map_err(|e| {
+            Error::parse(
+                path,
+                format!("byte offset {offset}, particle {first}"),
+                if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                    format!("truncated while reading the {count} points: the file ends first")
+                } else {
+                    format!("cannot read the points: {e}")
+                },
+            )
+        })?;
+        chunk.clear();
+        for (k, rec) in data.chunks_exact(size).enumerate() {
+            let c = |i: usize| -> f32 {
+                if double {
+                    f64::from_be_bytes(rec[8 * i..8 * i + 8].try_into().expect("8 bytes")) as f32
+                } else {
+                    f32::from_be_bytes(rec[4 * i..4 * i + 4].try_into().expect("4 bytes"))
+                }
+            };
+            let p = Vec3::new(c(0), c(1), c(2));
+            if !p.is_finite() {
+                return Err(Error::parse(
+                    path,
+                    format!("particle {}", first + k),
+                    format!("non-finite coordinate {p}"),
+                ));
+            }
+            chunk.push(p);
+        }
+        positions(&chunk)?;
+        offset += data.len() as u64;
+        first += n;
+    }
+    Ok(Some(count))
+}
