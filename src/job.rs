@@ -92,27 +92,20 @@ pub fn reconstruct_file(
 ) -> Result<FrameReport> {
     on_stage("read");
     let clock = Instant::now();
-    // Raw .xyz is mapped window by window; BGEO and binary VTK (points first) are
-    // streamed once into a temporary .xyz that is then mapped the same way; other VTK
-    // and PLY are parsed into memory and handed over, so a tiled run can drop them once
-    // they are spilled.
+    // Raw .xyz is mapped window by window; BGEO, and binary VTK and PLY with their points
+    // first, are streamed once into a temporary .xyz that is then mapped the same way;
+    // ASCII files are parsed into memory and handed over, so a tiled run can drop them
+    // once they are spilled.
     let format = match job.input_format {
         Some(f) => f,
         None => ParticleFormat::from_path(input)?,
     };
     let positions = match format {
         ParticleFormat::Xyz => Input::Mapped(MappedXyz::open(input)?),
-        ParticleFormat::Bgeo => Input::Spooled(SpooledXyz::from_bgeo(
-            input,
-            options.tiles.temp_dir.as_deref(),
-        )?),
-        ParticleFormat::Vtk => {
-            match SpooledXyz::from_vtk(input, options.tiles.temp_dir.as_deref())? {
-                Some(spooled) => Input::Spooled(spooled),
-                None => parsed(input, format)?,
-            }
-        }
-        _ => parsed(input, format)?,
+        _ => match SpooledXyz::from_file(input, format, options.tiles.temp_dir.as_deref())? {
+            Some(spooled) => Input::Spooled(spooled),
+            None => parsed(input, format)?,
+        },
     };
     let read_seconds = clock.elapsed().as_secs_f64();
     on_stage("reconstruct");

@@ -3,8 +3,8 @@
 
 use glam::Vec3;
 use meniscus::io::particles::{
-    read_particles, stream_bgeo_positions, stream_vtk_positions, write_particles, ParticleFormat,
-    Particles, PointAttribute,
+    read_particles, stream_bgeo_positions, stream_ply_positions, stream_vtk_positions,
+    write_particles, ParticleFormat, Particles, PointAttribute,
 };
 use meniscus::Error;
 use std::path::{Path, PathBuf};
@@ -406,6 +406,69 @@ fn binary_vtk_streams_its_points_like_it_reads_whole() {
         dir.path(),
         "a.vtk",
         b"# vtk DataFile Version 3.0\na\nASCII\nDATASET POLYDATA\nPOINTS 1 float\n1 2 3\n",
+    );
+    assert_eq!(collect(&ascii).0, None);
+}
+
+#[test]
+fn binary_ply_streams_its_vertices_like_it_reads_whole() {
+    let collect = |path: &Path| {
+        let mut out = Vec::new();
+        let n = stream_ply_positions(path, &mut |chunk| {
+            out.extend_from_slice(chunk);
+            Ok(())
+        })
+        .unwrap();
+        (n, out)
+    };
+    let dir = tempfile::tempdir().unwrap();
+    // The written sample (velocity and density interleaved with the positions).
+    let written = dir.path().join("sample.ply");
+    write_particles(&written, &sample(), ParticleFormat::Ply).unwrap();
+    let (n, streamed) = collect(&written);
+    assert_eq!(n, Some(50));
+    assert_eq!(bits(&streamed), bits(&sample().positions));
+    // Big-endian doubles behind another property, over two chunks, a face element after.
+    let positions: Vec<Vec3> = (0..70_000)
+        .map(|i| Vec3::new(i as f32 * 0.5, (i % 11) as f32, -(i as f32) * 0.01))
+        .collect();
+    let mut bytes = format!(
+        "ply\nformat binary_big_endian 1.0\ncomment test\nelement vertex {}\nproperty uchar tag\nproperty double x\nproperty double y\nproperty double z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n",
+        positions.len()
+    )
+    .into_bytes();
+    for p in &positions {
+        bytes.push(7);
+        for c in p.to_array() {
+            bytes.extend_from_slice(&(c as f64).to_be_bytes());
+        }
+    }
+    bytes.push(3);
+    for i in [0i32, 1, 2] {
+        bytes.extend_from_slice(&i.to_be_bytes());
+    }
+    let big = write(dir.path(), "big.ply", &bytes);
+    let (n, streamed) = collect(&big);
+    assert_eq!(n, Some(positions.len()));
+    assert_eq!(bits(&streamed), bits(&positions));
+    assert_eq!(
+        bits(&read_particles(&big, None).unwrap().positions),
+        bits(&positions)
+    );
+    // Cut in the vertices: a clear error.
+    let cut = write(dir.path(), "cut.ply", &bytes[..bytes.len() / 2]);
+    let err = stream_ply_positions(&cut, &mut |_| Ok(()))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("cut.ply") && err.contains("truncated"),
+        "{err}"
+    );
+    // ASCII is left to the whole-file reader.
+    let ascii = write(
+        dir.path(),
+        "a.ply",
+        b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n",
     );
     assert_eq!(collect(&ascii).0, None);
 }

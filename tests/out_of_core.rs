@@ -332,24 +332,39 @@ fn marching_cubes_files_are_byte_identical_for_any_tiling_and_thread_count() {
 }
 
 #[test]
-fn gzip_bgeo_and_binary_vtk_are_streamed_and_mesh_like_their_xyz() {
-    // The shipped BGEO and VTK hold the same positions as the .xyz of the frame: streamed
-    // into a temporary .xyz and mapped, they must give the same file, tiled or not, and
-    // leave no temporary file behind.
+fn bgeo_vtk_and_ply_are_streamed_and_mesh_like_their_xyz() {
+    // The shipped BGEO and VTK (and a PLY written from them) hold the same positions as
+    // the .xyz of the frame: streamed into a temporary .xyz and mapped, they must give the
+    // same file, tiled or not, and leave no temporary file behind.
     let dir = tempfile::tempdir().unwrap();
     let temp = dir.path().join("temp");
     std::fs::create_dir(&temp).unwrap();
+    // The frame as binary PLY too.
+    let ply = dir.path().join("frame25.ply");
+    let particles = meniscus::io::particles::read_particles(
+        &dataset("dambreak_small/ParticleData_Fluid_25.vtk"),
+        None,
+    )
+    .unwrap();
+    meniscus::io::particles::write_particles(
+        &ply,
+        &particles,
+        meniscus::io::particles::ParticleFormat::Ply,
+    )
+    .unwrap();
     for tiles in [None, Some("64")] {
         let mut outputs = Vec::new();
         for input in [
-            "ParticleData_Fluid_25.bgeo",
-            "ParticleData_Fluid_25.vtk",
-            "ParticleData_Fluid_25.xyz",
+            dataset("dambreak_small/ParticleData_Fluid_25.bgeo"),
+            dataset("dambreak_small/ParticleData_Fluid_25.vtk"),
+            ply.clone(),
+            dataset("dambreak_small/ParticleData_Fluid_25.xyz"),
         ] {
-            let out = dir.path().join(format!("{input}.ply"));
+            let name = input.file_name().unwrap().to_string_lossy().into_owned();
+            let out = dir.path().join(format!("{name}.out.ply"));
             let mut cmd = meniscus();
             cmd.arg("reconstruct")
-                .arg(dataset(&format!("dambreak_small/{input}")))
+                .arg(&input)
                 .args(["-r", "0.012", "-q", "--temp-dir"])
                 .arg(&temp)
                 .arg("-o")

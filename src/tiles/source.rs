@@ -133,7 +133,7 @@ impl ParticleSource for MappedXyz {
     }
 }
 
-/// Particles of a file that cannot be mapped as it is (gzip BGEO; big-endian binary VTK),
+/// Particles of a file that cannot be mapped as it is (gzip BGEO, binary VTK and PLY),
 /// streamed once into a raw `.xyz` temporary file (positions only, 12 bytes per particle) and then read like
 /// [`MappedXyz`]: memory stays one chunk while converting and one window while reading,
 /// whatever the input size. The temporary file is removed when this is dropped (also on
@@ -144,22 +144,30 @@ pub struct SpooledXyz {
 }
 
 impl SpooledXyz {
-    /// Streams the positions of the BGEO file `path` into a temporary file in `temp_dir`
-    /// (`None`: the system's temporary directory).
-    pub fn from_bgeo(path: &Path, temp_dir: Option<&Path>) -> Result<SpooledXyz> {
-        let spooled = Self::spool(path, temp_dir, &mut |sink| {
-            crate::io::particles::stream_bgeo_positions(path, sink).map(Some)
-        })?;
-        Ok(spooled.expect("BGEO always streams"))
-    }
-
-    /// Streams the positions of the binary legacy VTK file `path` into a temporary file
-    /// in `temp_dir`; `Ok(None)` when its layout is not the streamable one (see
-    /// [`crate::io::particles::stream_vtk_positions`]).
-    pub fn from_vtk(path: &Path, temp_dir: Option<&Path>) -> Result<Option<SpooledXyz>> {
-        Self::spool(path, temp_dir, &mut |sink| {
-            crate::io::particles::stream_vtk_positions(path, sink)
-        })
+    /// Streams the positions of `path` (in `format`) into a temporary file in `temp_dir`
+    /// (`None`: the system's temporary directory). Gzip or plain BGEO always streams;
+    /// binary VTK and binary PLY when their points come first
+    /// ([`crate::io::particles::stream_vtk_positions`],
+    /// [`crate::io::particles::stream_ply_positions`]); `Ok(None)` otherwise (and for
+    /// `.xyz`, which is mapped as it is).
+    pub fn from_file(
+        path: &Path,
+        format: crate::io::particles::ParticleFormat,
+        temp_dir: Option<&Path>,
+    ) -> Result<Option<SpooledXyz>> {
+        use crate::io::particles::{self as p, ParticleFormat};
+        match format {
+            ParticleFormat::Xyz => Ok(None),
+            ParticleFormat::Bgeo => Self::spool(path, temp_dir, &mut |sink| {
+                p::stream_bgeo_positions(path, sink).map(Some)
+            }),
+            ParticleFormat::Vtk => Self::spool(path, temp_dir, &mut |sink| {
+                p::stream_vtk_positions(path, sink)
+            }),
+            ParticleFormat::Ply => Self::spool(path, temp_dir, &mut |sink| {
+                p::stream_ply_positions(path, sink)
+            }),
+        }
     }
 
     /// Runs `stream` with a sink that appends to a new temporary `.xyz`, then maps it.
@@ -169,6 +177,15 @@ impl SpooledXyz {
         temp_dir: Option<&Path>,
         stream: &mut dyn FnMut(&mut dyn FnMut(&[Vec3]) -> Result<()>) -> Result<Option<usize>>,
     ) -> Result<Option<SpooledXyz>> {
+        if std::fs::metadata(path)
+            .map_err(|e| Error::io(path, e))?
+            .len()
+            == 0
+        {
+            return Err(Error::EmptyInput {
+                path: path.to_path_buf(),
+            });
+        }
         let dir = temp_dir
             .map(Path::to_path_buf)
             .unwrap_or_else(std::env::temp_dir);

@@ -17,6 +17,7 @@ mod vtk;
 mod xyz;
 
 pub use bgeo::stream_positions as stream_bgeo_positions;
+pub use ply::stream_positions as stream_ply_positions;
 pub use vtk::stream_positions as stream_vtk_positions;
 
 use crate::error::{Error, Result};

@@ -127,3 +127,97 @@ pub(super) fn write(path: &Path, particles: &Particles) -> Result<()> {
     })
     .map(|_| ())
 }
+
+/// Vertices decoded per chunk by [`stream_positions`].
+const CHUNK_POINTS: usize = 1 << 16;
+
+/// Streams the positions of a binary PLY file whose first element is `vertex` (scalar
+/// properties only) from disk in chunks of at most 65 536 particles; the rest of the file
+/// is not read. Returns `Ok(None)` for any other layout (ASCII, another element first, a
+/// list property, an unreadable header), which the whole-file reader handles and reports
+/// on. Memory: one chunk, whatever the file size.
+pub fn stream_positions(
+    path: &Path,
+    positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
+) -> Result<Option<usize>> {
+    use crate::error::Error;
+    use std::io::{BufRead, Read};
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut r = std::io::BufReader::with_capacity(1 << 20, file);
+    let mut header = Vec::new();
+    loop {
+        let n = r
+            .read_until(b'\n', &mut header)
+            .map_err(|e| Error::io(path, e))?;
+        if n == 0 || header.len() > 1 << 16 {
+            return Ok(None);
+        }
+        if header.ends_with(b"end_header\n") {
+            break;
+        }
+    }
+    let mut c = Cursor::new(path, &header);
+    let Ok(h) = ply_header::parse(&mut c) else {
+        return Ok(None);
+    };
+    let Some(big_endian) = h.binary else {
+        return Ok(None);
+    };
+    let Some(element) = h.elements.first().filter(|e| e.name == "vertex") else {
+        return Ok(None);
+    };
+    if element.properties.iter().any(|p| p.list_count.is_some()) {
+        return Ok(None);
+    }
+    let (Some(x), Some(y), Some(z)) = (element.find("x"), element.find("y"), element.find("z"))
+    else {
+        return Ok(None);
+    };
+    let mut offsets = Vec::with_capacity(element.properties.len());
+    let mut stride = 0;
+    for p in &element.properties {
+        offsets.push(stride);
+        stride += p.scalar.size();
+    }
+    let field = |rec: &[u8], k: usize| -> f32 {
+        let p = &element.properties[k];
+        p.scalar
+            .decode(&rec[offsets[k]..offsets[k] + p.scalar.size()], big_endian) as f32
+    };
+    let count = element.count;
+    let mut offset = header.len() as u64;
+    let mut bytes = vec![0u8; CHUNK_POINTS.min(count) * stride];
+    let mut chunk: Vec<Vec3> = Vec::with_capacity(CHUNK_POINTS.min(count));
+    let mut first = 0;
+    while first < count {
+        let n = CHUNK_POINTS.min(count - first);
+        let data = &mut bytes[..n * stride];
+        r.read_exact(data).map_err(|e| {
+            Error::parse(
+                path,
+                format!("byte offset {offset}, vertex {first}"),
+                if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                    format!("truncated while reading the {count} vertices: the file ends first")
+                } else {
+                    format!("cannot read the vertices: {e}")
+                },
+            )
+        })?;
+        chunk.clear();
+        for (k, rec) in data.chunks_exact(stride).enumerate() {
+            let p = Vec3::new(field(rec, x), field(rec, y), field(rec, z));
+            if !p.is_finite() {
+                return Err(Error::parse(
+                    path,
+                    format!("vertex {}", first + k),
+                    format!("non-finite coordinate {p}"),
+                ));
+            }
+            chunk.push(p);
+        }
+        positions(&chunk)?;
+        offset += data.len() as u64;
+        first += n;
+    }
+    Ok(Some(count))
+}
