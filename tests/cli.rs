@@ -287,3 +287,64 @@ fn a_sequence_into_one_gltf_plays_frame_by_frame() {
     let scales: Vec<[f32; 3]> = gltf.nodes().map(|n| n.transform().decomposed().2).collect();
     assert_eq!(scales, [[1.0; 3], [0.0; 3], [0.0; 3]]);
 }
+
+#[test]
+fn an_archived_frame_extracts_to_the_mesh_reconstruct_writes() {
+    // reconstruct -o run.mseq stops before the Loop step and lets the archive redo it: the
+    // extracted frame must have the direct run's vertices and triangles, every vertex
+    // within the bound (0.01 r) of the direct run's nearest one, with the same volume.
+    let dir = tempfile::tempdir().unwrap();
+    let input = dataset("dambreak_small/ParticleData_Fluid_25.xyz");
+    let input = input.to_str().unwrap();
+    let direct = dir.path().join("direct.ply");
+    let archive = dir.path().join("run.mseq");
+    let extracted = dir.path().join("extracted.ply");
+    for out in [&direct, &archive] {
+        let (ok, err) = run(&[
+            "reconstruct",
+            input,
+            "-r",
+            "0.012",
+            "-q",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+    }
+    let (ok, err) = run(&[
+        "archive",
+        "extract",
+        archive.to_str().unwrap(),
+        "--frame",
+        "0",
+        "-o",
+        extracted.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let a = meniscus::io::mesh::read_mesh(&direct).unwrap();
+    let b = meniscus::io::mesh::read_mesh(&extracted).unwrap();
+    assert_eq!(a.triangle_count(), b.triangle_count());
+    assert_eq!(a.vertex_count(), b.vertex_count());
+    let bound = 0.01 * 0.012 * 1.001 + 1e-7;
+    let cell = |p: glam::Vec3| (p / 0.002).floor().as_ivec3();
+    let mut grid: std::collections::HashMap<glam::IVec3, Vec<glam::Vec3>> = Default::default();
+    for p in &a.positions {
+        grid.entry(cell(*p)).or_default().push(*p);
+    }
+    for p in &b.positions {
+        let c = cell(*p);
+        let near = (0..27).any(|d| {
+            let key = c + glam::IVec3::new(d % 3 - 1, d / 3 % 3 - 1, d / 9 - 1);
+            grid.get(&key).is_some_and(|v| {
+                v.iter()
+                    .any(|q| (*q - *p).abs().max_element() as f64 <= bound)
+            })
+        });
+        assert!(
+            near,
+            "extracted vertex {p} has no direct vertex within the bound"
+        );
+    }
+    let (va, vb) = (a.signed_volume(), b.signed_volume());
+    assert!((va - vb).abs() <= 1e-3 * va.abs(), "volumes {va} and {vb}");
+}
