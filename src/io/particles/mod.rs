@@ -144,6 +144,74 @@ pub fn write_particles(path: &Path, particles: &Particles, format: ParticleForma
     }
 }
 
+/// Records decoded per chunk by the streaming readers.
+const CHUNK_RECORDS: usize = 1 << 16;
+
+/// Where the fixed-size records of a binary file are, and what they are called in error
+/// messages ("particle"/"points").
+struct Records {
+    /// Byte offset of the first record in the file.
+    offset: u64,
+    count: usize,
+    /// Bytes per record.
+    stride: usize,
+    one: &'static str,
+    many: &'static str,
+}
+
+/// Reads the records from `reader` (positioned at the first one) in chunks of at most
+/// 65 536, takes each record's position with `position`, checks it is finite and hands
+/// the chunks to `sink`. Memory: one chunk.
+fn stream_records(
+    path: &Path,
+    reader: &mut dyn std::io::Read,
+    records: Records,
+    position: &dyn Fn(&[u8]) -> Vec3,
+    sink: &mut dyn FnMut(&[Vec3]) -> Result<()>,
+) -> Result<()> {
+    let Records {
+        mut offset,
+        count,
+        stride,
+        one,
+        many,
+    } = records;
+    let mut bytes = vec![0u8; CHUNK_RECORDS.min(count) * stride];
+    let mut chunk: Vec<Vec3> = Vec::with_capacity(CHUNK_RECORDS.min(count));
+    let mut first = 0;
+    while first < count {
+        let n = CHUNK_RECORDS.min(count - first);
+        let data = &mut bytes[..n * stride];
+        reader.read_exact(data).map_err(|e| {
+            Error::parse(
+                path,
+                format!("byte offset {offset}, {one} {first}"),
+                if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                    format!("truncated while reading the {count} {many}: the file ends first")
+                } else {
+                    format!("cannot read the {many}: {e}")
+                },
+            )
+        })?;
+        chunk.clear();
+        for (k, record) in data.chunks_exact(stride).enumerate() {
+            let p = position(record);
+            if !p.is_finite() {
+                return Err(Error::parse(
+                    path,
+                    format!("{one} {}", first + k),
+                    format!("non-finite coordinate {p}"),
+                ));
+            }
+            chunk.push(p);
+        }
+        sink(&chunk)?;
+        offset += data.len() as u64;
+        first += n;
+    }
+    Ok(())
+}
+
 fn check_finite(path: &Path, positions: &[Vec3]) -> Result<()> {
     match positions.iter().position(|p| !p.is_finite()) {
         None => Ok(()),

@@ -128,9 +128,6 @@ pub(super) fn write(path: &Path, particles: &Particles) -> Result<()> {
     .map(|_| ())
 }
 
-/// Vertices decoded per chunk by [`stream_positions`].
-const CHUNK_POINTS: usize = 1 << 16;
-
 /// Streams the positions of a binary PLY file whose first element is `vertex` (scalar
 /// properties only) from disk in chunks of at most 65 536 particles; the rest of the file
 /// is not read. Returns `Ok(None)` for any other layout (ASCII, another element first, a
@@ -141,7 +138,7 @@ pub fn stream_positions(
     positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
 ) -> Result<Option<usize>> {
     use crate::error::Error;
-    use std::io::{BufRead, Read};
+    use std::io::BufRead;
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let mut r = std::io::BufReader::with_capacity(1 << 20, file);
     let mut header = Vec::new();
@@ -184,40 +181,18 @@ pub fn stream_positions(
         p.scalar
             .decode(&rec[offsets[k]..offsets[k] + p.scalar.size()], big_endian) as f32
     };
-    let count = element.count;
-    let mut offset = header.len() as u64;
-    let mut bytes = vec![0u8; CHUNK_POINTS.min(count) * stride];
-    let mut chunk: Vec<Vec3> = Vec::with_capacity(CHUNK_POINTS.min(count));
-    let mut first = 0;
-    while first < count {
-        let n = CHUNK_POINTS.min(count - first);
-        let data = &mut bytes[..n * stride];
-        r.read_exact(data).map_err(|e| {
-            Error::parse(
-                path,
-                format!("byte offset {offset}, vertex {first}"),
-                if e.kind() == std::io::ErrorKind::UnexpectedEof {
-                    format!("truncated while reading the {count} vertices: the file ends first")
-                } else {
-                    format!("cannot read the vertices: {e}")
-                },
-            )
-        })?;
-        chunk.clear();
-        for (k, rec) in data.chunks_exact(stride).enumerate() {
-            let p = Vec3::new(field(rec, x), field(rec, y), field(rec, z));
-            if !p.is_finite() {
-                return Err(Error::parse(
-                    path,
-                    format!("vertex {}", first + k),
-                    format!("non-finite coordinate {p}"),
-                ));
-            }
-            chunk.push(p);
-        }
-        positions(&chunk)?;
-        offset += data.len() as u64;
-        first += n;
-    }
-    Ok(Some(count))
+    super::stream_records(
+        path,
+        &mut r,
+        super::Records {
+            offset: header.len() as u64,
+            count: element.count,
+            stride,
+            one: "vertex",
+            many: "vertices",
+        },
+        &|record| Vec3::new(field(record, x), field(record, y), field(record, z)),
+        positions,
+    )?;
+    Ok(Some(element.count))
 }

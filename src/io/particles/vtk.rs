@@ -264,9 +264,6 @@ pub(super) fn write(path: &Path, particles: &Particles) -> Result<()> {
     .map(|_| ())
 }
 
-/// Points decoded per chunk by [`stream_positions`].
-const CHUNK_POINTS: usize = 1 << 16;
-
 /// Streams the positions of a BINARY legacy VTK file whose first data section is
 /// `POINTS n float|double` (what SPlisHSPlasH and DualSPHysics write) from disk in chunks
 /// of at most 65 536 particles; the rest of the file is not read. Returns `Ok(None)` for
@@ -276,7 +273,7 @@ pub fn stream_positions(
     path: &Path,
     positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
 ) -> Result<Option<usize>> {
-    use std::io::{BufRead, Read};
+    use std::io::BufRead;
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let mut r = std::io::BufReader::with_capacity(1 << 20, file);
     let mut offset = 0u64;
@@ -322,45 +319,31 @@ pub fn stream_positions(
         }
     };
     let size = if double { 24 } else { 12 };
-    let mut bytes = vec![0u8; CHUNK_POINTS.min(count) * size];
-    let mut chunk: Vec<Vec3> = Vec::with_capacity(CHUNK_POINTS.min(count));
-    let mut first = 0;
-    while first < count {
-        let n = CHUNK_POINTS.min(count - first);
-        let data = &mut bytes[..n * size];
-        r.read_exact(data).map_err(|e| {
-            Error::parse(
-                path,
-                format!("byte offset {offset}, particle {first}"),
-                if e.kind() == std::io::ErrorKind::UnexpectedEof {
-                    format!("truncated while reading the {count} points: the file ends first")
-                } else {
-                    format!("cannot read the points: {e}")
-                },
-            )
-        })?;
-        chunk.clear();
-        for (k, rec) in data.chunks_exact(size).enumerate() {
-            let c = |i: usize| -> f32 {
-                if double {
-                    f64::from_be_bytes(rec[8 * i..8 * i + 8].try_into().expect("8 bytes")) as f32
-                } else {
-                    f32::from_be_bytes(rec[4 * i..4 * i + 4].try_into().expect("4 bytes"))
-                }
-            };
-            let p = Vec3::new(c(0), c(1), c(2));
-            if !p.is_finite() {
-                return Err(Error::parse(
-                    path,
-                    format!("particle {}", first + k),
-                    format!("non-finite coordinate {p}"),
-                ));
-            }
-            chunk.push(p);
+    let coordinate = |record: &[u8], i: usize| -> f32 {
+        if double {
+            f64::from_be_bytes(record[8 * i..8 * i + 8].try_into().expect("8 bytes")) as f32
+        } else {
+            f32::from_be_bytes(record[4 * i..4 * i + 4].try_into().expect("4 bytes"))
         }
-        positions(&chunk)?;
-        offset += data.len() as u64;
-        first += n;
-    }
+    };
+    super::stream_records(
+        path,
+        &mut r,
+        super::Records {
+            offset,
+            count,
+            stride: size,
+            one: "particle",
+            many: "points",
+        },
+        &|record| {
+            Vec3::new(
+                coordinate(record, 0),
+                coordinate(record, 1),
+                coordinate(record, 2),
+            )
+        },
+        positions,
+    )?;
     Ok(Some(count))
 }
