@@ -5,8 +5,8 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use meniscus::archive::{ArchiveOptions, ArchiveReader, ArchiveWriter};
 use meniscus::decimation::DecimateOptions;
+use meniscus::io::mesh::read_mesh;
 use meniscus::io::mesh::MeshWriteOptions;
-use meniscus::io::mesh::{read_mesh, write_surface};
 use meniscus::io::particles::ParticleFormat;
 use meniscus::job::{peak_rss_bytes, plan_frames, run_frames, FrameReport, JobOptions};
 use meniscus::pipeline::ReconstructOptions;
@@ -286,24 +286,12 @@ fn archive(command: ArchiveCommand) -> Result<(), String> {
             output,
         } => {
             let r = ArchiveReader::open(&file).map_err(text)?;
-            let options = MeshWriteOptions::default();
-            match frame {
-                Some(n) if !meniscus::sequence::is_pattern(&output) => {
-                    let surface = r.read_surface(n).map_err(text)?;
-                    let path = std::path::Path::new(&output);
-                    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-                        std::fs::create_dir_all(dir)
-                            .map_err(|e| format!("{}: {e}", dir.display()))?;
-                    }
-                    write_surface(path, &surface, &options).map_err(text)?;
-                }
-                _ => {
-                    let numbers = frame.map(|n| vec![n]);
-                    let written = r
-                        .extract(numbers.as_deref(), &output, &options)
-                        .map_err(text)?;
-                    eprintln!("{} frame(s) written", written.len());
-                }
+            let numbers = frame.map(|n| vec![n]);
+            let written = r
+                .extract(numbers.as_deref(), &output, &MeshWriteOptions::default())
+                .map_err(text)?;
+            if frame.is_none() {
+                eprintln!("{} frame(s) written", written.len());
             }
         }
         ArchiveCommand::Pack {

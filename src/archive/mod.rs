@@ -349,17 +349,11 @@ impl ArchiveReader {
         .map_err(|m| archive_error(&self.path, Some(f.number), m))
     }
 
-    /// Decodes the frames `numbers`, two or more at a time (one per worker thread), in
-    /// the order given.
-    pub fn read_surfaces(&self, numbers: &[i64]) -> Result<Vec<Surface>> {
-        use rayon::prelude::*;
-        numbers.par_iter().map(|&n| self.read_surface(n)).collect()
-    }
-
     /// Writes the frames `numbers` (all frames when `None`) to the files `output_pattern`
-    /// names, its `{}` replaced by the frame number, in any format
-    /// [`crate::io::mesh::write_surface`] writes; frames are decoded and written in
-    /// parallel, each file complete or absent. Returns the files in frame order.
+    /// names, its `{}` replaced by the frame number (one frame may also go to a plain
+    /// path), in any format [`crate::io::mesh::write_surface`] writes; missing
+    /// directories are made; frames are decoded and written in parallel, each file
+    /// complete or absent. Returns the files in frame order.
     pub fn extract(
         &self,
         numbers: Option<&[i64]>,
@@ -367,7 +361,8 @@ impl ArchiveReader {
         options: &crate::io::mesh::MeshWriteOptions,
     ) -> Result<Vec<PathBuf>> {
         use rayon::prelude::*;
-        if !crate::sequence::is_pattern(output_pattern) {
+        let single = numbers.is_some_and(|n| n.len() == 1);
+        if !single && !crate::sequence::is_pattern(output_pattern) {
             return Err(Error::InvalidOption {
                 option: "--output",
                 message: format!(
