@@ -346,17 +346,52 @@ fn bgeo_streams_in_chunks_like_it_reads_whole() {
     );
 }
 
+/// A streaming reader's count and positions, gathered from its chunks.
+type StreamFn =
+    fn(&Path, &mut dyn FnMut(&[Vec3]) -> meniscus::Result<()>) -> meniscus::Result<Option<usize>>;
+
+fn streamed(stream: StreamFn, path: &Path) -> (Option<usize>, Vec<Vec3>) {
+    let mut out = Vec::new();
+    let n = stream(path, &mut |chunk| {
+        out.extend_from_slice(chunk);
+        Ok(())
+    })
+    .unwrap();
+    (n, out)
+}
+
+/// The checks both streaming readers share: a big file (`bytes`, holding `positions`)
+/// streams and reads whole to those positions, its first half is a clear "truncated"
+/// error, and an ASCII file is declined.
+fn check_big_cut_and_ascii(
+    stream: StreamFn,
+    dir: &Path,
+    ext: &str,
+    bytes: &[u8],
+    positions: &[Vec3],
+    ascii: &[u8],
+) {
+    let big = write(dir, &format!("big.{ext}"), bytes);
+    let (n, got) = streamed(stream, &big);
+    assert_eq!(n, Some(positions.len()));
+    assert_eq!(bits(&got), bits(positions));
+    assert_eq!(
+        bits(&read_particles(&big, None).unwrap().positions),
+        bits(positions)
+    );
+    let cut = write(dir, &format!("cut.{ext}"), &bytes[..bytes.len() / 2]);
+    let err = stream(&cut, &mut |_| Ok(())).unwrap_err().to_string();
+    assert!(
+        err.contains(&format!("cut.{ext}")) && err.contains("truncated"),
+        "{err}"
+    );
+    let ascii = write(dir, &format!("a.{ext}"), ascii);
+    assert_eq!(streamed(stream, &ascii).0, None);
+}
+
 #[test]
 fn binary_vtk_streams_its_points_like_it_reads_whole() {
-    let collect = |path: &Path| {
-        let mut out = Vec::new();
-        let n = stream_vtk_positions(path, &mut |chunk| {
-            out.extend_from_slice(chunk);
-            Ok(())
-        })
-        .unwrap();
-        (n, out)
-    };
+    let collect = |path: &Path| streamed(stream_vtk_positions, path);
     // Shipped frames (SPlisHSPlasH layout, float points) and the written sample (with
     // point data after the points).
     let dir = tempfile::tempdir().unwrap();
@@ -384,43 +419,19 @@ fn binary_vtk_streams_its_points_like_it_reads_whole() {
             doubles.extend_from_slice(&(c as f64).to_be_bytes());
         }
     }
-    let big = write(dir.path(), "big.vtk", &doubles);
-    let (n, streamed) = collect(&big);
-    assert_eq!(n, Some(positions.len()));
-    assert_eq!(bits(&streamed), bits(&positions));
-    assert_eq!(
-        bits(&read_particles(&big, None).unwrap().positions),
-        bits(&positions)
-    );
-    // Cut in the points: a clear error.
-    let cut = write(dir.path(), "cut.vtk", &doubles[..doubles.len() / 2]);
-    let err = stream_vtk_positions(&cut, &mut |_| Ok(()))
-        .unwrap_err()
-        .to_string();
-    assert!(
-        err.contains("cut.vtk") && err.contains("truncated"),
-        "{err}"
-    );
-    // ASCII is left to the whole-file reader.
-    let ascii = write(
+    check_big_cut_and_ascii(
+        stream_vtk_positions,
         dir.path(),
-        "a.vtk",
+        "vtk",
+        &doubles,
+        &positions,
         b"# vtk DataFile Version 3.0\na\nASCII\nDATASET POLYDATA\nPOINTS 1 float\n1 2 3\n",
     );
-    assert_eq!(collect(&ascii).0, None);
 }
 
 #[test]
 fn binary_ply_streams_its_vertices_like_it_reads_whole() {
-    let collect = |path: &Path| {
-        let mut out = Vec::new();
-        let n = stream_ply_positions(path, &mut |chunk| {
-            out.extend_from_slice(chunk);
-            Ok(())
-        })
-        .unwrap();
-        (n, out)
-    };
+    let collect = |path: &Path| streamed(stream_ply_positions, path);
     let dir = tempfile::tempdir().unwrap();
     // The written sample (velocity and density interleaved with the positions).
     let written = dir.path().join("sample.ply");
@@ -447,28 +458,12 @@ fn binary_ply_streams_its_vertices_like_it_reads_whole() {
     for i in [0i32, 1, 2] {
         bytes.extend_from_slice(&i.to_be_bytes());
     }
-    let big = write(dir.path(), "big.ply", &bytes);
-    let (n, streamed) = collect(&big);
-    assert_eq!(n, Some(positions.len()));
-    assert_eq!(bits(&streamed), bits(&positions));
-    assert_eq!(
-        bits(&read_particles(&big, None).unwrap().positions),
-        bits(&positions)
-    );
-    // Cut in the vertices: a clear error.
-    let cut = write(dir.path(), "cut.ply", &bytes[..bytes.len() / 2]);
-    let err = stream_ply_positions(&cut, &mut |_| Ok(()))
-        .unwrap_err()
-        .to_string();
-    assert!(
-        err.contains("cut.ply") && err.contains("truncated"),
-        "{err}"
-    );
-    // ASCII is left to the whole-file reader.
-    let ascii = write(
+    check_big_cut_and_ascii(
+        stream_ply_positions,
         dir.path(),
-        "a.ply",
+        "ply",
+        &bytes,
+        &positions,
         b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n",
     );
-    assert_eq!(collect(&ascii).0, None);
 }
