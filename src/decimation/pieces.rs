@@ -110,14 +110,25 @@ pub(super) fn decimate_by_regions(
     drop(order);
     let regions = nv.div_ceil(region_vertices);
     // Triangles with all three vertices in one region are that region's; the others are
-    // seam triangles, and their vertices stay locked until the final pass.
-    let mut region_tris: Vec<Vec<u32>> = vec![Vec::new(); regions];
+    // seam triangles, and their vertices stay locked until the final pass. A region's
+    // vertices are numbered in order of first use by its triangles (what [`extract`]
+    // does), in one pass here so that the regions can then be decimated in parallel.
+    let mut region_tris: Vec<Vec<[u32; 3]>> = vec![Vec::new(); regions];
+    let mut region_vertices_of: Vec<Vec<u32>> = vec![Vec::new(); regions];
+    let mut local_of = vec![u32::MAX; nv];
     let mut seam_tris = Vec::new();
     let mut on_seam = vec![false; nv];
     for (t, tri) in mesh.triangles.iter().enumerate() {
         let r = region_of[tri[0] as usize];
         if tri.iter().all(|&v| region_of[v as usize] == r) {
-            region_tris[r as usize].push(t as u32);
+            let globals = &mut region_vertices_of[r as usize];
+            region_tris[r as usize].push(tri.map(|v| {
+                if local_of[v as usize] == u32::MAX {
+                    local_of[v as usize] = globals.len() as u32;
+                    globals.push(v);
+                }
+                local_of[v as usize]
+            }));
         } else {
             seam_tris.push(t as u32);
             for &v in tri {
@@ -125,13 +136,42 @@ pub(super) fn decimate_by_regions(
             }
         }
     }
-    drop(region_of);
+    drop((region_of, local_of));
 
     let mut stats = DecimateStats {
         triangles_before: before,
         regions,
         ..Default::default()
     };
+    // Regions are decimated in parallel (each also runs its passes in parallel inside),
+    // and placed in region order, so the output does not depend on the thread count.
+    let decimated: Vec<(Piece, DecimateStats, Vec<u32>)> = region_tris
+        .into_par_iter()
+        .zip(region_vertices_of)
+        .filter(|(tris, _)| !tris.is_empty())
+        .map(|(triangles, global_of)| {
+            let mut piece = Piece {
+                mesh: TriMesh {
+                    positions: global_of
+                        .iter()
+                        .map(|&g| mesh.positions[g as usize])
+                        .collect(),
+                    triangles,
+                    normals: Vec::new(),
+                },
+                global_of,
+            };
+            let locked: Vec<bool> = piece
+                .global_of
+                .iter()
+                .map(|&g| on_seam[g as usize])
+                .collect();
+            let region_target = options.target_triangles(piece.mesh.triangle_count());
+            let (region_stats, remap) =
+                decimate_locked(&mut piece.mesh, region_target, options.max_error, &locked);
+            (piece, region_stats, remap)
+        })
+        .collect();
     let mut positions: Vec<Vec3> = Vec::new();
     let mut triangles: Vec<[u32; 3]> = Vec::new();
     // Output index of each seam vertex, once placed; seam vertices keep their exact input
@@ -144,26 +184,7 @@ pub(super) fn decimate_by_regions(
         }
         seam_index[g]
     };
-    let mut scratch = vec![u32::MAX; nv];
-    for tris in &mut region_tris {
-        let tris = std::mem::take(tris);
-        if tris.is_empty() {
-            continue;
-        }
-        let mut piece = extract(
-            mesh,
-            tris.iter().map(|&t| mesh.triangles[t as usize]),
-            &mut scratch,
-        );
-        drop(tris);
-        let locked: Vec<bool> = piece
-            .global_of
-            .iter()
-            .map(|&g| on_seam[g as usize])
-            .collect();
-        let region_target = options.target_triangles(piece.mesh.triangle_count());
-        let (region_stats, remap) =
-            decimate_locked(&mut piece.mesh, region_target, options.max_error, &locked);
+    for (piece, region_stats, remap) in decimated {
         stats.add_work(&region_stats);
         let output_of = place_survivors(
             &piece.mesh,
