@@ -10,6 +10,7 @@ use std::path::Path;
 use std::time::Instant;
 
 fn main() {
+    meniscus::tune_allocator();
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(input) = args.first() else {
         eprintln!("usage: decimate_mesh IN.ply [OUT.ply] [reduction|error=E]");

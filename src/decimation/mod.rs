@@ -438,13 +438,17 @@ impl State {
             .map(|p| (p.as_dvec3() - centre) / scale)
             .collect();
         drop(positions);
-        let reference_normal: Vec<Vec3> = tris
+        // Per triangle: its unit normal and its plane quadric, computed once.
+        let (reference_normal, tri_quadric): (Vec<Vec3>, Vec<Quadric>) = tris
             .par_iter()
             .map(|t| {
                 let [a, b, c] = t.map(|v| pos[v as usize]);
-                (b - a).cross(c - a).normalize_or_zero().as_vec3()
+                (
+                    (b - a).cross(c - a).normalize_or_zero().as_vec3(),
+                    Quadric::from_triangle(a, b, c),
+                )
             })
-            .collect();
+            .unzip();
         // Vertex → triangles, through a counting sort (triangles in increasing order).
         let mut start = vec![0u32; nv + 1];
         for tri in &tris {
@@ -484,12 +488,8 @@ impl State {
                 let mut q = Quadric::default();
                 scratch.clear();
                 for &t in &vert_tris[v] {
+                    q += tri_quadric[t as usize];
                     let tri = tris[t as usize];
-                    q += Quadric::from_triangle(
-                        pos[tri[0] as usize],
-                        pos[tri[1] as usize],
-                        pos[tri[2] as usize],
-                    );
                     scratch.extend(tri.iter().copied().filter(|&w| w as usize != v));
                 }
                 scratch.sort_unstable();
