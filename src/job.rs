@@ -92,10 +92,10 @@ pub fn reconstruct_file(
 ) -> Result<FrameReport> {
     on_stage("read");
     let clock = Instant::now();
-    // Raw .xyz is mapped window by window; BGEO, and binary VTK and PLY with their points
-    // first, are streamed once into a temporary .xyz that is then mapped the same way;
-    // ASCII files are parsed into memory and handed over, so a tiled run can drop them
-    // once they are spilled.
+    // Raw .xyz is mapped window by window; BGEO, and VTK and PLY (binary or ASCII) with
+    // their points first, are streamed once into a temporary .xyz that is then mapped the
+    // same way; other layouts are parsed into memory and handed over, so a tiled run can
+    // drop them once they are spilled.
     let format = match job.input_format {
         Some(f) => f,
         None => ParticleFormat::from_path(input)?,

@@ -362,14 +362,16 @@ fn streamed(stream: StreamFn, path: &Path) -> (Option<usize>, Vec<Vec3>) {
 
 /// The checks both streaming readers share: a big file (`bytes`, holding `positions`)
 /// streams and reads whole to those positions, its first half is a clear "truncated"
-/// error, and an ASCII file is declined.
+/// error; an ASCII file (`ascii`, its last record on line `last_record_line`) streams like
+/// it reads whole, and a cut or a bad number in it is an error naming the line.
 fn check_big_cut_and_ascii(
     stream: StreamFn,
     dir: &Path,
     ext: &str,
     bytes: &[u8],
     positions: &[Vec3],
-    ascii: &[u8],
+    ascii: &str,
+    last_record_line: usize,
 ) {
     let big = write(dir, &format!("big.{ext}"), bytes);
     let (n, got) = streamed(stream, &big);
@@ -385,12 +387,37 @@ fn check_big_cut_and_ascii(
         err.contains(&format!("cut.{ext}")) && err.contains("truncated"),
         "{err}"
     );
-    let ascii = write(dir, &format!("a.{ext}"), ascii);
-    assert_eq!(streamed(stream, &ascii).0, None);
+
+    let text = write(dir, &format!("a.{ext}"), ascii.as_bytes());
+    let whole = read_particles(&text, None).unwrap().positions;
+    assert!(whole.len() > 2);
+    let (n, got) = streamed(stream, &text);
+    assert_eq!(n, Some(whole.len()));
+    assert_eq!(bits(&got), bits(&whole));
+    let lines = last_record_line;
+    let before_last: usize = ascii.lines().take(lines - 1).map(|l| l.len() + 1).sum();
+    let cut = write(
+        dir,
+        &format!("acut.{ext}"),
+        &ascii.as_bytes()[..before_last],
+    );
+    let err = stream(&cut, &mut |_| Ok(())).unwrap_err().to_string();
+    assert!(
+        err.contains("truncated") && err.contains(&format!("line {lines}")),
+        "{err}"
+    );
+    let mut bad = ascii.as_bytes()[..before_last].to_vec();
+    bad.extend_from_slice(b"1 2 oops 4 5 6\n");
+    let bad = write(dir, &format!("abad.{ext}"), &bad);
+    let err = stream(&bad, &mut |_| Ok(())).unwrap_err().to_string();
+    assert!(
+        err.contains("\"oops\"") && err.contains(&format!("line {lines}")),
+        "{err}"
+    );
 }
 
 #[test]
-fn binary_vtk_streams_its_points_like_it_reads_whole() {
+fn vtk_streams_its_points_like_it_reads_whole() {
     let collect = |path: &Path| streamed(stream_vtk_positions, path);
     // Shipped frames (SPlisHSPlasH layout, float points) and the written sample (with
     // point data after the points).
@@ -425,12 +452,14 @@ fn binary_vtk_streams_its_points_like_it_reads_whole() {
         "vtk",
         &doubles,
         &positions,
-        b"# vtk DataFile Version 3.0\na\nASCII\nDATASET POLYDATA\nPOINTS 1 float\n1 2 3\n",
+        // Records spanning lines, several on one line, and a section after the points.
+        "# vtk DataFile Version 3.0\na\nASCII\nDATASET POLYDATA\nPOINTS 4 float\n1 2.5\n-3 4e-3 5 6\n7 8 9\n0.1 0.2 0.3\nVERTICES 0 0\n",
+        9,
     );
 }
 
 #[test]
-fn binary_ply_streams_its_vertices_like_it_reads_whole() {
+fn ply_streams_its_vertices_like_it_reads_whole() {
     let collect = |path: &Path| streamed(stream_ply_positions, path);
     let dir = tempfile::tempdir().unwrap();
     // The written sample (velocity and density interleaved with the positions).
@@ -464,6 +493,8 @@ fn binary_ply_streams_its_vertices_like_it_reads_whole() {
         "ply",
         &bytes,
         &positions,
-        b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n",
+        // Positions behind another property, a face element after the vertices.
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty uchar tag\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n7 1 2 3\n8 -4.5 5e2 6\n9 0.7 0.8 0.9\n3 0 1 2\n",
+        13,
     );
 }

@@ -146,7 +146,7 @@ pub struct SpooledXyz {
 impl SpooledXyz {
     /// Streams the positions of `path` (in `format`) into a temporary file in `temp_dir`
     /// (`None`: the system's temporary directory). Gzip or plain BGEO always streams;
-    /// binary VTK and binary PLY when their points come first
+    /// VTK and PLY, binary or ASCII, when their points come first
     /// ([`crate::io::particles::stream_vtk_positions`],
     /// [`crate::io::particles::stream_ply_positions`]); `Ok(None)` otherwise (and for
     /// `.xyz`, which is mapped as it is).

@@ -212,6 +212,101 @@ fn stream_records(
     Ok(())
 }
 
+/// Where the records of an ASCII file are: `count` records of `fields` whitespace-separated
+/// numbers each (a record may span lines or share one), the position taken from the fields
+/// `xyz`; `line` is the 1-based line number at the reader's position (for errors).
+struct AsciiRecords {
+    line: usize,
+    count: usize,
+    fields: usize,
+    xyz: [usize; 3],
+    one: &'static str,
+    many: &'static str,
+}
+
+/// [`stream_records`] for ASCII files: reads line by line from `reader` (positioned at the
+/// first record), parses numbers like the whole-file readers (as f64, then rounded to
+/// f32) and hands chunks of at most 65 536 positions to `sink`. Memory: one line and one
+/// chunk. What follows the last record is not read.
+fn stream_ascii_records(
+    path: &Path,
+    reader: &mut dyn std::io::BufRead,
+    records: AsciiRecords,
+    sink: &mut dyn FnMut(&[Vec3]) -> Result<()>,
+) -> Result<()> {
+    let AsciiRecords {
+        mut line,
+        count,
+        fields,
+        xyz,
+        one,
+        many,
+    } = records;
+    let mut chunk: Vec<Vec3> = Vec::with_capacity(CHUNK_RECORDS.min(count));
+    let mut text = Vec::new();
+    let (mut done, mut field, mut record) = (0, 0, [0.0f32; 3]);
+    while done < count {
+        text.clear();
+        if reader
+            .read_until(b'\n', &mut text)
+            .map_err(|e| Error::io(path, e))?
+            == 0
+        {
+            return Err(Error::parse(
+                path,
+                format!("line {line}, {one} {done}"),
+                format!("truncated while reading the {count} {many}: the file ends first"),
+            ));
+        }
+        let where_ = |line: usize, done: usize| format!("line {line}, {one} {done}");
+        let words = std::str::from_utf8(&text).map_err(|_| {
+            Error::parse(
+                path,
+                where_(line, done),
+                "expected numbers, found non-text bytes",
+            )
+        })?;
+        for word in words.split_ascii_whitespace() {
+            if done == count {
+                break;
+            }
+            let value: f64 = word.parse().map_err(|_| {
+                Error::parse(
+                    path,
+                    where_(line, done),
+                    format!("expected a number, found {word:?}"),
+                )
+            })?;
+            if let Some(axis) = xyz.iter().position(|&k| k == field) {
+                record[axis] = value as f32;
+            }
+            field += 1;
+            if field == fields {
+                let p = Vec3::from(record);
+                if !p.is_finite() {
+                    return Err(Error::parse(
+                        path,
+                        where_(line, done),
+                        format!("non-finite coordinate {p}"),
+                    ));
+                }
+                chunk.push(p);
+                field = 0;
+                done += 1;
+                if chunk.len() == CHUNK_RECORDS {
+                    sink(&chunk)?;
+                    chunk.clear();
+                }
+            }
+        }
+        line += 1;
+    }
+    if !chunk.is_empty() {
+        sink(&chunk)?;
+    }
+    Ok(())
+}
+
 fn check_finite(path: &Path, positions: &[Vec3]) -> Result<()> {
     match positions.iter().position(|p| !p.is_finite()) {
         None => Ok(()),

@@ -128,11 +128,11 @@ pub(super) fn write(path: &Path, particles: &Particles) -> Result<()> {
     .map(|_| ())
 }
 
-/// Streams the positions of a binary PLY file whose first element is `vertex` (scalar
-/// properties only) from disk in chunks of at most 65 536 particles; the rest of the file
-/// is not read. Returns `Ok(None)` for any other layout (ASCII, another element first, a
+/// Streams the positions of a PLY file (binary or ASCII) whose first element is `vertex`
+/// (scalar properties only) from disk in chunks of at most 65 536 particles; the rest of
+/// the file is not read. Returns `Ok(None)` for any other layout (another element first, a
 /// list property, an unreadable header), which the whole-file reader handles and reports
-/// on. Memory: one chunk, whatever the file size.
+/// on. Memory: one chunk (and, for ASCII, one line), whatever the file size.
 pub fn stream_positions(
     path: &Path,
     positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
@@ -157,9 +157,6 @@ pub fn stream_positions(
     let Ok(h) = ply_header::parse(&mut c) else {
         return Ok(None);
     };
-    let Some(big_endian) = h.binary else {
-        return Ok(None);
-    };
     let Some(element) = h.elements.first().filter(|e| e.name == "vertex") else {
         return Ok(None);
     };
@@ -169,6 +166,22 @@ pub fn stream_positions(
     let (Some(x), Some(y), Some(z)) = (element.find("x"), element.find("y"), element.find("z"))
     else {
         return Ok(None);
+    };
+    let Some(big_endian) = h.binary else {
+        super::stream_ascii_records(
+            path,
+            &mut r,
+            super::AsciiRecords {
+                line: header.iter().filter(|&&b| b == b'\n').count() + 1,
+                count: element.count,
+                fields: element.properties.len(),
+                xyz: [x, y, z],
+                one: "vertex",
+                many: "vertices",
+            },
+            positions,
+        )?;
+        return Ok(Some(element.count));
     };
     let mut offsets = Vec::with_capacity(element.properties.len());
     let mut stride = 0;

@@ -264,11 +264,12 @@ pub(super) fn write(path: &Path, particles: &Particles) -> Result<()> {
     .map(|_| ())
 }
 
-/// Streams the positions of a BINARY legacy VTK file whose first data section is
-/// `POINTS n float|double` (what SPlisHSPlasH and DualSPHysics write) from disk in chunks
-/// of at most 65 536 particles; the rest of the file is not read. Returns `Ok(None)` for
-/// any other layout (ASCII, another section first, another point type), which the
-/// whole-file reader handles and reports on. Memory: one chunk, whatever the file size.
+/// Streams the positions of a legacy VTK file (BINARY or ASCII) whose first data section
+/// is `POINTS n float|double` (what SPlisHSPlasH and DualSPHysics write) from disk in
+/// chunks of at most 65 536 particles; the rest of the file is not read. Returns
+/// `Ok(None)` for any other layout (another section first, another point type), which the
+/// whole-file reader handles and reports on. Memory: one chunk (and, for ASCII, one line),
+/// whatever the file size.
 pub fn stream_positions(
     path: &Path,
     positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
@@ -292,15 +293,18 @@ pub fn stream_positions(
         };
     let header_ok = matches!(next_line(&mut r, &mut offset)?, Some(l) if l.starts_with("# vtk DataFile Version"));
     let _title = next_line(&mut r, &mut offset)?;
-    let binary =
-        matches!(next_line(&mut r, &mut offset)?, Some(l) if l.eq_ignore_ascii_case("BINARY"));
-    if !(header_ok && binary) {
+    let encoding = next_line(&mut r, &mut offset)?;
+    let binary = matches!(&encoding, Some(l) if l.eq_ignore_ascii_case("BINARY"));
+    let ascii = matches!(&encoding, Some(l) if l.eq_ignore_ascii_case("ASCII"));
+    if !(header_ok && (binary || ascii)) {
         return Ok(None);
     }
+    let mut lines_read = 3;
     let (count, double) = loop {
         let Some(l) = next_line(&mut r, &mut offset)? else {
             return Ok(None);
         };
+        lines_read += 1;
         let tokens: Vec<&str> = l.split_whitespace().collect();
         match tokens.as_slice() {
             [] => continue,
@@ -318,6 +322,22 @@ pub fn stream_positions(
             _ => return Ok(None),
         }
     };
+    if ascii {
+        super::stream_ascii_records(
+            path,
+            &mut r,
+            super::AsciiRecords {
+                line: lines_read + 1,
+                count,
+                fields: 3,
+                xyz: [0, 1, 2],
+                one: "particle",
+                many: "points",
+            },
+            positions,
+        )?;
+        return Ok(Some(count));
+    }
     let size = if double { 24 } else { 12 };
     let coordinate = |record: &[u8], i: usize| -> f32 {
         if double {
