@@ -9,9 +9,7 @@
 //! → passes until the triangle target or the error bound is reached: cost every live edge
 //! (in parallel), find the cost of the (2·goal)-th cheapest, collapse every edge below it
 //! in mesh order, each vertex at most once per pass (several passes approximate the
-//! greedy order of a heap, without the heap's cache misses) → compact. An edge's cost is
-//! kept from one pass to the next while neither endpoint moves (a quarter of the costings
-//! on frame 25); it is the same pure function of the state, so the output is unchanged.
+//! greedy order of a heap, without the heap's cache misses) → compact.
 //!
 //! **Parallel walk.** The triangles are cut into fixed chunks of [`CHUNK_TRIANGLES`] in
 //! mesh order (spatially coherent: marching cubes emits them block by block). At the start
@@ -72,7 +70,7 @@ use crate::mesh::TriMesh;
 use glam::{DVec3, Vec3};
 pub(crate) use pieces::place_survivors;
 pub use pieces::{decimate_band, BAND_RINGS};
-use quadric::Quadric;
+use quadric::{Plane, Quadric};
 use rayon::prelude::*;
 
 /// Options of [`decimate`].
@@ -234,45 +232,21 @@ pub fn decimate_locked(
     let mut stalled = false;
     // Multiple of the pass goal that sets the cost limit; grows when passes stall.
     let mut limit_factor = 2usize;
-    // Cost of the edge on each triangle side, and the pass that computed it: a cost stays
-    // valid until one of its endpoints moves (only the survivor of a collapse changes
-    // position and quadric, and it is marked `touched` with the pass).
-    let mut side_cost = vec![0.0f64; s.tris.len() * 3];
-    let mut side_pass = vec![0u32; s.tris.len() * 3];
     while alive_tris > target {
         pass += 1;
         // Candidates: every live interior edge once (as the directed side u → v, u < v),
-        // costed in parallel (or taken from the previous costing when neither endpoint
-        // moved since), in mesh order, per chunk.
+        // costed in parallel, in mesh order, per chunk.
         let mut chunks: Vec<Vec<Candidate>> = s
             .tris
             .par_chunks(CHUNK_TRIANGLES)
             .zip(s.tri_alive.par_chunks(CHUNK_TRIANGLES))
-            .zip(side_cost.par_chunks_mut(CHUNK_TRIANGLES * 3))
-            .zip(side_pass.par_chunks_mut(CHUNK_TRIANGLES * 3))
-            .map(|(((tris, alive), costs), passes)| {
+            .map(|(tris, alive)| {
                 let mut out = Vec::with_capacity(tris.len() * 3 / 2);
-                for (t, (tri, _)) in tris.iter().zip(alive).enumerate().filter(|(_, (_, a))| **a) {
+                for (tri, _) in tris.iter().zip(alive).filter(|(_, a)| **a) {
                     for k in 0..3 {
                         let (u, v) = (tri[k], tri[(k + 1) % 3]);
                         if u < v && !s.locked[u as usize] && !s.locked[v as usize] {
-                            let side = t * 3 + k;
-                            let computed = passes[side];
-                            if computed != 0
-                                && s.touched[u as usize] < computed
-                                && s.touched[v as usize] < computed
-                            {
-                                out.push(Candidate {
-                                    cost: costs[side],
-                                    u,
-                                    v,
-                                });
-                            } else {
-                                let c = s.candidate(u, v);
-                                costs[side] = c.cost;
-                                passes[side] = pass;
-                                out.push(c);
-                            }
+                            out.push(s.candidate(u, v));
                         }
                     }
                 }
@@ -438,14 +412,14 @@ impl State {
             .map(|p| (p.as_dvec3() - centre) / scale)
             .collect();
         drop(positions);
-        // Per triangle: its unit normal and its plane quadric, computed once.
-        let (reference_normal, tri_quadric): (Vec<Vec3>, Vec<Quadric>) = tris
+        // Per triangle: its unit normal and its weighted plane, computed once.
+        let (reference_normal, tri_plane): (Vec<Vec3>, Vec<Plane>) = tris
             .par_iter()
             .map(|t| {
                 let [a, b, c] = t.map(|v| pos[v as usize]);
                 (
                     (b - a).cross(c - a).normalize_or_zero().as_vec3(),
-                    Quadric::from_triangle(a, b, c),
+                    Plane::from_triangle(a, b, c),
                 )
             })
             .unzip();
@@ -488,7 +462,7 @@ impl State {
                 let mut q = Quadric::default();
                 scratch.clear();
                 for &t in &vert_tris[v] {
-                    q += tri_quadric[t as usize];
+                    q += Quadric::from_plane(&tri_plane[t as usize]);
                     let tri = tris[t as usize];
                     scratch.extend(tri.iter().copied().filter(|&w| w as usize != v));
                 }

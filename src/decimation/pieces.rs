@@ -113,7 +113,9 @@ pub(super) fn decimate_by_regions(
     // seam triangles, and their vertices stay locked until the final pass. A region's
     // vertices are numbered in order of first use by its triangles (what [`extract`]
     // does), in one pass here so that the regions can then be decimated in parallel.
-    let mut region_tris: Vec<Vec<[u32; 3]>> = vec![Vec::new(); regions];
+    // Triangles are kept as indices (4 bytes each) and renumbered when their region is
+    // taken out.
+    let mut region_tris: Vec<Vec<u32>> = vec![Vec::new(); regions];
     let mut region_vertices_of: Vec<Vec<u32>> = vec![Vec::new(); regions];
     let mut local_of = vec![u32::MAX; nv];
     let mut seam_tris = Vec::new();
@@ -122,13 +124,13 @@ pub(super) fn decimate_by_regions(
         let r = region_of[tri[0] as usize];
         if tri.iter().all(|&v| region_of[v as usize] == r) {
             let globals = &mut region_vertices_of[r as usize];
-            region_tris[r as usize].push(tri.map(|v| {
+            for &v in tri {
                 if local_of[v as usize] == u32::MAX {
                     local_of[v as usize] = globals.len() as u32;
                     globals.push(v);
                 }
-                local_of[v as usize]
-            }));
+            }
+            region_tris[r as usize].push(t as u32);
         } else {
             seam_tris.push(t as u32);
             for &v in tri {
@@ -136,7 +138,7 @@ pub(super) fn decimate_by_regions(
             }
         }
     }
-    drop((region_of, local_of));
+    drop(region_of);
 
     let mut stats = DecimateStats {
         triangles_before: before,
@@ -149,7 +151,12 @@ pub(super) fn decimate_by_regions(
         .into_par_iter()
         .zip(region_vertices_of)
         .filter(|(tris, _)| !tris.is_empty())
-        .map(|(triangles, global_of)| {
+        .map(|(tris, global_of)| {
+            let triangles = tris
+                .iter()
+                .map(|&t| mesh.triangles[t as usize].map(|v| local_of[v as usize]))
+                .collect();
+            drop(tris);
             let mut piece = Piece {
                 mesh: TriMesh {
                     positions: global_of
@@ -172,6 +179,7 @@ pub(super) fn decimate_by_regions(
             (piece, region_stats, remap)
         })
         .collect();
+    drop(local_of);
     let mut positions: Vec<Vec3> = Vec::new();
     let mut triangles: Vec<[u32; 3]> = Vec::new();
     // Output index of each seam vertex, once placed; seam vertices keep their exact input

@@ -21,18 +21,47 @@ pub(crate) struct Quadric {
     pub weight: f64,
 }
 
-impl Quadric {
-    /// The quadric of the plane through `a, b, c`, weighted by the triangle's area; zero
-    /// for a degenerate triangle.
-    pub fn from_triangle(a: DVec3, b: DVec3, c: DVec3) -> Quadric {
+/// The area-weighted plane of a triangle (unit normal `n`, offset `d` with `n·p + d = 0`),
+/// 40 bytes instead of the quadric's 88: what [`Quadric::from_plane`] expands.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct Plane {
+    n: DVec3,
+    d: f64,
+    area: f64,
+}
+
+impl Plane {
+    /// The plane through `a, b, c`, weighted by the triangle's area; zero weight for a
+    /// degenerate triangle.
+    pub fn from_triangle(a: DVec3, b: DVec3, c: DVec3) -> Plane {
         let n = (b - a).cross(c - a);
         let len = n.length();
         if len == 0.0 || !len.is_finite() {
+            return Plane::default();
+        }
+        let n = n / len;
+        Plane {
+            n,
+            d: -n.dot(a),
+            area: 0.5 * len,
+        }
+    }
+}
+
+impl Quadric {
+    /// The quadric of the plane through `a, b, c`, weighted by the triangle's area; zero
+    /// for a degenerate triangle.
+    #[cfg(test)]
+    pub fn from_triangle(a: DVec3, b: DVec3, c: DVec3) -> Quadric {
+        Quadric::from_plane(&Plane::from_triangle(a, b, c))
+    }
+
+    /// The quadric of an area-weighted plane; zero for a zero weight.
+    pub fn from_plane(plane: &Plane) -> Quadric {
+        let Plane { n, d, area } = *plane;
+        if area == 0.0 {
             return Quadric::default();
         }
-        let area = 0.5 * len;
-        let n = n / len;
-        let d = -n.dot(a);
         Quadric {
             xx: area * n.x * n.x,
             xy: area * n.x * n.y,
