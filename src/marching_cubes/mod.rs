@@ -110,13 +110,14 @@ pub fn march_blocks(field: &SparseField, range: Option<BlockRange>) -> Vec<Block
 pub fn stitch(mut surfaces: Vec<BlockSurface>) -> (TriMesh, MarchingCubesStats) {
     surfaces.sort_unstable_by_key(|s| [s.key[2], s.key[1], s.key[0]]);
     let (base, index_of) = number_blocks(&surfaces);
-    let (surfaces_ref, index_ref, base_ref) = (&surfaces, &index_of, &base);
+    let (surfaces_ref, base_ref) = (&surfaces, &base);
     let triangles: Vec<[u32; 3]> = surfaces
         .par_iter()
         .flat_map_iter(|s| {
+            let owners = owner_table(&index_of, s.key);
             s.triangles
                 .iter()
-                .map(move |t| t.map(|r| resolve(surfaces_ref, index_ref, base_ref, s.key, r)))
+                .map(move |t| t.map(|r| resolve(surfaces_ref, &owners, base_ref, r)))
         })
         .collect();
     let mut positions = Vec::with_capacity(*base.last().unwrap() as usize);
@@ -154,24 +155,29 @@ fn number_blocks(surfaces: &[BlockSurface]) -> (Vec<u32>, HashMap<BlockKey, usiz
     (base, index_of)
 }
 
-/// The index of the vertex `r` of a triangle of block `key`, in a numbering where block
-/// `surfaces[i]`'s owned vertices start at `base[i]`.
+/// For the triangles of block `key`: the position in the list of each block its vertex
+/// references can point to (the block itself and its +x/+y/+z neighbours, by offset
+/// bits), looked up once per block instead of once per reference.
+fn owner_table(index_of: &HashMap<BlockKey, usize>, key: BlockKey) -> [Option<usize>; 8] {
+    std::array::from_fn(|o| {
+        let owner = [
+            key[0] + (o & 1) as i32,
+            key[1] + ((o >> 1) & 1) as i32,
+            key[2] + ((o >> 2) & 1) as i32,
+        ];
+        index_of.get(&owner).copied()
+    })
+}
+
+/// The index of the vertex `r` of a triangle of a block whose [`owner_table`] is
+/// `owners`, in a numbering where block `surfaces[i]`'s owned vertices start at `base[i]`.
 fn resolve(
     surfaces: &[BlockSurface],
-    index_of: &HashMap<BlockKey, usize>,
+    owners: &[Option<usize>; 8],
     base: &[u32],
-    key: BlockKey,
     r: EdgeRef,
 ) -> u32 {
-    let o = r >> 16;
-    let owner = [
-        key[0] + (o & 1) as i32,
-        key[1] + ((o >> 1) & 1) as i32,
-        key[2] + ((o >> 2) & 1) as i32,
-    ];
-    let bi = *index_of
-        .get(&owner)
-        .expect("the owner of a crossed edge is always marched");
+    let bi = owners[(r >> 16) as usize].expect("the owner of a crossed edge is always marched");
     let local = (r & 0xffff) as u16;
     let pos = surfaces[bi]
         .owned
@@ -193,11 +199,11 @@ pub fn stitch_range(surfaces: &[BlockSurface], own: BlockRange) -> RangeMesh {
     let total = *base.last().unwrap() as usize;
     let mut triangles: Vec<[u32; 3]> = Vec::new();
     for s in surfaces.iter().filter(|s| own.contains(s.key)) {
-        let key = s.key;
+        let owners = owner_table(&index_of, s.key);
         triangles.extend(
             s.triangles
                 .iter()
-                .map(|t| t.map(|r| resolve(surfaces, &index_of, &base, key, r))),
+                .map(|t| t.map(|r| resolve(surfaces, &owners, &base, r))),
         );
     }
     // Keep the referenced vertices only, in block order.
