@@ -293,11 +293,7 @@ pub fn compute_blocks(
 
     // Particle indices sorted by (home block, index).
     let home = home_blocks(positions, options);
-    let mut order: Vec<u32> = (0..positions.len() as u32).collect();
-    order.par_sort_unstable_by_key(|&i| {
-        let k = home[i as usize];
-        (k[2], k[1], k[0], i)
-    });
+    let order = crate::grid::sort_by_key_zyx(&home);
     let mut home_ranges: HashMap<BlockKey, (u32, u32)> = HashMap::new();
     let mut start = 0;
     while start < order.len() {

@@ -153,9 +153,68 @@ impl SparseField {
     }
 }
 
+/// The indices of `keys` in ascending (z, y, x, index) order: the canonical order of
+/// particles binned by cell or block. Sorts packed 63-bit keys beside the indices (one
+/// contiguous array, no lookups while comparing) when every axis spans fewer than 2^21
+/// values, which it does for any block key; else compares the keys themselves.
+pub fn sort_by_key_zyx(keys: &[[i32; 3]]) -> Vec<u32> {
+    use rayon::prelude::*;
+    let lo = keys
+        .par_iter()
+        .copied()
+        .reduce(|| [i32::MAX; 3], |a, b| [0, 1, 2].map(|k| a[k].min(b[k])));
+    let hi = keys
+        .par_iter()
+        .copied()
+        .reduce(|| [i32::MIN; 3], |a, b| [0, 1, 2].map(|k| a[k].max(b[k])));
+    const BITS: u32 = 21;
+    let fits = keys.is_empty() || (0..3).all(|k| (hi[k] as i64 - lo[k] as i64) < (1 << BITS));
+    if !fits {
+        let mut order: Vec<u32> = (0..keys.len() as u32).collect();
+        order.par_sort_unstable_by_key(|&i| {
+            let k = keys[i as usize];
+            (k[2], k[1], k[0], i)
+        });
+        return order;
+    }
+    let mut packed: Vec<(u64, u32)> = keys
+        .par_iter()
+        .enumerate()
+        .map(|(i, k)| {
+            let d = [0, 1, 2].map(|a| (k[a] as i64 - lo[a] as i64) as u64);
+            ((d[2] << (2 * BITS)) | (d[1] << BITS) | d[0], i as u32)
+        })
+        .collect();
+    packed.par_sort_unstable();
+    packed.into_par_iter().map(|(_, i)| i).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn packed_sort_orders_like_the_key_tuples() {
+        let mut seed = 3u64;
+        let mut next = |m: i32| {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 33) as i32).rem_euclid(2 * m) - m
+        };
+        for spread in [3, 1 << 19, 1 << 22] {
+            let keys: Vec<[i32; 3]> = (0..5000)
+                .map(|_| [next(spread), next(3), next(spread)])
+                .collect();
+            let mut expected: Vec<u32> = (0..keys.len() as u32).collect();
+            expected.sort_by_key(|&i| {
+                let k = keys[i as usize];
+                (k[2], k[1], k[0], i)
+            });
+            assert_eq!(sort_by_key_zyx(&keys), expected, "spread {spread}");
+        }
+        assert!(sort_by_key_zyx(&[]).is_empty());
+    }
 
     #[test]
     fn negative_coordinates_split_into_lower_blocks() {

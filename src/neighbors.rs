@@ -20,11 +20,7 @@ impl CellHash {
     pub fn new(positions: &[Vec3], cell_size: f32) -> Self {
         let inv = 1.0 / cell_size;
         let keys: Vec<[i32; 3]> = positions.par_iter().map(|p| cell_of(*p, inv)).collect();
-        let mut order: Vec<u32> = (0..positions.len() as u32).collect();
-        order.par_sort_unstable_by_key(|&i| {
-            let k = keys[i as usize];
-            (k[2], k[1], k[0], i)
-        });
+        let order = crate::grid::sort_by_key_zyx(&keys);
         let mut cells = HashMap::new();
         let mut start = 0usize;
         while start < order.len() {
