@@ -393,7 +393,7 @@ struct State {
     /// triangle may never turn far from it, however many collapses touch it.
     reference_normal: Vec<Vec3>,
     tri_alive: Vec<bool>,
-    vert_tris: Vec<Vec<u32>>,
+    vert_tris: Vec<TriList>,
     locked: Vec<bool>,
     alive: Vec<bool>,
     /// Pass in which the vertex last moved (each vertex moves at most once per pass).
@@ -442,13 +442,9 @@ impl State {
             }
         }
         drop(fill);
-        let vert_tris: Vec<Vec<u32>> = (0..nv)
+        let vert_tris: Vec<TriList> = (0..nv)
             .into_par_iter()
-            .map(|v| {
-                let mut list = Vec::with_capacity(8);
-                list.extend_from_slice(&flat[start[v] as usize..start[v + 1] as usize]);
-                list
-            })
+            .map(|v| TriList::from_slice(&flat[start[v] as usize..start[v + 1] as usize]))
             .collect();
         drop(flat);
         drop(start);
@@ -519,6 +515,89 @@ impl State {
     }
 }
 
+/// Triangles a vertex keeps inline; more go to the heap. Marching-cubes vertices start
+/// with 4–8 and decimation keeps the average near 6, so most lists never allocate.
+const INLINE_TRIANGLES: usize = 8;
+
+/// The triangles of one vertex: a list that lives inline up to [`INLINE_TRIANGLES`]
+/// entries (no allocation per vertex, and the list sits beside its neighbours' in
+/// memory), on the heap beyond.
+#[derive(Clone, Default)]
+struct TriList {
+    len: u32,
+    inline: [u32; INLINE_TRIANGLES],
+    heap: Vec<u32>,
+}
+
+impl TriList {
+    fn from_slice(tris: &[u32]) -> TriList {
+        let mut list = TriList::default();
+        if tris.len() <= INLINE_TRIANGLES {
+            list.inline[..tris.len()].copy_from_slice(tris);
+        } else {
+            list.heap = tris.to_vec();
+        }
+        list.len = tris.len() as u32;
+        list
+    }
+
+    fn spilled(&self) -> bool {
+        !self.heap.is_empty()
+    }
+
+    fn push(&mut self, t: u32) {
+        let n = self.len as usize;
+        if self.spilled() {
+            self.heap.push(t);
+        } else if n < INLINE_TRIANGLES {
+            self.inline[n] = t;
+        } else {
+            self.heap = Vec::with_capacity(2 * INLINE_TRIANGLES);
+            self.heap.extend_from_slice(&self.inline);
+            self.heap.push(t);
+        }
+        self.len += 1;
+    }
+
+    fn retain(&mut self, keep: impl Fn(&u32) -> bool) {
+        if self.spilled() {
+            self.heap.retain(keep);
+            self.len = self.heap.len() as u32;
+            if self.heap.is_empty() {
+                self.heap = Vec::new();
+            }
+        } else {
+            let mut kept = 0;
+            for k in 0..self.len as usize {
+                if keep(&self.inline[k]) {
+                    self.inline[kept] = self.inline[k];
+                    kept += 1;
+                }
+            }
+            self.len = kept as u32;
+        }
+    }
+}
+
+impl std::ops::Deref for TriList {
+    type Target = [u32];
+    fn deref(&self) -> &[u32] {
+        if self.spilled() {
+            &self.heap
+        } else {
+            &self.inline[..self.len as usize]
+        }
+    }
+}
+
+impl<'a> IntoIterator for &'a TriList {
+    type Item = &'a u32;
+    type IntoIter = std::slice::Iter<'a, u32>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.iter()
+    }
+}
+
 /// Interleaves the bits of three 10-bit coordinates.
 fn morton3(x: u32, y: u32, z: u32) -> u32 {
     fn spread(mut v: u32) -> u32 {
@@ -555,7 +634,7 @@ struct View {
     tris: *mut [u32; 3],
     reference_normal: *const Vec3,
     tri_alive: *mut bool,
-    vert_tris: *mut Vec<u32>,
+    vert_tris: *mut TriList,
     alive: *mut bool,
     touched: *mut u32,
     owner: *const u32,
@@ -572,11 +651,11 @@ impl View {
     unsafe fn tri(&self, t: u32) -> [u32; 3] {
         *self.tris.add(t as usize)
     }
-    unsafe fn vert_tris(&self, v: u32) -> &Vec<u32> {
+    unsafe fn vert_tris(&self, v: u32) -> &TriList {
         &*self.vert_tris.add(v as usize)
     }
     #[allow(clippy::mut_from_ref)]
-    unsafe fn vert_tris_mut(&self, v: u32) -> &mut Vec<u32> {
+    unsafe fn vert_tris_mut(&self, v: u32) -> &mut TriList {
         &mut *self.vert_tris.add(v as usize)
     }
     unsafe fn alive(&self, v: u32) -> bool {
