@@ -861,3 +861,37 @@ impl View {
         removed
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn triangle_lists_behave_like_vectors_across_the_inline_limit() {
+        let mut list = TriList::from_slice(&[1, 2, 3]);
+        let mut reference = vec![1u32, 2, 3];
+        // Grow past the inline capacity, shrink back under it, and grow again.
+        for t in 4..20 {
+            list.push(t);
+            reference.push(t);
+            assert_eq!(&*list, reference.as_slice());
+        }
+        list.retain(|&t| t % 3 == 0);
+        reference.retain(|&t| t % 3 == 0);
+        assert_eq!(&*list, reference.as_slice());
+        list.retain(|_| false);
+        assert!(list.is_empty() && !list.spilled());
+        for t in 0..INLINE_TRIANGLES as u32 + 2 {
+            list.push(t);
+        }
+        assert_eq!(list.len(), INLINE_TRIANGLES + 2);
+        assert_eq!(
+            list.iter().copied().max(),
+            Some(INLINE_TRIANGLES as u32 + 1)
+        );
+        let big = TriList::from_slice(&(0..12).collect::<Vec<u32>>());
+        assert!(big.spilled() && big.len() == 12);
+        assert_eq!(std::mem::take(&mut list).len(), INLINE_TRIANGLES + 2);
+        assert!(list.is_empty());
+    }
+}
