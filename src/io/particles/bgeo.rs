@@ -160,14 +160,14 @@ fn parse<'a, R: BufRead + 'a>(
         for (k, rec) in data.chunks_exact(stride).enumerate() {
             let p = Vec3::new(f(&rec[0..4]), f(&rec[4..8]), f(&rec[8..12]));
             if !p.is_finite() {
-                return Err(Error::parse(
+                return Err(super::non_finite(
                     path,
                     format!(
                         "byte offset {} (decompressed), particle {}",
                         start + (k * stride) as u64,
                         first + k
                     ),
-                    format!("non-finite coordinate {p}"),
+                    p,
                 ));
             }
             chunk.push(p);
@@ -213,6 +213,5 @@ pub fn stream_positions(
     path: &Path,
     positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
 ) -> Result<usize> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    parse(path, std::io::BufReader::new(file), None, positions)
+    parse(path, super::open_buffered(path)?, None, positions)
 }

@@ -159,6 +159,22 @@ struct Records {
     many: &'static str,
 }
 
+/// Opens `path` for the streaming readers, with a 1 MiB buffer.
+fn open_buffered(path: &Path) -> Result<std::io::BufReader<std::fs::File>> {
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    Ok(std::io::BufReader::with_capacity(1 << 20, file))
+}
+
+/// The error of a stream that ends before its `count` `many` (e.g. "points").
+fn truncated(count: usize, many: &str) -> String {
+    format!("truncated while reading the {count} {many}: the file ends first")
+}
+
+/// The error for a non-finite position at `location` of `path`.
+fn non_finite(path: &Path, location: String, p: Vec3) -> Error {
+    Error::parse(path, location, format!("non-finite coordinate {p}"))
+}
+
 /// Reads the records from `reader` (positioned at the first one) in chunks of at most
 /// 65 536, takes each record's position with `position`, checks it is finite and hands
 /// the chunks to `sink`. Memory: one chunk.
@@ -187,7 +203,7 @@ fn stream_records(
                 path,
                 format!("byte offset {offset}, {one} {first}"),
                 if e.kind() == std::io::ErrorKind::UnexpectedEof {
-                    format!("truncated while reading the {count} {many}: the file ends first")
+                    truncated(count, many)
                 } else {
                     format!("cannot read the {many}: {e}")
                 },
@@ -197,11 +213,7 @@ fn stream_records(
         for (k, record) in data.chunks_exact(stride).enumerate() {
             let p = position(record);
             if !p.is_finite() {
-                return Err(Error::parse(
-                    path,
-                    format!("{one} {}", first + k),
-                    format!("non-finite coordinate {p}"),
-                ));
+                return Err(non_finite(path, format!("{one} {}", first + k), p));
             }
             chunk.push(p);
         }
@@ -245,6 +257,7 @@ fn stream_ascii_records(
     let mut chunk: Vec<Vec3> = Vec::with_capacity(CHUNK_RECORDS.min(count));
     let mut text = Vec::new();
     let (mut done, mut field, mut record) = (0, 0, [0.0f32; 3]);
+    let at = |line: usize, done: usize| format!("line {line}, {one} {done}");
     while done < count {
         text.clear();
         if reader
@@ -252,17 +265,12 @@ fn stream_ascii_records(
             .map_err(|e| Error::io(path, e))?
             == 0
         {
-            return Err(Error::parse(
-                path,
-                format!("line {line}, {one} {done}"),
-                format!("truncated while reading the {count} {many}: the file ends first"),
-            ));
+            return Err(Error::parse(path, at(line, done), truncated(count, many)));
         }
-        let where_ = |line: usize, done: usize| format!("line {line}, {one} {done}");
         let words = std::str::from_utf8(&text).map_err(|_| {
             Error::parse(
                 path,
-                where_(line, done),
+                at(line, done),
                 "expected numbers, found non-text bytes",
             )
         })?;
@@ -273,7 +281,7 @@ fn stream_ascii_records(
             let value: f64 = word.parse().map_err(|_| {
                 Error::parse(
                     path,
-                    where_(line, done),
+                    at(line, done),
                     format!("expected a number, found {word:?}"),
                 )
             })?;
@@ -284,11 +292,7 @@ fn stream_ascii_records(
             if field == fields {
                 let p = Vec3::from(record);
                 if !p.is_finite() {
-                    return Err(Error::parse(
-                        path,
-                        where_(line, done),
-                        format!("non-finite coordinate {p}"),
-                    ));
+                    return Err(non_finite(path, at(line, done), p));
                 }
                 chunk.push(p);
                 field = 0;

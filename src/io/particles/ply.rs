@@ -139,8 +139,7 @@ pub fn stream_positions(
 ) -> Result<Option<usize>> {
     use crate::error::Error;
     use std::io::BufRead;
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let mut r = std::io::BufReader::with_capacity(1 << 20, file);
+    let mut r = super::open_buffered(path)?;
     let mut header = Vec::new();
     loop {
         let n = r

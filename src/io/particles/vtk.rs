@@ -275,8 +275,7 @@ pub fn stream_positions(
     positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
 ) -> Result<Option<usize>> {
     use std::io::BufRead;
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let mut r = std::io::BufReader::with_capacity(1 << 20, file);
+    let mut r = super::open_buffered(path)?;
     let mut offset = 0u64;
     let mut line = Vec::new();
     let mut next_line =
