@@ -159,14 +159,15 @@ impl SparseField {
 /// values, which it does for any block key; else compares the keys themselves.
 pub fn sort_by_key_zyx(keys: &[[i32; 3]]) -> Vec<u32> {
     use rayon::prelude::*;
-    let lo = keys
-        .par_iter()
-        .copied()
-        .reduce(|| [i32::MAX; 3], |a, b| [0, 1, 2].map(|k| a[k].min(b[k])));
-    let hi = keys
-        .par_iter()
-        .copied()
-        .reduce(|| [i32::MIN; 3], |a, b| [0, 1, 2].map(|k| a[k].max(b[k])));
+    let (lo, hi) = keys.par_iter().map(|&k| (k, k)).reduce(
+        || ([i32::MAX; 3], [i32::MIN; 3]),
+        |(lo, hi), (l, h)| {
+            (
+                [0, 1, 2].map(|a| lo[a].min(l[a])),
+                [0, 1, 2].map(|a| hi[a].max(h[a])),
+            )
+        },
+    );
     const BITS: u32 = 21;
     let fits = keys.is_empty() || (0..3).all(|k| (hi[k] as i64 - lo[k] as i64) < (1 << BITS));
     if !fits {
