@@ -343,9 +343,35 @@ pub(crate) fn raw_capacity(vertices: usize, triangles: usize) -> usize {
     triangles * 8 + vertices * 30 + 64
 }
 
-/// zstd decompression of at most `capacity` bytes.
+/// zstd decompression of at most `capacity` bytes. The buffer is sized by the frame's
+/// content size when the frame states it, and each thread keeps its decompression context
+/// (creating one costs about as much as decompressing a small frame).
 pub(crate) fn decompress(payload: &[u8], capacity: usize) -> Result<Vec<u8>, String> {
-    zstd::bulk::decompress(payload, capacity).map_err(|e| format!("zstd: {e}"))
+    thread_local! {
+        static CONTEXT: std::cell::RefCell<Option<zstd::bulk::Decompressor<'static>>> =
+            const { std::cell::RefCell::new(None) };
+    }
+    let size = match zstd::zstd_safe::get_frame_content_size(payload) {
+        Ok(Some(n)) if n > capacity as u64 => {
+            return Err(format!(
+                "zstd: content of {n} bytes exceeds the frame's {capacity}"
+            ))
+        }
+        Ok(Some(n)) => n as usize,
+        _ => capacity,
+    };
+    CONTEXT.with(|context| {
+        let mut context = context.borrow_mut();
+        let decompressor = match context.as_mut() {
+            Some(d) => d,
+            None => {
+                context.insert(zstd::bulk::Decompressor::new().map_err(|e| format!("zstd: {e}"))?)
+            }
+        };
+        decompressor
+            .decompress(payload, size)
+            .map_err(|e| format!("zstd: {e}"))
+    })
 }
 
 /// The flag, vertex-code and residual streams at `raw[*pos..]`; moves `pos` past them.
