@@ -247,7 +247,7 @@ fn every_frame_round_trips_within_the_bound() {
     write_archive(&path, &frames);
     let reader = ArchiveReader::open(&path).unwrap();
     assert!(!reader.recovered_by_scan());
-    assert_eq!(reader.version(), 2);
+    assert_eq!(reader.version(), 3);
     assert_eq!(
         reader.frames().iter().map(|f| f.number).collect::<Vec<_>>(),
         [1, 9, 17, 25, 31, 45, 1000]

@@ -153,6 +153,16 @@ pub(crate) struct CodedMesh {
 /// Appends the flag, vertex-code and residual streams of `mesh` (positions quantized
 /// with step `step`, world units), each prefixed with its byte length, to `out`.
 pub(crate) fn encode_streams(mesh: &TriMesh, step: f64, out: &mut Vec<u8>) -> CodedMesh {
+    encode_streams_numbered(mesh, step, out).0
+}
+
+/// [`encode_streams`], also returning the vertex order of the streams: decoded vertex
+/// `i` is `mesh` vertex `order[i]`.
+pub(crate) fn encode_streams_numbered(
+    mesh: &TriMesh,
+    step: f64,
+    out: &mut Vec<u8>,
+) -> (CodedMesh, Vec<u32>) {
     let tris = &mesh.triangles;
     let n = tris.len();
     // Half-edge h = 3t + k runs from corner k to corner k+1 of triangle t. Half-edges are
@@ -311,13 +321,14 @@ pub(crate) fn encode_streams(mesh: &TriMesh, step: f64, out: &mut Vec<u8>) -> Co
         }
         closed_oriented &= edge_sides.iter().all(|&(_, n, f)| n == 2 && f == 1);
     }
-    CodedMesh {
+    let coded = CodedMesh {
         vertices: numbering.next,
         triangles: n as u32,
         edges,
         loop_countable,
         closed_oriented: closed_oriented && loop_countable,
-    }
+    };
+    (coded, old_of_new)
 }
 
 /// Decodes a version-1 payload of `vertices` vertices and `triangles` triangles. No

@@ -1,5 +1,5 @@
-//! The version-2 frame payload: a fluid surface that may be stored as the control mesh of
-//! Loop subdivision, plus instanced spheres.
+//! The frame payload of versions 2 and 3: a fluid surface that may be stored as the
+//! control mesh of Loop subdivision, plus instanced spheres.
 //!
 //! meniscus's own output is the Loop subdivision of the decimated mesh (Akinci et al.
 //! 2013, § 3.3), and Loop subdivision is deterministic: a frame is stored as its control
@@ -12,24 +12,34 @@
 //! vertex plus centre stays within the bound.
 //!
 //! ```text
-//! raw := varint(levels) u8(closed) varint(fluid vertices) varint(fluid triangles) fluid_streams
+//! raw := varint(levels) u8(shape) varint(fluid vertices) varint(fluid triangles) fluid
 //!        varint(sphere count)
 //!        [ varint(template vertices) varint(template triangles) template_streams
 //!          count × 3 zigzag varints: centre − previous centre, on the lattice step / 2 ]
 //! payload := zstd(raw)
 //! ```
-//! The streams are those of [`super::codec::encode_streams`]. `closed` is 1 when the
-//! stored fluid mesh is a closed, consistently oriented 2-manifold: then the first Loop
-//! step runs while decoding ([`super::fused`]).
+//! The streams are those of [`super::codec::encode_streams`]. `shape` is 1 when the
+//! stored fluid mesh is a closed, consistently oriented 2-manifold: then `fluid` is its
+//! streams and the first Loop step runs while decoding ([`super::fused`]); 2 when it is
+//! also stored in parts that decode in parallel (version 3, [`super::parts`]); 0 for any
+//! other mesh, stored as its streams.
 
 use super::codec::{
     decode_streams, decompress, encode_streams, get_varint, put_varint, raw_capacity, unzigzag,
     zigzag,
 };
 use super::fused::decode_streams_subdivided;
+use super::parts::{decode_parts_subdivided, encode_parts, part_count};
 use crate::mesh::{SphereInstances, Surface, TriMesh};
 use crate::subdivision::{subdivide, SubdivideOptions};
 use glam::Vec3;
+
+/// `shape`: the fluid mesh is open (or not known closed and oriented) ...
+const OPEN: u8 = 0;
+/// ... closed and consistently oriented, stored whole ...
+const CLOSED: u8 = 1;
+/// ... or closed, consistently oriented and stored in parts ([`super::parts`]).
+const CLOSED_IN_PARTS: u8 = 2;
 
 /// A frame to archive.
 #[derive(Clone, Copy, Debug)]
@@ -56,10 +66,12 @@ fn loop_counts(coded: super::codec::CodedMesh, levels: u32) -> Option<(u64, u64)
 }
 
 /// Encodes a frame; returns the payload and the vertex and triangle counts it decodes to.
+/// `in_parts`: a closed control mesh may be stored in parts (version 3 and later).
 pub(crate) fn encode_frame(
     frame: &ArchiveFrame,
     step: f64,
     zstd_level: i32,
+    in_parts: bool,
 ) -> std::io::Result<(Vec<u8>, u32, u32)> {
     let mut raw = Vec::new();
     let mut levels = frame.subdivision_levels;
@@ -77,11 +89,23 @@ pub(crate) fn encode_frame(
         counts = Some((coded.vertices as u64, coded.triangles as u64));
     }
     let (mut vertices, mut triangles) = counts.expect("set above");
+    let parts = part_count(coded.triangles as usize);
+    let shape = if !coded.closed_oriented {
+        OPEN
+    } else if in_parts && levels > 0 && parts > 1 {
+        CLOSED_IN_PARTS
+    } else {
+        CLOSED
+    };
     put_varint(&mut raw, levels as u64);
-    raw.push(coded.closed_oriented as u8);
+    raw.push(shape);
     put_varint(&mut raw, coded.vertices as u64);
     put_varint(&mut raw, coded.triangles as u64);
-    raw.extend_from_slice(&fluid_streams);
+    if shape == CLOSED_IN_PARTS {
+        encode_parts(frame.fluid, parts, step, &mut raw);
+    } else {
+        raw.extend_from_slice(&fluid_streams);
+    }
     drop(fluid_streams);
     let spheres = frame.spheres;
     let count = if spheres.template.triangles.is_empty() {
@@ -137,11 +161,21 @@ pub(crate) fn decode_frame(
     let pos = &mut 0usize;
     let (nv, nt) = (vertices as u64, triangles as u64);
     let levels = read_count(&raw, pos, "subdivision levels", 16)? as u32;
-    let closed = *raw.get(*pos).ok_or("fluid shape flag missing")?;
+    let shape = *raw.get(*pos).ok_or("fluid shape flag missing")?;
     *pos += 1;
     let fluid_vertices = read_count(&raw, pos, "fluid vertex count", nv)?;
     let fluid_triangles = read_count(&raw, pos, "fluid triangle count", nt)?;
-    let fluid = if levels > 0 && closed == 1 {
+    let fluid = if shape == CLOSED_IN_PARTS {
+        if levels == 0 {
+            return Err("a mesh in parts must be subdivided".into());
+        }
+        // The first Loop step while decoding, the parts in parallel.
+        let mut fluid = decode_parts_subdivided(&raw, pos, fluid_vertices, fluid_triangles, step)?;
+        subdivide(&mut fluid, &SubdivideOptions { levels: levels - 1 });
+        fluid
+    } else if shape > CLOSED_IN_PARTS {
+        return Err(format!("unknown fluid shape {shape}"));
+    } else if levels > 0 && shape == CLOSED {
         // The first Loop step while decoding.
         let mut fluid =
             decode_streams_subdivided(&raw, pos, fluid_vertices, fluid_triangles, step)?;

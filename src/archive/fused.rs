@@ -21,27 +21,50 @@ use rayon::prelude::*;
 const NONE: u32 = u32::MAX;
 
 /// The decoder's state: the control mesh so far and the subdivision gathered from it.
-struct State<'a> {
+pub(crate) struct State<'a> {
     codes: &'a [u8],
     cpos: usize,
     residuals: &'a [u8],
     rpos: usize,
     step: f64,
-    quantized: Vec<[i64; 3]>,
+    pub(crate) quantized: Vec<[i64; 3]>,
     /// Control positions as decoded (f32), widened to f64 for the masks.
-    positions: Vec<DVec3>,
-    valence: Vec<u32>,
-    sum: Vec<DVec3>,
+    pub(crate) positions: Vec<DVec3>,
+    pub(crate) valence: Vec<u32>,
+    pub(crate) sum: Vec<DVec3>,
     /// Sides waiting for their partner: the head of a list per smaller vertex, and the
     /// entries (larger vertex, side, its apex, next entry).
     waiting_head: Vec<u32>,
     waiting: Vec<[u32; 4]>,
-    triangles: Vec<[u32; 3]>,
-    side_edge: Vec<[u32; 3]>,
-    edge_points: Vec<Vec3>,
+    pub(crate) triangles: Vec<[u32; 3]>,
+    pub(crate) side_edge: Vec<[u32; 3]>,
+    pub(crate) edge_points: Vec<Vec3>,
 }
 
 impl State<'_> {
+    /// Loop's vertex point of control vertex `v` once its valence and neighbour sum are
+    /// complete (`beta` from [`loop_betas`]).
+    pub(crate) fn vertex_point(&self, v: usize, beta: &[f64]) -> Vec3 {
+        let (p, n) = (self.positions[v], self.valence[v]);
+        let (nf, b) = (n as f64, beta[n as usize]);
+        ((1.0 - nf * b) * p + b * self.sum[v]).as_vec3()
+    }
+
+    /// The sides still waiting for a partner (boundary sides), in order of vertex and
+    /// list position.
+    pub(crate) fn unpaired_sides(&self) -> Vec<u32> {
+        let mut sides = Vec::new();
+        for &head in &self.waiting_head {
+            let mut entry = head;
+            while entry != NONE {
+                let [_, side, _, next] = self.waiting[entry as usize];
+                sides.push(side);
+                entry = next;
+            }
+        }
+        sides
+    }
+
     /// Reads a vertex code; a new vertex gets its position from the residual stream.
     fn vertex(&mut self, prediction: Prediction) -> Result<u32, String> {
         let d = get_varint(self.codes, &mut self.cpos).ok_or("vertex code stream ends early")?;
@@ -113,16 +136,16 @@ impl State<'_> {
     }
 }
 
-/// Decodes the streams at `raw[*pos..]` of a closed, consistently oriented mesh of
-/// `vertices` vertices and `triangles` triangles and returns its Loop subdivision (one
-/// step). Moves `pos` past the streams.
-pub(crate) fn decode_streams_subdivided(
-    raw: &[u8],
+/// Runs the traversal of the streams at `raw[*pos..]` (a mesh of `vertices` vertices and
+/// `triangles` triangles), pairing every edge whose two sides it meets; moves `pos` past
+/// the streams. Sides left waiting lie on the boundary (of a part of a closed mesh).
+pub(crate) fn traverse<'a>(
+    raw: &'a [u8],
     pos: &mut usize,
     vertices: usize,
     triangles: usize,
     step: f64,
-) -> Result<TriMesh, String> {
+) -> Result<State<'a>, String> {
     let [flags, codes, residuals] = split_streams(raw, pos)?;
     let mut st = State {
         codes,
@@ -135,14 +158,15 @@ pub(crate) fn decode_streams_subdivided(
         valence: Vec::with_capacity(vertices),
         sum: Vec::with_capacity(vertices),
         waiting_head: Vec::with_capacity(vertices),
-        waiting: Vec::new(),
+        // At most one entry per side popped with flag 0, about one per triangle.
+        waiting: Vec::with_capacity(triangles + 16),
         triangles: Vec::with_capacity(triangles),
         side_edge: Vec::with_capacity(triangles),
         edge_points: Vec::with_capacity(triangles * 3 / 2),
     };
     // Gates with the side they stand for (3 t + k: corner k to k + 1 of triangle t).
-    let mut stack: Vec<Gate> = Vec::new();
-    let mut stack_sides: Vec<u32> = Vec::new();
+    let mut stack: Vec<Gate> = Vec::with_capacity(64);
+    let mut stack_sides: Vec<u32> = Vec::with_capacity(64);
     let mut fpos = 0usize;
     while st.triangles.len() < triangles {
         let t = st.triangles.len() as u32;
@@ -192,17 +216,31 @@ pub(crate) fn decode_streams_subdivided(
             st.quantized.len()
         ));
     }
+    Ok(st)
+}
+
+/// Decodes the streams at `raw[*pos..]` of a closed, consistently oriented mesh of
+/// `vertices` vertices and `triangles` triangles and returns its Loop subdivision (one
+/// step). Moves `pos` past the streams.
+pub(crate) fn decode_streams_subdivided(
+    raw: &[u8],
+    pos: &mut usize,
+    vertices: usize,
+    triangles: usize,
+    step: f64,
+) -> Result<TriMesh, String> {
+    let st = traverse(raw, pos, vertices, triangles, step)?;
     if st.edge_points.len() * 2 != triangles * 3 {
         return Err("the mesh stored as closed has sides without a partner".into());
     }
     // Loop's vertex mask.
     let beta = loop_betas(&st.valence);
     let mut positions: Vec<Vec3> = Vec::with_capacity(vertices + st.edge_points.len());
-    positions.par_extend((0..vertices).into_par_iter().map(|v| {
-        let (p, n) = (st.positions[v], st.valence[v]);
-        let (nf, b) = (n as f64, beta[n as usize]);
-        ((1.0 - nf * b) * p + b * st.sum[v]).as_vec3()
-    }));
+    positions.par_extend(
+        (0..vertices)
+            .into_par_iter()
+            .map(|v| st.vertex_point(v, &beta)),
+    );
     positions.extend_from_slice(&st.edge_points);
     let nv = vertices as u32;
     let mut fine: Vec<[u32; 3]> = vec![[0; 3]; triangles * 4];

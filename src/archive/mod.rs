@@ -11,8 +11,9 @@
 //!
 //! **Frames** ([`ArchiveFrame`]): the pipeline's fluid surface is stored as its Loop
 //! control mesh (the decimated mesh, a quarter of the triangles) and subdivided again on
-//! decoding; isolated-particle spheres as one template and their centres. Meshes from
-//! other tools ([`ArchiveWriter::append`]) are stored as they are.
+//! decoding, a big one in parts that decode in parallel; isolated-particle spheres as one
+//! template and their centres. Meshes from other tools ([`ArchiveWriter::append`]) are
+//! stored as they are.
 //!
 //! Round trip: connectivity exactly, up to a permutation of the triangles (traversal
 //! order), a rotation of each triangle's corners (orientation kept) and a renumbering of
@@ -22,6 +23,7 @@
 mod codec;
 mod frame;
 mod fused;
+mod parts;
 
 pub use frame::ArchiveFrame;
 
@@ -32,9 +34,9 @@ use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 const MAGIC: &[u8; 8] = b"MNSCMSEQ";
-/// The version new archives get. Version 1 (one plain mesh per frame) is still read and
-/// appended to.
-const VERSION: u32 = 2;
+/// The version new archives get. Versions 1 (one plain mesh per frame) and 2 (no parts)
+/// are still read and appended to in their own format.
+const VERSION: u32 = 3;
 const HEADER_LEN: u64 = 16;
 const RECORD_MAGIC: &[u8; 4] = b"FRAM";
 const RECORD_HEADER_LEN: usize = 48;
@@ -285,7 +287,7 @@ impl ArchiveReader {
         self.recovered_by_scan
     }
 
-    /// Format version of the file (1 or 2).
+    /// Format version of the file (1, 2 or 3).
     pub fn version(&self) -> u32 {
         self.version
     }
@@ -536,7 +538,7 @@ impl ArchiveWriter {
             }
             codec::encode_v1(&merged, step, level)
         } else {
-            frame::encode_frame(frame, step, level)
+            frame::encode_frame(frame, step, level, self.version >= 3)
         }
         .map_err(|e| Error::io(&self.path, e))?;
         let header = RecordHeader {
@@ -625,6 +627,44 @@ mod tests {
         assert!(
             std::fs::metadata(&new_path).unwrap().len() < std::fs::metadata(&path).unwrap().len()
         );
+    }
+
+    #[test]
+    fn version_2_archives_keep_control_meshes_whole() {
+        let dir = tempfile::tempdir().unwrap();
+        // A control mesh big enough for ten parts.
+        let control = icosphere(6, 1.0);
+        let frame = ArchiveFrame {
+            fluid: &control,
+            subdivision_levels: 1,
+            spheres: &SphereInstances::default(),
+        };
+        let options = ArchiveOptions::new(1e-5);
+        let mut decoded = Vec::new();
+        for version in [2u32, VERSION] {
+            let path = dir.path().join(format!("v{version}.mseq"));
+            let mut header = [0u8; HEADER_LEN as usize];
+            header[0..8].copy_from_slice(MAGIC);
+            header[8..12].copy_from_slice(&version.to_le_bytes());
+            std::fs::write(&path, header).unwrap();
+            let mut w = ArchiveWriter::open_append(&path, &options).unwrap();
+            w.append_frame(7, &frame).unwrap();
+            w.finish().unwrap();
+            let r = ArchiveReader::open(&path).unwrap();
+            assert_eq!(r.version(), version);
+            // The shape byte after the level varint: 1 whole, 2 in parts.
+            let f = &r.frames()[0];
+            let start = f.offset as usize + RECORD_HEADER_LEN;
+            let payload = &r.bytes[start..start + f.payload_bytes as usize];
+            let raw = zstd::bulk::decompress(payload, 1 << 24).unwrap();
+            assert_eq!(raw[1], if version == 2 { 1 } else { 2 });
+            decoded.push(r.read_geometry(7).unwrap().fluid);
+        }
+        assert_eq!(decoded[0].triangle_count(), 4 * control.triangle_count());
+        assert_eq!(decoded[0].triangle_count(), decoded[1].triangle_count());
+        assert_eq!(decoded[0].vertex_count(), decoded[1].vertex_count());
+        let area = |m: &TriMesh| m.area();
+        assert!((area(&decoded[0]) - area(&decoded[1])).abs() < 1e-6 * area(&decoded[0]));
     }
 
     #[test]
