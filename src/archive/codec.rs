@@ -165,29 +165,11 @@ pub(crate) fn encode_streams_numbered(
 ) -> (CodedMesh, Vec<u32>) {
     let tris = &mesh.triangles;
     let n = tris.len();
-    // Half-edge h = 3t + k runs from corner k to corner k+1 of triangle t. Half-edges are
-    // bucketed by the smaller vertex of their edge (a counting sort, ascending h within a
-    // bucket), so the half-edges of one edge are found among a handful of entries.
     let half_edge = |h: usize| {
         let t = tris[h / 3];
         (t[h % 3], t[(h % 3 + 1) % 3])
     };
-    let mut bucket_start = vec![0u32; mesh.positions.len() + 1];
-    for h in 0..3 * n {
-        let (a, b) = half_edge(h);
-        bucket_start[a.min(b) as usize + 1] += 1;
-    }
-    for v in 0..mesh.positions.len() {
-        bucket_start[v + 1] += bucket_start[v];
-    }
-    let mut fill = bucket_start.clone();
-    let mut bucket = vec![0u32; 3 * n];
-    for h in 0..3 * n {
-        let (a, b) = half_edge(h);
-        let slot = &mut fill[a.min(b) as usize];
-        bucket[*slot as usize] = h as u32;
-        *slot += 1;
-    }
+    let (bucket_start, bucket) = half_edge_buckets(mesh);
     let mut coded = vec![false; n];
     let mut new_id = vec![u32::MAX; mesh.positions.len()];
     let mut old_of_new: Vec<u32> = Vec::new();
@@ -285,6 +267,60 @@ pub(crate) fn encode_streams_numbered(
         put_varint(out, stream.len() as u64);
         out.extend_from_slice(stream);
     }
+    let mut coded = edge_report(mesh, &bucket_start, &bucket);
+    coded.vertices = numbering.next;
+    (coded, old_of_new)
+}
+
+/// What [`encode_streams`] would report for `mesh`, without coding it.
+pub(crate) fn analyze(mesh: &TriMesh) -> CodedMesh {
+    let (bucket_start, bucket) = half_edge_buckets(mesh);
+    let mut coded = edge_report(mesh, &bucket_start, &bucket);
+    let mut used = vec![false; mesh.positions.len()];
+    for &v in mesh.triangles.iter().flatten() {
+        used[v as usize] = true;
+    }
+    coded.vertices = used.iter().filter(|&&u| u).count() as u32;
+    coded
+}
+
+/// Half-edge `h = 3t + k` runs from corner `k` to corner `k + 1` of triangle `t`.
+/// Half-edges are bucketed by the smaller vertex of their edge (a counting sort,
+/// ascending `h` within a bucket), so the half-edges of one edge are found among a
+/// handful of entries: bucket `v` is `bucket[start[v]..start[v + 1]]`.
+fn half_edge_buckets(mesh: &TriMesh) -> (Vec<u32>, Vec<u32>) {
+    let tris = &mesh.triangles;
+    let n = tris.len();
+    let half_edge = |h: usize| {
+        let t = tris[h / 3];
+        (t[h % 3], t[(h % 3 + 1) % 3])
+    };
+    let mut bucket_start = vec![0u32; mesh.positions.len() + 1];
+    for h in 0..3 * n {
+        let (a, b) = half_edge(h);
+        bucket_start[a.min(b) as usize + 1] += 1;
+    }
+    for v in 0..mesh.positions.len() {
+        bucket_start[v + 1] += bucket_start[v];
+    }
+    let mut fill = bucket_start.clone();
+    let mut bucket = vec![0u32; 3 * n];
+    for h in 0..3 * n {
+        let (a, b) = half_edge(h);
+        let slot = &mut fill[a.min(b) as usize];
+        bucket[*slot as usize] = h as u32;
+        *slot += 1;
+    }
+    (bucket_start, bucket)
+}
+
+/// Triangle and edge counts and the shape conditions of `mesh` (vertices left 0).
+fn edge_report(mesh: &TriMesh, bucket_start: &[u32], bucket: &[u32]) -> CodedMesh {
+    let tris = &mesh.triangles;
+    let half_edge = |h: usize| {
+        let t = tris[h / 3];
+        (t[h % 3], t[(h % 3 + 1) % 3])
+    };
     // Edges and the conditions of exact Loop counts, from the buckets: the sides of one
     // undirected edge share a bucket.
     let mut edges = 0u64;
@@ -321,14 +357,13 @@ pub(crate) fn encode_streams_numbered(
         }
         closed_oriented &= edge_sides.iter().all(|&(_, n, f)| n == 2 && f == 1);
     }
-    let coded = CodedMesh {
-        vertices: numbering.next,
-        triangles: n as u32,
+    CodedMesh {
+        vertices: 0,
+        triangles: tris.len() as u32,
         edges,
         loop_countable,
         closed_oriented: closed_oriented && loop_countable,
-    };
-    (coded, old_of_new)
+    }
 }
 
 /// Decodes a version-1 payload of `vertices` vertices and `triangles` triangles. No

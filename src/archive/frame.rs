@@ -25,8 +25,8 @@
 //! other mesh, stored as its streams.
 
 use super::codec::{
-    decode_streams, decompress, encode_streams, get_varint, put_varint, raw_capacity, unzigzag,
-    zigzag,
+    analyze, decode_streams, decompress, encode_streams, get_varint, put_varint, raw_capacity,
+    unzigzag, zigzag,
 };
 use super::fused::decode_streams_subdivided;
 use super::parts::{decode_parts_subdivided, encode_parts, part_count};
@@ -75,19 +75,20 @@ pub(crate) fn encode_frame(
 ) -> std::io::Result<(Vec<u8>, u32, u32)> {
     let mut raw = Vec::new();
     let mut levels = frame.subdivision_levels;
-    let mut fluid_streams = Vec::new();
-    let mut coded = encode_streams(frame.fluid, step, &mut fluid_streams);
+    let mut fine = None;
+    let mut coded = analyze(frame.fluid);
     let mut counts = loop_counts(coded, levels);
     if counts.is_none() {
         // A control mesh whose subdivision the counts cannot describe (a degenerate or a
         // repeated triangle): subdivide here and store the result as it is.
-        let mut fine = frame.fluid.clone();
-        subdivide(&mut fine, &SubdivideOptions { levels });
-        fluid_streams.clear();
-        coded = encode_streams(&fine, step, &mut fluid_streams);
+        let mut mesh = frame.fluid.clone();
+        subdivide(&mut mesh, &SubdivideOptions { levels });
+        coded = analyze(&mesh);
         levels = 0;
         counts = Some((coded.vertices as u64, coded.triangles as u64));
+        fine = Some(mesh);
     }
+    let fluid = fine.as_ref().unwrap_or(frame.fluid);
     let (mut vertices, mut triangles) = counts.expect("set above");
     let parts = part_count(coded.triangles as usize);
     let shape = if !coded.closed_oriented {
@@ -102,11 +103,11 @@ pub(crate) fn encode_frame(
     put_varint(&mut raw, coded.vertices as u64);
     put_varint(&mut raw, coded.triangles as u64);
     if shape == CLOSED_IN_PARTS {
-        encode_parts(frame.fluid, parts, step, &mut raw);
+        encode_parts(fluid, parts, step, &mut raw);
     } else {
-        raw.extend_from_slice(&fluid_streams);
+        encode_streams(fluid, step, &mut raw);
     }
-    drop(fluid_streams);
+    drop(fine);
     let spheres = frame.spheres;
     let count = if spheres.template.triangles.is_empty() {
         0

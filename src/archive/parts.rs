@@ -63,13 +63,24 @@ pub(crate) fn encode_parts(mesh: &TriMesh, parts: usize, step: f64, out: &mut Ve
     } else {
         2
     };
-    let key: Vec<f32> = mesh
+    // Sorted by the sum of the corners' coordinates along the axis, ties by number: the
+    // sum as order-preserving bits above the triangle number.
+    let mut order: Vec<u64> = mesh
         .triangles
         .iter()
-        .map(|t| t.iter().map(|&v| mesh.positions[v as usize][axis]).sum())
+        .enumerate()
+        .map(|(t, tri)| {
+            let key: f32 = tri.iter().map(|&v| mesh.positions[v as usize][axis]).sum();
+            let bits = key.to_bits();
+            let ordered = if bits >> 31 == 1 {
+                !bits
+            } else {
+                bits | 1 << 31
+            };
+            (ordered as u64) << 32 | t as u64
+        })
         .collect();
-    let mut order: Vec<u32> = (0..n as u32).collect();
-    order.sort_unstable_by(|&a, &b| key[a as usize].total_cmp(&key[b as usize]).then(a.cmp(&b)));
+    order.sort_unstable();
     put_varint(out, parts as u64);
     // First (part, number) of every mesh vertex, and each part's copies.
     let mut first: Vec<(u32, u32)> = vec![(NONE, 0); mesh.positions.len()];
@@ -77,7 +88,10 @@ pub(crate) fn encode_parts(mesh: &TriMesh, parts: usize, step: f64, out: &mut Ve
     let mut local = vec![NONE; mesh.positions.len()];
     let mut streams = Vec::new();
     for p in 0..parts {
-        let mut tris = order[p * n / parts..(p + 1) * n / parts].to_vec();
+        let mut tris: Vec<u32> = order[p * n / parts..(p + 1) * n / parts]
+            .iter()
+            .map(|&k| k as u32)
+            .collect();
         tris.sort_unstable();
         let mut piece = TriMesh::default();
         let mut original: Vec<u32> = Vec::new();
