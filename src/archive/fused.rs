@@ -28,8 +28,8 @@ pub(crate) struct State<'a> {
     rpos: usize,
     step: f64,
     pub(crate) quantized: Vec<[i64; 3]>,
-    /// Control positions as decoded (f32), widened to f64 for the masks.
-    pub(crate) positions: Vec<DVec3>,
+    /// Control positions as decoded (f32; widened to f64 for the masks).
+    pub(crate) positions: Vec<Vec3>,
     pub(crate) valence: Vec<u32>,
     pub(crate) sum: Vec<DVec3>,
     /// Sides waiting for their partner: the head of a list per smaller vertex, and the
@@ -45,7 +45,7 @@ impl State<'_> {
     /// Loop's vertex point of control vertex `v` once its valence and neighbour sum are
     /// complete (`beta` from [`loop_betas`]).
     pub(crate) fn vertex_point(&self, v: usize, beta: &[f64]) -> Vec3 {
-        let (p, n) = (self.positions[v], self.valence[v]);
+        let (p, n) = (self.positions[v].as_dvec3(), self.valence[v]);
         let (nf, b) = (n as f64, beta[n as usize]);
         ((1.0 - nf * b) * p + b * self.sum[v]).as_vec3()
     }
@@ -83,7 +83,7 @@ impl State<'_> {
         }
         self.quantized.push(q);
         let p = Vec3::from_array(q.map(|c| (c as f64 * self.step) as f32));
-        self.positions.push(p.as_dvec3());
+        self.positions.push(p);
         self.valence.push(0);
         self.sum.push(DVec3::ZERO);
         self.waiting_head.push(NONE);
@@ -99,10 +99,10 @@ impl State<'_> {
         self.side_edge[t as usize / 3][t as usize % 3] = e;
         let p = &self.positions;
         let (a, b, c, d) = (a as usize, b as usize, c as usize, d as usize);
-        let (pa, pb) = (p[a], p[b]);
+        let (pa, pb) = (p[a].as_dvec3(), p[b].as_dvec3());
         // Summed as the general subdivision does: smaller vertex first.
         let ends = if a < b { pa + pb } else { pb + pa };
-        let point = 0.375 * ends + 0.125 * (p[c] + p[d]);
+        let point = 0.375 * ends + 0.125 * (p[c].as_dvec3() + p[d].as_dvec3());
         self.edge_points.push(point.as_vec3());
         self.sum[a] += pb;
         self.sum[b] += pa;

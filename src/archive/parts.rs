@@ -285,11 +285,11 @@ pub(crate) fn decode_parts_subdivided(
             let a = corner(&states, s.3, s.4, 0);
             let b = corner(&states, s.3, s.4, 1);
             // Smaller global vertex first, as the general subdivision adds them.
-            (st.positions[a], st.positions[b])
+            (st.positions[a].as_dvec3(), st.positions[b].as_dvec3())
         };
         let ends = if s.2 == s.0 { pa + pb } else { pb + pa };
-        let pc = states[s.3 as usize].positions[corner(&states, s.3, s.4, 2)];
-        let pd = states[t.3 as usize].positions[corner(&states, t.3, t.4, 2)];
+        let pc = states[s.3 as usize].positions[corner(&states, s.3, s.4, 2)].as_dvec3();
+        let pd = states[t.3 as usize].positions[corner(&states, t.3, t.4, 2)].as_dvec3();
         cut_points.push((0.375 * ends + 0.125 * (pc + pd)).as_vec3());
         for &(p, side) in &[(s.3, s.4), (t.3, t.4)] {
             let st = &mut states[p as usize];
