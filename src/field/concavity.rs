@@ -22,41 +22,110 @@ pub fn concavity_factor(ev: f64, t_low: f64, t_high: f64) -> f64 {
 /// `1e-8·ρ` — below the f32 precision of the field — for a sixth of the time of the libm
 /// `acos` and `cos` (which took a quarter of the field stage).
 pub fn largest_eigenvalue_real_part(m: &[f64; 9]) -> f64 {
-    const THIRD: f64 = 1.0 / 3.0;
-    let tr = m[0] + m[4] + m[8];
-    let minors = m[0] * m[4] - m[1] * m[3] + m[0] * m[8] - m[2] * m[6] + m[4] * m[8] - m[5] * m[7];
-    let det = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6])
-        + m[2] * (m[3] * m[7] - m[4] * m[6]);
-    let (a, b, c) = (-tr, minors, -det);
-    // Depressed cubic t³ + p t + q = 0 with λ = t − a/3.
-    let shift = -a * THIRD;
-    let p = b - a * a * THIRD;
-    let q = (2.0 / 27.0) * a * a * a - a * b * THIRD + c;
-    let half_q = 0.5 * q;
-    let third_p = p * THIRD;
-    let disc = half_q * half_q + third_p * third_p * third_p;
-    if disc > 0.0 {
-        // One real root and a complex pair.
-        let s = disc.sqrt();
-        let t = (-half_q + s).cbrt() + (-half_q - s).cbrt();
-        let real_root = t + shift;
-        let pair_real = (tr - real_root) * 0.5;
+    let c = Cubic::of(*m);
+    if c.disc > 0.0 {
+        c.largest_with_one_real_root()
+    } else if c.p < 0.0 {
+        c.largest_of_three_real_roots()
+    } else {
+        c.shift
+    }
+}
+
+/// [`largest_eigenvalue_real_part`] of `N` matrices at once, given entry by entry
+/// (`m[k][lane]`): the same operations lane by lane, so the same values bit for bit. The
+/// common case (three real roots) has no branch and no call, so the lanes run as vector
+/// instructions; the cube roots of the one-real-root case are taken lane by lane.
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+pub(crate) fn largest_eigenvalue_real_part_lanes<const N: usize>(m: &[[f64; N]; 9]) -> [f64; N] {
+    // Plain loops rather than closures, so that everything inlines into the caller's
+    // (possibly AVX2) code.
+    let mut cubics = [Cubic::default(); N];
+    for l in 0..N {
+        let mut lane = [0.0; 9];
+        for k in 0..9 {
+            lane[k] = m[k][l];
+        }
+        cubics[l] = Cubic::of(lane);
+    }
+    let mut largest = [0.0; N];
+    for l in 0..N {
+        largest[l] = cubics[l].largest_of_three_real_roots();
+    }
+    for l in 0..N {
+        let c = &cubics[l];
+        if c.disc > 0.0 {
+            largest[l] = c.largest_with_one_real_root();
+        } else if c.p.is_nan() || c.p >= 0.0 {
+            // (A NaN `p` takes the shift, as in the scalar version.)
+            largest[l] = c.shift;
+        }
+    }
+    largest
+}
+
+/// The characteristic cubic of a 3×3 matrix in depressed form `t³ + p t + q = 0`,
+/// `λ = t + shift`.
+#[derive(Clone, Copy, Default)]
+struct Cubic {
+    trace: f64,
+    shift: f64,
+    p: f64,
+    half_q: f64,
+    third_p: f64,
+    disc: f64,
+}
+
+impl Cubic {
+    #[inline(always)]
+    fn of(m: [f64; 9]) -> Cubic {
+        const THIRD: f64 = 1.0 / 3.0;
+        let tr = m[0] + m[4] + m[8];
+        let minors =
+            m[0] * m[4] - m[1] * m[3] + m[0] * m[8] - m[2] * m[6] + m[4] * m[8] - m[5] * m[7];
+        let det = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6])
+            + m[2] * (m[3] * m[7] - m[4] * m[6]);
+        let (a, b, c) = (-tr, minors, -det);
+        let p = b - a * a * THIRD;
+        let q = (2.0 / 27.0) * a * a * a - a * b * THIRD + c;
+        let half_q = 0.5 * q;
+        let third_p = p * THIRD;
+        Cubic {
+            trace: tr,
+            shift: -a * THIRD,
+            p,
+            half_q,
+            third_p,
+            disc: half_q * half_q + third_p * third_p * third_p,
+        }
+    }
+
+    /// One real root and a complex pair (`disc > 0`): the larger of the root and the
+    /// pair's real part.
+    fn largest_with_one_real_root(&self) -> f64 {
+        let s = self.disc.sqrt();
+        let t = (-self.half_q + s).cbrt() + (-self.half_q - s).cbrt();
+        let real_root = t + self.shift;
+        let pair_real = (self.trace - real_root) * 0.5;
         real_root.max(pair_real)
-    } else if p < 0.0 {
-        // Three real roots; k = 0 gives the largest: ρ·cos(acos(x)/3) + shift.
-        let root = (-third_p).sqrt();
+    }
+
+    /// Three real roots (`disc ≤ 0`, `p < 0`); `k = 0` gives the largest:
+    /// `ρ·cos(acos(x)/3) + shift`. Meaningless (but harmless) in the other cases.
+    #[inline(always)]
+    fn largest_of_three_real_roots(&self) -> f64 {
+        let root = (-self.third_p).sqrt();
         let rho = 2.0 * root;
         // x = 3q / (p·ρ) = (q/2) / (p/3 · root).
-        let x = (half_q / (third_p * root)).clamp(-1.0, 1.0);
-        rho * cos_third_of_acos(x) + shift
-    } else {
-        shift
+        let x = (self.half_q / (self.third_p * root)).clamp(-1.0, 1.0);
+        rho * cos_third_of_acos(x) + self.shift
     }
 }
 
 /// `cos(acos(x) / 3)` for `x` in `[−1, 1]`: within 9e-9, and to rounding for `x` above
 /// −0.936 (c > 0.6; see [`largest_eigenvalue_real_part`]).
-#[inline]
+#[inline(always)]
 fn cos_third_of_acos(x: f64) -> f64 {
     const G: [f64; 9] = [
         5.000_000_087_591_784e-1,
@@ -78,8 +147,10 @@ fn cos_third_of_acos(x: f64) -> f64 {
     let c = low + s4 * (high + s4 * G[8]);
     // One Newton step on 4c³ − 3c = x (cos 3φ = 4cos³φ − 3cos φ) takes the error to the
     // f64 rounding level, except near c = 1/2 where the derivative 12c² − 3 vanishes.
+    // Computed either way and then chosen, so that lanes of a vector need no branch.
+    let newton = c - (4.0 * c * c * c - 3.0 * c - x) / (12.0 * c * c - 3.0);
     if c > 0.6 {
-        c - (4.0 * c * c * c - 3.0 * c - x) / (12.0 * c * c - 3.0)
+        newton
     } else {
         c
     }
@@ -158,6 +229,53 @@ mod tests {
             let ev = largest_eigenvalue_real_part(&m);
             assert!((ev - rayleigh).abs() < 1e-6, "{m:?}: {ev} vs {rayleigh}");
         }
+    }
+
+    #[test]
+    fn lanes_give_the_scalar_eigenvalue_bit_for_bit() {
+        // Random non-symmetric matrices (both the one- and the three-real-root case),
+        // a triple root, zero, and non-finite entries.
+        let mut seed = 3u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 4.0 - 2.0
+        };
+        let mut matrices: Vec<[f64; 9]> =
+            (0..400).map(|_| std::array::from_fn(|_| next())).collect();
+        matrices.push([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]);
+        matrices.push([0.0; 9]);
+        matrices.push([f64::NAN, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]);
+        matrices.push([f64::INFINITY, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]);
+        let (mut one_root, mut three_roots) = (0, 0);
+        for group in matrices.chunks(8) {
+            let mut lanes = [[0.0f64; 8]; 9];
+            for (l, m) in group.iter().enumerate() {
+                for k in 0..9 {
+                    lanes[k][l] = m[k];
+                }
+            }
+            let got = largest_eigenvalue_real_part_lanes(&lanes);
+            for (l, m) in group.iter().enumerate() {
+                let c = Cubic::of(*m);
+                if c.disc > 0.0 {
+                    one_root += 1;
+                } else if c.p < 0.0 {
+                    three_roots += 1;
+                }
+                let want = largest_eigenvalue_real_part(m);
+                assert!(
+                    got[l].to_bits() == want.to_bits() || (got[l].is_nan() && want.is_nan()),
+                    "{m:?}: {} vs {want}",
+                    got[l]
+                );
+            }
+        }
+        assert!(
+            one_root > 50 && three_roots > 50,
+            "{one_root} / {three_roots}"
+        );
     }
 
     #[test]

@@ -34,6 +34,7 @@ use hashbrown::{HashMap, HashSet};
 use rayon::prelude::*;
 
 mod concavity;
+use concavity::largest_eigenvalue_real_part_lanes;
 pub use concavity::{concavity_factor, largest_eigenvalue_real_part};
 
 /// Parameters of the field. Lengths other than the particle radius are multiples of `r`.
@@ -290,6 +291,17 @@ pub fn compute_blocks(
     options: &FieldOptions,
     range: Option<BlockRange>,
 ) -> (SparseField, FieldStats) {
+    compute_blocks_with(positions, options, range, true)
+}
+
+/// [`compute_blocks`]; `simd`: the AVX2 copy of the kernel may be used (the values are the
+/// same either way, which the tests check).
+fn compute_blocks_with(
+    positions: &[Vec3],
+    options: &FieldOptions,
+    range: Option<BlockRange>,
+    simd: bool,
+) -> (SparseField, FieldStats) {
     let h = options.cell_size_world();
     let inv_h = 1.0 / h;
     let reach = block_reach(options);
@@ -335,6 +347,7 @@ pub fn compute_blocks(
         radius_cells: options.influence_radius / options.cell_size,
         h,
         options,
+        simd,
     };
     // Evaluate every candidate into one contiguous array, then compact away the
     // candidates no particle reaches.
@@ -405,6 +418,8 @@ struct BlockKernel<'a> {
     radius_cells: f32,
     h: f64,
     options: &'a FieldOptions,
+    /// May use the AVX2 copy of the kernel.
+    simd: bool,
 }
 
 impl BlockKernel<'_> {
@@ -421,7 +436,9 @@ impl BlockKernel<'_> {
         values: &mut BlockValues,
     ) -> Option<usize> {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        if self.simd
+            && std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
         {
             // SAFETY: the CPU supports the features the function is compiled for.
             return unsafe { self.evaluate_avx2(key, acc, values) };
@@ -440,6 +457,9 @@ impl BlockKernel<'_> {
         self.evaluate_portable(key, acc, values)
     }
 
+    // Index loops over lanes on purpose: they inline into (and vectorize within) the AVX2
+    // copy, where iterator adaptors' closures may not.
+    #[allow(clippy::needless_range_loop)]
     #[inline(always)]
     fn evaluate_portable(
         &self,
@@ -514,38 +534,47 @@ impl BlockKernel<'_> {
         let r = self.options.particle_radius as f64;
         let (t_low, t_high) = (self.options.t_low as f64, self.options.t_high as f64);
         for row in 0..BLOCK_VOLUME / ROW {
+            // One row of vertices at a time, each quantity as a lane array, so that the
+            // Jacobians and their eigenvalues run as vector instructions. Lanes outside
+            // the band (Σw = 0) compute garbage that is not stored.
+            // (Plain loops rather than closures: they stay inside the AVX2 copy of the
+            // kernel.)
+            let mut sums = [[0.0f64; ROW]; SUMS];
+            for k in 0..SUMS {
+                for i in 0..ROW {
+                    sums[k][i] = acc.sums[k][row][i] as f64;
+                }
+            }
+            let w = sums[0];
+            // v − vbar = Σ w r / Σ w.
+            let mut d = [[0.0f64; ROW]; 3];
+            for a in 0..3 {
+                for i in 0..ROW {
+                    d[a][i] = sums[1 + a][i] / w[i];
+                }
+            }
+            // x_i = v − r_i gives J_ab = ((v − vbar)_a Σ∂_b w − Σ g r_a r_b) / Σ w, with
+            // Σ∂_b w = sums[4 + b] and the symmetric Σ g r_a r_b in sums[7..13].
+            const SYMMETRIC: [usize; 9] = [7, 8, 9, 8, 10, 11, 9, 11, 12];
+            let mut jac = [[0.0f64; ROW]; 9];
+            for a in 0..3 {
+                for b in 0..3 {
+                    for i in 0..ROW {
+                        jac[a * 3 + b][i] =
+                            (d[a][i] * sums[4 + b][i] - sums[SYMMETRIC[a * 3 + b]][i]) / w[i];
+                    }
+                }
+            }
+            let ev = largest_eigenvalue_real_part_lanes(&jac);
             for i in 0..ROW {
-                let sum = |k: usize| acc.sums[k][row][i] as f64;
                 let idx = row * ROW + i;
-                let w = sum(0);
-                if w <= 0.0 {
+                if w[i] <= 0.0 {
                     values[idx] = self.options.outside_value();
                     continue;
                 }
                 in_band += 1;
-                // v − vbar = Σ w r / Σ w.
-                let d = [sum(1) / w, sum(2) / w, sum(3) / w];
-                let g = [sum(4), sum(5), sum(6)];
-                let s = [
-                    sum(7),
-                    sum(8),
-                    sum(9),
-                    sum(8),
-                    sum(10),
-                    sum(11),
-                    sum(9),
-                    sum(11),
-                    sum(12),
-                ];
-                // x_i = v − r_i gives J_ab = ((v − vbar)_a Σ∂_b w − Σ g r_a r_b) / Σ w.
-                let mut jac = [0.0f64; 9];
-                for a in 0..3 {
-                    for b in 0..3 {
-                        jac[a * 3 + b] = (d[a] * g[b] - s[a * 3 + b]) / w;
-                    }
-                }
-                let f = concavity_factor(largest_eigenvalue_real_part(&jac), t_low, t_high);
-                let dist_cells = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                let f = concavity_factor(ev[i], t_low, t_high);
+                let dist_cells = (d[0][i] * d[0][i] + d[1][i] * d[1][i] + d[2][i] * d[2][i]).sqrt();
                 values[idx] = (dist_cells * self.h - r * f) as f32;
             }
         }
@@ -688,4 +717,47 @@ fn stored_value(field: &SparseField, g: [i32; 3]) -> Option<f32> {
     field
         .block(&[bx, by, bz])
         .map(|block| block[local_index(a, b, c)])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_vector_kernel_gives_the_portable_kernel_values_bit_for_bit() {
+        // A jittered block of particles with a loose film and a few strays: every branch
+        // of the eigenvalue (one or three real roots, flat and sharp neighbourhoods).
+        let r = 0.01f32;
+        let mut seed = 5u64;
+        let mut jitter = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 40) as f32 / (1u64 << 24) as f32 - 0.5) * r
+        };
+        let mut positions = Vec::new();
+        for z in 0..10 {
+            for y in 0..14 {
+                for x in 0..12 {
+                    let p = Vec3::new(x as f32, y as f32, z as f32) * 2.0 * r;
+                    positions.push(p + Vec3::new(jitter(), jitter(), jitter()));
+                }
+            }
+        }
+        for k in 0..40 {
+            let t = k as f32 * 0.7;
+            positions.push(Vec3::new(t.sin(), 0.3 * t.cos(), 0.6) * 0.3 + Vec3::splat(0.12));
+        }
+        let options = FieldOptions::new(r);
+        let (portable, _) = compute_blocks_with(&positions, &options, None, false);
+        let (vector, _) = compute_blocks_with(&positions, &options, None, true);
+        assert!(portable.blocks().count() > 10);
+        assert_eq!(portable.blocks().count(), vector.blocks().count());
+        for (key, values) in portable.blocks() {
+            let other = vector.block(key).expect("same blocks");
+            for (a, b) in values.iter().zip(other.iter()) {
+                assert_eq!(a.to_bits(), b.to_bits(), "block {key:?}");
+            }
+        }
+    }
 }
