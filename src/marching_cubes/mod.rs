@@ -297,16 +297,29 @@ fn march_block(field: &SparseField, key: BlockKey, cube: &mut [f32]) -> BlockSur
             key[2] + ((o >> 2) & 1),
         ]);
     }
+    // Row by row: eight values of a block row, then the first of the +x neighbour's.
+    let outside = field.outside_value;
     for c in 0..=E {
         for b in 0..=E {
-            for a in 0..=E {
-                let o = (a / E) | ((b / E) << 1) | ((c / E) << 2);
-                cube[cube_index(a, b, c)] = match neighbours[o as usize] {
-                    Some(block) => block[local_index(a % E, b % E, c % E)],
-                    None => field.outside_value,
-                };
+            let o = (((b / E) << 1) | ((c / E) << 2)) as usize;
+            let src = local_index(0, b % E, c % E);
+            let start = cube_index(0, b, c);
+            let row = &mut cube[start..start + E as usize + 1];
+            match neighbours[o] {
+                Some(block) => row[..E as usize].copy_from_slice(&block[src..src + E as usize]),
+                None => row[..E as usize].fill(outside),
             }
+            row[E as usize] = neighbours[o | 1].map_or(outside, |block| block[src]);
         }
+    }
+    let inside: usize = cube.iter().map(|&v| (v < 0.0) as usize).sum();
+    if inside == 0 || inside == cube.len() {
+        // All outside or all inside (most blocks of the band): no cell changes sign.
+        return BlockSurface {
+            key,
+            owned: Vec::new(),
+            triangles: Vec::new(),
+        };
     }
     let table = table::table();
     let edges = table::cube_edges();
