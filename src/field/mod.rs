@@ -511,16 +511,17 @@ impl BlockKernel<'_> {
                                     continue;
                                 }
                                 let row = (c * BLOCK_EDGE + b) as usize;
-                                accumulate_row(
-                                    &mut acc.sums,
-                                    row,
-                                    &rx,
-                                    &rx2,
-                                    ry,
-                                    rz,
-                                    ryz2,
-                                    inv_rc2,
-                                );
+                                let args = (&rx, &rx2, ry, rz, ryz2, inv_rc2);
+                                // A sphere within one half of the row (particles of the
+                                // ±x neighbour blocks, mostly) updates four lanes only;
+                                // the others would add zeros.
+                                if hi[0] < HALF as i32 {
+                                    accumulate_row::<0, HALF>(&mut acc.sums, row, args);
+                                } else if lo[0] >= HALF as i32 {
+                                    accumulate_row::<HALF, ROW>(&mut acc.sums, row, args);
+                                } else {
+                                    accumulate_row::<0, ROW>(&mut acc.sums, row, args);
+                                }
                             }
                         }
                     }
@@ -582,19 +583,18 @@ impl BlockKernel<'_> {
     }
 }
 
-/// Adds one particle's terms to one row of vertices. Lanes outside the influence sphere
-/// get `q = 0`, hence zero weight and zero gradient.
-#[allow(clippy::too_many_arguments)]
+/// Half a row.
+const HALF: usize = ROW / 2;
+
+/// Adds one particle's terms to lanes `FROM..TO` of one row of vertices (`args`: the
+/// lanes' `x` offsets and their squares, `y` and `z` offsets, `y² + z²`, `1 / R²` in
+/// cells). Lanes outside the influence sphere get `q = 0`, hence zero weight and zero
+/// gradient; lanes outside `FROM..TO` must be outside the sphere.
 #[inline(always)]
-fn accumulate_row(
+fn accumulate_row<const FROM: usize, const TO: usize>(
     sums: &mut [[[f32; ROW]; BLOCK_VOLUME / ROW]],
     row: usize,
-    rx: &[f32; ROW],
-    rx2: &[f32; ROW],
-    ry: f32,
-    rz: f32,
-    ryz2: f32,
-    inv_rc2: f32,
+    (rx, rx2, ry, rz, ryz2, inv_rc2): (&[f32; ROW], &[f32; ROW], f32, f32, f32, f32),
 ) {
     let [s0, s1, s2, s3, s4, s5, s6, s7, s8, s9, s10, s11, s12] = sums else {
         unreachable!("SUMS accumulators")
@@ -608,7 +608,7 @@ fn accumulate_row(
         &mut s11[row],
         &mut s12[row],
     );
-    for i in 0..ROW {
+    for i in FROM..TO {
         let q = (1.0 - (rx2[i] + ryz2) * inv_rc2).max(0.0);
         let q2 = q * q;
         let w = q2 * q;
