@@ -17,6 +17,10 @@ pub use topology::{validate, TopologyReport};
 use glam::Vec3;
 use rayon::prelude::*;
 
+/// Fewest vertices per task of [`TriMesh::compute_normals`] (each task scans every
+/// triangle).
+const NORMALS_MIN_CHUNK: usize = 1 << 14;
+
 /// An indexed triangle mesh. Positions are world units.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TriMesh {
@@ -43,17 +47,42 @@ impl TriMesh {
     /// to its three vertices), stored in [`TriMesh::normals`]. A vertex with no area around
     /// it gets +y.
     pub fn compute_normals(&mut self) {
+        let chunk = self
+            .positions
+            .len()
+            .div_ceil(rayon::current_num_threads())
+            .max(NORMALS_MIN_CHUNK);
+        self.compute_normals_in_chunks(chunk);
+    }
+
+    /// [`TriMesh::compute_normals`] with the vertices split into ranges of `chunk`, one task
+    /// each. A task scans all triangles in order and adds those touching its range, so
+    /// every vertex sums its triangles in triangle order whatever the split: the normals
+    /// do not depend on `chunk` (nor on the thread count), bit for bit.
+    fn compute_normals_in_chunks(&mut self, chunk: usize) {
         // Accumulated in place in f32 (cross products in f64): one array of the output's
         // size, not a second f64 one, since the fluid surface is the largest thing alive.
         let mut acc = vec![Vec3::ZERO; self.positions.len()];
-        for t in &self.triangles {
-            let [a, b, c] = t.map(|i| self.positions[i as usize].as_dvec3());
-            // The cross product is twice the area times the unit normal.
-            let n = (b - a).cross(c - a).as_vec3();
-            for &i in t {
-                acc[i as usize] += n;
-            }
-        }
+        let (positions, triangles) = (&self.positions, &self.triangles);
+        acc.par_chunks_mut(chunk.max(1))
+            .enumerate()
+            .for_each(|(k, out)| {
+                let lo = (k * chunk) as u32;
+                let hi = lo + out.len() as u32;
+                for t in triangles {
+                    if t.iter().all(|&i| i < lo || i >= hi) {
+                        continue;
+                    }
+                    let [a, b, c] = t.map(|i| positions[i as usize].as_dvec3());
+                    // The cross product is twice the area times the unit normal.
+                    let n = (b - a).cross(c - a).as_vec3();
+                    for &i in t {
+                        if (lo..hi).contains(&i) {
+                            out[(i - lo) as usize] += n;
+                        }
+                    }
+                }
+            });
         acc.par_iter_mut().for_each(|n| {
             let len = n.length();
             *n = if len > 0.0 && len.is_finite() {
@@ -178,5 +207,45 @@ impl Surface {
             out.append(&self.spheres.merged());
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn normals_do_not_depend_on_the_split_of_the_vertices() {
+        let mut mesh = crate::isolated::icosphere(4, 1.0);
+        for (i, p) in mesh.positions.iter_mut().enumerate() {
+            *p *= 1.0 + 0.01 * ((i * 7919 % 97) as f32 / 97.0);
+        }
+        // Shuffle the vertex numbers so that triangles straddle the ranges (a bijection:
+        // 2562 vertices, coprime to 11).
+        let n = mesh.positions.len() as u32;
+        assert_ne!(n % 11, 0);
+        let perm = |v: u32| (v * 11 + 3) % n;
+        let mut shuffled = TriMesh {
+            positions: vec![Vec3::ZERO; n as usize],
+            triangles: mesh.triangles.iter().map(|t| t.map(perm)).collect(),
+            normals: Vec::new(),
+        };
+        for v in 0..n {
+            shuffled.positions[perm(v) as usize] = mesh.positions[v as usize];
+        }
+        shuffled.compute_normals_in_chunks(usize::MAX);
+        let whole = shuffled.normals.clone();
+        for chunk in [1, 7, 100, 1000] {
+            shuffled.compute_normals_in_chunks(chunk);
+            let same = whole
+                .iter()
+                .zip(&shuffled.normals)
+                .all(|(a, b)| a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits));
+            assert!(same, "chunk {chunk}");
+        }
+        // Outward on the sphere.
+        for (p, nrm) in shuffled.positions.iter().zip(&whole) {
+            assert!(p.normalize().dot(*nrm) > 0.9);
+        }
     }
 }
