@@ -153,33 +153,68 @@ pub(crate) struct CodedMesh {
 /// Appends the flag, vertex-code and residual streams of `mesh` (positions quantized
 /// with step `step`, world units), each prefixed with its byte length, to `out`.
 pub(crate) fn encode_streams(mesh: &TriMesh, step: f64, out: &mut Vec<u8>) -> CodedMesh {
-    encode_streams_numbered(mesh, step, out).0
+    let half_edges = HalfEdges::of(mesh);
+    half_edges.encode(mesh, step, out);
+    half_edges.report(mesh)
 }
 
-/// [`encode_streams`], also returning the vertex order of the streams: decoded vertex
-/// `i` is `mesh` vertex `order[i]`.
-pub(crate) fn encode_streams_numbered(
-    mesh: &TriMesh,
-    step: f64,
-    out: &mut Vec<u8>,
-) -> (CodedMesh, Vec<u32>) {
-    let tris = &mesh.triangles;
-    let n = tris.len();
-    let half_edge = |h: usize| {
-        let t = tris[h / 3];
-        (t[h % 3], t[(h % 3 + 1) % 3])
-    };
-    let (bucket_start, bucket) = half_edge_buckets(mesh);
-    let mut coded = vec![false; n];
-    let mut new_id = vec![u32::MAX; mesh.positions.len()];
-    let mut old_of_new: Vec<u32> = Vec::new();
-    let mut numbering = Numbering {
-        next: 0,
-        plan: Vec::new(),
-    };
-    let (mut flags, mut codes) = (Vec::with_capacity(2 * n), Vec::with_capacity(2 * n));
-    let mut emit =
-        |v: u32, prediction: Prediction, numbering: &mut Numbering, codes: &mut Vec<u8>| -> u32 {
+/// Half-edge `h = 3t + k` of `tris`: from corner `k` to corner `k + 1` of triangle `t`.
+fn half_edge(tris: &[[u32; 3]], h: usize) -> (u32, u32) {
+    let t = tris[h / 3];
+    (t[h % 3], t[(h % 3 + 1) % 3])
+}
+
+/// The half-edges of a mesh bucketed by the smaller vertex of their edge (a counting
+/// sort, ascending `h` within a bucket), so the half-edges of one edge are found among a
+/// handful of entries: bucket `v` is `bucket[start[v]..start[v + 1]]`. Built once per
+/// mesh for both its shape report and its coding.
+pub(crate) struct HalfEdges {
+    start: Vec<u32>,
+    bucket: Vec<u32>,
+}
+
+impl HalfEdges {
+    pub(crate) fn of(mesh: &TriMesh) -> HalfEdges {
+        let tris = &mesh.triangles;
+        let n = tris.len();
+        let mut start = vec![0u32; mesh.positions.len() + 1];
+        for h in 0..3 * n {
+            let (a, b) = half_edge(tris, h);
+            start[a.min(b) as usize + 1] += 1;
+        }
+        for v in 0..mesh.positions.len() {
+            start[v + 1] += start[v];
+        }
+        let mut fill = start.clone();
+        let mut bucket = vec![0u32; 3 * n];
+        for h in 0..3 * n {
+            let (a, b) = half_edge(tris, h);
+            let slot = &mut fill[a.min(b) as usize];
+            bucket[*slot as usize] = h as u32;
+            *slot += 1;
+        }
+        HalfEdges { start, bucket }
+    }
+
+    /// Appends the streams of `mesh` (the mesh these half-edges are of) to `out`, as
+    /// [`encode_streams`] describes; returns the vertex order of the streams: decoded
+    /// vertex `i` is `mesh` vertex `order[i]`.
+    pub(crate) fn encode(&self, mesh: &TriMesh, step: f64, out: &mut Vec<u8>) -> Vec<u32> {
+        let tris = &mesh.triangles;
+        let n = tris.len();
+        let mut coded = vec![false; n];
+        let mut new_id = vec![u32::MAX; mesh.positions.len()];
+        let mut old_of_new: Vec<u32> = Vec::new();
+        let mut numbering = Numbering {
+            next: 0,
+            plan: Vec::new(),
+        };
+        let (mut flags, mut codes) = (Vec::with_capacity(2 * n), Vec::with_capacity(2 * n));
+        let mut emit = |v: u32,
+                        prediction: Prediction,
+                        numbering: &mut Numbering,
+                        codes: &mut Vec<u8>|
+         -> u32 {
             let id = new_id[v as usize];
             if id == u32::MAX {
                 new_id[v as usize] = numbering.next;
@@ -193,177 +228,149 @@ pub(crate) fn encode_streams_numbered(
                 id
             }
         };
-    // The stack holds gates in new ids, and in parallel their half-edges.
-    let mut stack: Vec<Gate> = Vec::new();
-    let mut gate_edge: Vec<u32> = Vec::new();
-    let (mut done, mut cursor) = (0usize, 0usize);
-    while done < n {
-        if stack.is_empty() {
-            while coded[cursor] {
-                cursor += 1;
+        // The stack holds gates in new ids, and in parallel their half-edges.
+        let mut stack: Vec<Gate> = Vec::new();
+        let mut gate_edge: Vec<u32> = Vec::new();
+        let (mut done, mut cursor) = (0usize, 0usize);
+        while done < n {
+            if stack.is_empty() {
+                while coded[cursor] {
+                    cursor += 1;
+                }
+                let t = tris[cursor];
+                coded[cursor] = true;
+                done += 1;
+                let mut ids = [0u32; 3];
+                for k in 0..3 {
+                    let known = (0..k).map(|j| ids[j]).next();
+                    let p = numbering.root_prediction(known);
+                    ids[k] = emit(t[k], p, &mut numbering, &mut codes);
+                }
+                push_gates(&mut stack, ids, false);
+                for k in (0..3).rev() {
+                    gate_edge.push((3 * cursor + k) as u32);
+                }
+                continue;
             }
-            let t = tris[cursor];
-            coded[cursor] = true;
+            let [x, y, z] = stack.pop().expect("non-empty");
+            let h = gate_edge.pop().expect("parallel to the stack") as usize;
+            let (ox, oy) = half_edge(tris, h);
+            let low = ox.min(oy) as usize;
+            let found = self.bucket[self.start[low] as usize..self.start[low + 1] as usize]
+                .iter()
+                .copied()
+                .find(|&e| half_edge(tris, e as usize) == (oy, ox) && !coded[e as usize / 3]);
+            let Some(e) = found else {
+                flags.push(0);
+                continue;
+            };
+            flags.push(1);
+            let t = e as usize / 3;
+            coded[t] = true;
             done += 1;
-            let mut ids = [0u32; 3];
-            for k in 0..3 {
-                let known = (0..k).map(|j| ids[j]).next();
-                let p = numbering.root_prediction(known);
-                ids[k] = emit(t[k], p, &mut numbering, &mut codes);
-            }
-            push_gates(&mut stack, ids, false);
-            for k in (0..3).rev() {
-                gate_edge.push((3 * cursor + k) as u32);
-            }
-            continue;
+            // The triangle holds (oy, ox) at corner k = e % 3; its third corner follows.
+            let k = e as usize % 3;
+            let ow = tris[t][(k + 2) % 3];
+            let w = emit(
+                ow,
+                Prediction::Parallelogram(x, y, z),
+                &mut numbering,
+                &mut codes,
+            );
+            push_gates(&mut stack, [y, x, w], true);
+            // Gates (w, y) and (x, w) in push order: half-edges k+2 then k+1 of t.
+            gate_edge.push((3 * t + (k + 2) % 3) as u32);
+            gate_edge.push((3 * t + (k + 1) % 3) as u32);
         }
-        let [x, y, z] = stack.pop().expect("non-empty");
-        let h = gate_edge.pop().expect("parallel to the stack") as usize;
-        let (ox, oy) = half_edge(h);
-        let low = ox.min(oy) as usize;
-        let found = bucket[bucket_start[low] as usize..bucket_start[low + 1] as usize]
+        let quantized: Vec<[i64; 3]> = old_of_new
             .iter()
-            .copied()
-            .find(|&e| half_edge(e as usize) == (oy, ox) && !coded[e as usize / 3]);
-        let Some(e) = found else {
-            flags.push(0);
-            continue;
-        };
-        flags.push(1);
-        let t = e as usize / 3;
-        coded[t] = true;
-        done += 1;
-        // The triangle holds (oy, ox) at corner k = e % 3; its third corner follows.
-        let k = e as usize % 3;
-        let ow = tris[t][(k + 2) % 3];
-        let w = emit(
-            ow,
-            Prediction::Parallelogram(x, y, z),
-            &mut numbering,
-            &mut codes,
-        );
-        push_gates(&mut stack, [y, x, w], true);
-        // Gates (w, y) and (x, w) in push order: half-edges k+2 then k+1 of t.
-        gate_edge.push((3 * t + (k + 2) % 3) as u32);
-        gate_edge.push((3 * t + (k + 1) % 3) as u32);
-    }
-    let quantized: Vec<[i64; 3]> = old_of_new
-        .iter()
-        .map(|&v| {
-            mesh.positions[v as usize]
-                .to_array()
-                .map(|c| (c as f64 / step).round() as i64)
-        })
-        .collect();
-    let mut residuals = Vec::with_capacity(quantized.len() * 4);
-    for (v, q) in quantized.iter().enumerate() {
-        let pred = numbering.plan[v].resolve(&quantized);
-        for k in 0..3 {
-            put_varint(&mut residuals, zigzag(q[k] - pred[k]));
-        }
-    }
-    out.reserve(flags.len() + codes.len() + residuals.len() + 16);
-    for stream in [&flags, &codes, &residuals] {
-        put_varint(out, stream.len() as u64);
-        out.extend_from_slice(stream);
-    }
-    let mut coded = edge_report(mesh, &bucket_start, &bucket);
-    coded.vertices = numbering.next;
-    (coded, old_of_new)
-}
-
-/// What [`encode_streams`] would report for `mesh`, without coding it.
-pub(crate) fn analyze(mesh: &TriMesh) -> CodedMesh {
-    let (bucket_start, bucket) = half_edge_buckets(mesh);
-    let mut coded = edge_report(mesh, &bucket_start, &bucket);
-    let mut used = vec![false; mesh.positions.len()];
-    for &v in mesh.triangles.iter().flatten() {
-        used[v as usize] = true;
-    }
-    coded.vertices = used.iter().filter(|&&u| u).count() as u32;
-    coded
-}
-
-/// Half-edge `h = 3t + k` runs from corner `k` to corner `k + 1` of triangle `t`.
-/// Half-edges are bucketed by the smaller vertex of their edge (a counting sort,
-/// ascending `h` within a bucket), so the half-edges of one edge are found among a
-/// handful of entries: bucket `v` is `bucket[start[v]..start[v + 1]]`.
-fn half_edge_buckets(mesh: &TriMesh) -> (Vec<u32>, Vec<u32>) {
-    let tris = &mesh.triangles;
-    let n = tris.len();
-    let half_edge = |h: usize| {
-        let t = tris[h / 3];
-        (t[h % 3], t[(h % 3 + 1) % 3])
-    };
-    let mut bucket_start = vec![0u32; mesh.positions.len() + 1];
-    for h in 0..3 * n {
-        let (a, b) = half_edge(h);
-        bucket_start[a.min(b) as usize + 1] += 1;
-    }
-    for v in 0..mesh.positions.len() {
-        bucket_start[v + 1] += bucket_start[v];
-    }
-    let mut fill = bucket_start.clone();
-    let mut bucket = vec![0u32; 3 * n];
-    for h in 0..3 * n {
-        let (a, b) = half_edge(h);
-        let slot = &mut fill[a.min(b) as usize];
-        bucket[*slot as usize] = h as u32;
-        *slot += 1;
-    }
-    (bucket_start, bucket)
-}
-
-/// Triangle and edge counts and the shape conditions of `mesh` (vertices left 0).
-fn edge_report(mesh: &TriMesh, bucket_start: &[u32], bucket: &[u32]) -> CodedMesh {
-    let tris = &mesh.triangles;
-    let half_edge = |h: usize| {
-        let t = tris[h / 3];
-        (t[h % 3], t[(h % 3 + 1) % 3])
-    };
-    // Edges and the conditions of exact Loop counts, from the buckets: the sides of one
-    // undirected edge share a bucket.
-    let mut edges = 0u64;
-    let mut loop_countable = tris
-        .iter()
-        .all(|t| t[0] != t[1] && t[1] != t[2] && t[2] != t[0]);
-    let mut closed_oriented = loop_countable;
-    // Per half-edge of the bucket: (larger vertex, apex); per edge: (larger vertex,
-    // sides, sides running from the smaller vertex).
-    let mut seen: Vec<(u32, u32)> = Vec::new();
-    let mut edge_sides: Vec<(u32, u32, u32)> = Vec::new();
-    for v in 0..mesh.positions.len() {
-        seen.clear();
-        edge_sides.clear();
-        for &h in &bucket[bucket_start[v] as usize..bucket_start[v + 1] as usize] {
-            let (a, b) = half_edge(h as usize);
-            let other = a.max(b);
-            let opposite = tris[h as usize / 3][(h as usize % 3 + 2) % 3];
-            if seen.iter().any(|&(o, w)| o == other && w == opposite) {
-                loop_countable = false;
-            }
-            seen.push((other, opposite));
-            let forward = (a < b) as u32;
-            match edge_sides.iter_mut().find(|e| e.0 == other) {
-                Some(e) => {
-                    e.1 += 1;
-                    e.2 += forward;
-                }
-                None => {
-                    edges += 1;
-                    edge_sides.push((other, 1, forward));
-                }
+            .map(|&v| {
+                mesh.positions[v as usize]
+                    .to_array()
+                    .map(|c| (c as f64 / step).round() as i64)
+            })
+            .collect();
+        let mut residuals = Vec::with_capacity(quantized.len() * 4);
+        for (v, q) in quantized.iter().enumerate() {
+            let pred = numbering.plan[v].resolve(&quantized);
+            for k in 0..3 {
+                put_varint(&mut residuals, zigzag(q[k] - pred[k]));
             }
         }
-        closed_oriented &= edge_sides.iter().all(|&(_, n, f)| n == 2 && f == 1);
+        out.reserve(flags.len() + codes.len() + residuals.len() + 16);
+        for stream in [&flags, &codes, &residuals] {
+            put_varint(out, stream.len() as u64);
+            out.extend_from_slice(stream);
+        }
+        old_of_new
     }
-    CodedMesh {
-        vertices: 0,
-        triangles: tris.len() as u32,
-        edges,
-        loop_countable,
-        closed_oriented: closed_oriented && loop_countable,
+
+    /// What [`encode_streams`] reports for `mesh`: its counts and shape, without coding
+    /// it.
+    pub(crate) fn report(&self, mesh: &TriMesh) -> CodedMesh {
+        let tris = &mesh.triangles;
+        // Edges and the conditions of exact Loop counts, from the buckets: the sides of one
+        // undirected edge share a bucket.
+        let mut edges = 0u64;
+        let mut loop_countable = tris
+            .iter()
+            .all(|t| t[0] != t[1] && t[1] != t[2] && t[2] != t[0]);
+        let mut closed_oriented = loop_countable;
+        // Per half-edge of the bucket: (larger vertex, apex); per edge: (larger vertex,
+        // sides, sides running from the smaller vertex).
+        let mut seen: Vec<(u32, u32)> = Vec::new();
+        let mut edge_sides: Vec<(u32, u32, u32)> = Vec::new();
+        for v in 0..mesh.positions.len() {
+            seen.clear();
+            edge_sides.clear();
+            for &h in &self.bucket[self.start[v] as usize..self.start[v + 1] as usize] {
+                let (a, b) = half_edge(tris, h as usize);
+                let other = a.max(b);
+                let opposite = tris[h as usize / 3][(h as usize % 3 + 2) % 3];
+                if seen.iter().any(|&(o, w)| o == other && w == opposite) {
+                    loop_countable = false;
+                }
+                seen.push((other, opposite));
+                let forward = (a < b) as u32;
+                match edge_sides.iter_mut().find(|e| e.0 == other) {
+                    Some(e) => {
+                        e.1 += 1;
+                        e.2 += forward;
+                    }
+                    None => {
+                        edges += 1;
+                        edge_sides.push((other, 1, forward));
+                    }
+                }
+            }
+            closed_oriented &= edge_sides.iter().all(|&(_, n, f)| n == 2 && f == 1);
+        }
+        let mut used = vec![false; mesh.positions.len()];
+        for &v in tris.iter().flatten() {
+            used[v as usize] = true;
+        }
+        CodedMesh {
+            vertices: used.iter().filter(|&&u| u).count() as u32,
+            triangles: tris.len() as u32,
+            edges,
+            loop_countable,
+            closed_oriented: closed_oriented && loop_countable,
+        }
     }
+}
+
+/// Reads a count no larger than `limit` (what the header or an earlier count allows).
+pub(crate) fn read_count(
+    raw: &[u8],
+    pos: &mut usize,
+    what: &str,
+    limit: u64,
+) -> Result<usize, String> {
+    let v = get_varint(raw, pos).ok_or(format!("{what} missing"))?;
+    if v > limit {
+        return Err(format!("{what} {v} exceeds the frame's {limit}"));
+    }
+    Ok(v as usize)
 }
 
 /// Decodes a version-1 payload of `vertices` vertices and `triangles` triangles. No

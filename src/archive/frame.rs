@@ -25,8 +25,8 @@
 //! other mesh, stored as its streams.
 
 use super::codec::{
-    analyze, decode_streams, decompress, encode_streams, get_varint, put_varint, raw_capacity,
-    unzigzag, zigzag,
+    decode_streams, decompress, encode_streams, get_varint, put_varint, raw_capacity, read_count,
+    unzigzag, zigzag, HalfEdges,
 };
 use super::fused::decode_streams_subdivided;
 use super::parts::{decode_parts_subdivided, encode_parts, part_count};
@@ -76,14 +76,16 @@ pub(crate) fn encode_frame(
     let mut raw = Vec::new();
     let mut levels = frame.subdivision_levels;
     let mut fine = None;
-    let mut coded = analyze(frame.fluid);
+    let mut half_edges = HalfEdges::of(frame.fluid);
+    let mut coded = half_edges.report(frame.fluid);
     let mut counts = loop_counts(coded, levels);
     if counts.is_none() {
         // A control mesh whose subdivision the counts cannot describe (a degenerate or a
         // repeated triangle): subdivide here and store the result as it is.
         let mut mesh = frame.fluid.clone();
         subdivide(&mut mesh, &SubdivideOptions { levels });
-        coded = analyze(&mesh);
+        half_edges = HalfEdges::of(&mesh);
+        coded = half_edges.report(&mesh);
         levels = 0;
         counts = Some((coded.vertices as u64, coded.triangles as u64));
         fine = Some(mesh);
@@ -103,9 +105,10 @@ pub(crate) fn encode_frame(
     put_varint(&mut raw, coded.vertices as u64);
     put_varint(&mut raw, coded.triangles as u64);
     if shape == CLOSED_IN_PARTS {
+        drop(half_edges);
         encode_parts(fluid, parts, step, &mut raw);
     } else {
-        encode_streams(fluid, step, &mut raw);
+        half_edges.encode(fluid, step, &mut raw);
     }
     drop(fine);
     let spheres = frame.spheres;
@@ -141,14 +144,6 @@ pub(crate) fn encode_frame(
     }
 }
 
-fn read_count(raw: &[u8], pos: &mut usize, what: &str, limit: u64) -> Result<usize, String> {
-    let v = get_varint(raw, pos).ok_or(format!("{what} missing"))?;
-    if v > limit {
-        return Err(format!("{what} {v} exceeds the frame's {limit}"));
-    }
-    Ok(v as usize)
-}
-
 /// Decodes a payload that the record header says holds `vertices` vertices and
 /// `triangles` triangles (after subdivision, spheres included). No normals.
 pub(crate) fn decode_frame(
@@ -166,27 +161,26 @@ pub(crate) fn decode_frame(
     *pos += 1;
     let fluid_vertices = read_count(&raw, pos, "fluid vertex count", nv)?;
     let fluid_triangles = read_count(&raw, pos, "fluid triangle count", nt)?;
-    let fluid = if shape == CLOSED_IN_PARTS {
-        if levels == 0 {
-            return Err("a mesh in parts must be subdivided".into());
-        }
-        // The first Loop step while decoding, the parts in parallel.
-        let mut fluid = decode_parts_subdivided(&raw, pos, fluid_vertices, fluid_triangles, step)?;
-        subdivide(&mut fluid, &SubdivideOptions { levels: levels - 1 });
-        fluid
-    } else if shape > CLOSED_IN_PARTS {
-        return Err(format!("unknown fluid shape {shape}"));
-    } else if levels > 0 && shape == CLOSED {
-        // The first Loop step while decoding.
-        let mut fluid =
-            decode_streams_subdivided(&raw, pos, fluid_vertices, fluid_triangles, step)?;
-        subdivide(&mut fluid, &SubdivideOptions { levels: levels - 1 });
-        fluid
-    } else {
-        let mut fluid = decode_streams(&raw, pos, fluid_vertices, fluid_triangles, step)?;
-        subdivide(&mut fluid, &SubdivideOptions { levels });
-        fluid
+    let (v, t) = (fluid_vertices, fluid_triangles);
+    let (mut fluid, remaining_levels) = match (shape, levels) {
+        // The first Loop step while decoding, the parts in parallel ...
+        (CLOSED_IN_PARTS, 1..) => (decode_parts_subdivided(&raw, pos, v, t, step)?, levels - 1),
+        (CLOSED_IN_PARTS, 0) => return Err("a mesh in parts must be subdivided".into()),
+        // ... or the whole mesh ...
+        (CLOSED, 1..) => (
+            decode_streams_subdivided(&raw, pos, v, t, step)?,
+            levels - 1,
+        ),
+        // ... or the mesh as stored, subdivided after.
+        (OPEN | CLOSED, _) => (decode_streams(&raw, pos, v, t, step)?, levels),
+        _ => return Err(format!("unknown fluid shape {shape}")),
     };
+    subdivide(
+        &mut fluid,
+        &SubdivideOptions {
+            levels: remaining_levels,
+        },
+    );
     let count = read_count(&raw, pos, "sphere count", nt)?;
     let mut spheres = SphereInstances::default();
     if count > 0 {
