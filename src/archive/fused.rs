@@ -97,17 +97,24 @@ impl State<'_> {
         let e = self.edge_points.len() as u32;
         self.side_edge[s as usize / 3][s as usize % 3] = e;
         self.side_edge[t as usize / 3][t as usize % 3] = e;
-        let p = &self.positions;
-        let (a, b, c, d) = (a as usize, b as usize, c as usize, d as usize);
-        let (pa, pb) = (p[a].as_dvec3(), p[b].as_dvec3());
-        // Summed as the general subdivision does: smaller vertex first.
-        let ends = if a < b { pa + pb } else { pb + pa };
-        let point = 0.375 * ends + 0.125 * (p[c].as_dvec3() + p[d].as_dvec3());
-        self.edge_points.push(point.as_vec3());
-        self.sum[a] += pb;
-        self.sum[b] += pa;
-        self.valence[a] += 1;
-        self.valence[b] += 1;
+        let (pa, pb) = (self.position(a), self.position(b));
+        let (pc, pd) = (self.position(c), self.position(d));
+        self.edge_points.push(edge_point(pa, pb, a < b, pc, pd));
+        self.add_neighbour(a, pb);
+        self.add_neighbour(b, pa);
+    }
+
+    /// Control vertex `v`'s position, widened for the masks.
+    #[inline]
+    pub(crate) fn position(&self, v: u32) -> DVec3 {
+        self.positions[v as usize].as_dvec3()
+    }
+
+    /// Counts `other` (a position) among vertex `v`'s neighbours.
+    #[inline]
+    pub(crate) fn add_neighbour(&mut self, v: u32, other: DVec3) {
+        self.sum[v as usize] += other;
+        self.valence[v as usize] += 1;
     }
 
     /// A side (gate `[a, b, c]`: from `a` to `b`, apex `c`) whose gate found no triangle
@@ -134,6 +141,15 @@ impl State<'_> {
             .push([hi, side, c, self.waiting_head[lo as usize]]);
         self.waiting_head[lo as usize] = self.waiting.len() as u32 - 1;
     }
+}
+
+/// Loop's edge point `3/8 (a + b) + 1/8 (c + d)` of edge `(a, b)` with apexes `c` and
+/// `d`; the ends are added as the general subdivision adds them, smaller vertex first
+/// (`a_first`: `a` is the smaller).
+#[inline]
+pub(crate) fn edge_point(pa: DVec3, pb: DVec3, a_first: bool, pc: DVec3, pd: DVec3) -> Vec3 {
+    let ends = if a_first { pa + pb } else { pb + pa };
+    (0.375 * ends + 0.125 * (pc + pd)).as_vec3()
 }
 
 /// Runs the traversal of the streams at `raw[*pos..]` (a mesh of `vertices` vertices and

@@ -20,7 +20,7 @@
 //! parts: 8.6 %), and one frame decodes about 1.7 times as fast on two cores.
 
 use super::codec::{get_varint, put_varint, read_count, unzigzag, zigzag, HalfEdges};
-use super::fused::{traverse, State};
+use super::fused::{edge_point, traverse, State};
 use crate::mesh::TriMesh;
 use crate::subdivision::{children, loop_betas};
 use glam::Vec3;
@@ -145,18 +145,66 @@ pub(crate) fn decode_parts_subdivided(
     triangles: usize,
     step: f64,
 ) -> Result<TriMesh, String> {
+    let (spans, copies) = read_layout(raw, pos, triangles)?;
+    let mut states: Vec<State> = spans
+        .par_iter()
+        .enumerate()
+        .map(|(p, span)| {
+            traverse(
+                raw,
+                &mut { span.start },
+                span.vertices,
+                span.triangles,
+                step,
+            )
+            .map_err(|e| format!("part {p}: {e}"))
+        })
+        .collect::<Result<_, _>>()?;
+    let numbers = number_vertices(&states, &copies, vertices)?;
+    for (p, list) in copies.iter().enumerate() {
+        for &(k, q, l) in list {
+            let (n, sum) = (states[p].valence[k as usize], states[p].sum[k as usize]);
+            let original = &mut states[q as usize];
+            original.valence[l as usize] += n;
+            original.sum[l as usize] += sum;
+        }
+    }
+    let cut_points = pair_cuts(&mut states, &numbers)?;
+    let inner: usize = states.iter().map(|s| s.edge_points.len()).sum();
+    if (inner + cut_points.len()) * 2 != triangles * 3 {
+        return Err("the mesh stored as closed has sides without a partner".into());
+    }
+    Ok(write_subdivision(&states, &numbers, &cut_points, triangles))
+}
+
+/// Where a part's streams start in the raw frame, and its counts.
+struct Span {
+    start: usize,
+    vertices: usize,
+    triangles: usize,
+}
+
+/// Reads the part count, each part's counts (skipping its streams) and the copy lists.
+fn read_layout(
+    raw: &[u8],
+    pos: &mut usize,
+    triangles: usize,
+) -> Result<(Vec<Span>, Vec<Vec<SeamCopy>>), String> {
     let parts = read_count(raw, pos, "part count", MAX_PARTS as u64)?;
     if parts == 0 {
         return Err("a mesh in parts has no part".into());
     }
-    // Where each part's streams start, and its counts.
-    let mut spans: Vec<(usize, usize, usize)> = Vec::with_capacity(parts);
+    let mut spans: Vec<Span> = Vec::with_capacity(parts);
     let mut total_triangles = 0usize;
     for p in 0..parts {
         let t_limit = (triangles - total_triangles) as u64;
         let v = read_count(raw, pos, &format!("part {p} vertex count"), 3 * t_limit)?;
         let t = read_count(raw, pos, &format!("part {p} triangle count"), t_limit)?;
-        spans.push((*pos, v, t));
+        spans.push(Span {
+            start: *pos,
+            vertices: v,
+            triangles: t,
+        });
         total_triangles += t;
         super::codec::split_streams(raw, pos).map_err(|e| format!("part {p}: {e}"))?;
     }
@@ -167,161 +215,163 @@ pub(crate) fn decode_parts_subdivided(
     }
     let mut copies: Vec<Vec<SeamCopy>> = vec![Vec::new(); parts];
     for p in 1..parts {
-        let count = read_count(raw, pos, "copy count", spans[p].1 as u64)?;
+        let count = read_count(raw, pos, "copy count", spans[p].vertices as u64)?;
         let (mut previous, mut previous_there) = (0u64, 0i64);
         for i in 0..count {
             let k = previous + get_varint(raw, pos).ok_or("copy list cut off")?;
             let back = get_varint(raw, pos).ok_or("copy list cut off")?;
             let there = previous_there + unzigzag(get_varint(raw, pos).ok_or("copy list cut off")?);
-            if (i > 0 && k == previous) || k >= spans[p].1 as u64 || back >= p as u64 {
+            if (i > 0 && k == previous) || k >= spans[p].vertices as u64 || back >= p as u64 {
                 return Err(format!("part {p}: copy {i} is out of range"));
             }
             let q = p - 1 - back as usize;
-            if there < 0 || there >= spans[q].1 as i64 {
+            if there < 0 || there >= spans[q].vertices as i64 {
                 return Err(format!("part {p}: copy {i} refers past part {q}"));
             }
             copies[p].push((k as u32, q as u32, there as u32));
             (previous, previous_there) = (k, there);
         }
     }
-    let mut states: Vec<State> = spans
-        .par_iter()
-        .enumerate()
-        .map(|(p, &(start, v, t))| {
-            traverse(raw, &mut { start }, v, t, step).map_err(|e| format!("part {p}: {e}"))
-        })
-        .collect::<Result<_, _>>()?;
-    // Global numbers: each part's own vertices in order, then copies take their original's.
-    let mut global: Vec<Vec<u32>> = states
-        .iter()
-        .map(|s| vec![NONE; s.positions.len()])
-        .collect();
-    let mut next = 0u32;
-    let mut vertex_base = Vec::with_capacity(parts);
-    for p in 0..parts {
-        for &(k, _, _) in &copies[p] {
-            global[p][k as usize] = CUT;
-        }
-        vertex_base.push(next);
-        for g in global[p].iter_mut().filter(|g| **g == NONE) {
-            *g = next;
-            next += 1;
-        }
-        for &(k, q, l) in &copies[p] {
-            let g = global[q as usize][l as usize];
-            if g == CUT
-                || states[p].quantized[k as usize] != states[q as usize].quantized[l as usize]
-            {
+    Ok((spans, copies))
+}
+
+/// The global numbering of the control vertices: each part's own vertices in order
+/// (part `p`'s from `base[p]` on), copies taking their original's number.
+struct Numbers {
+    /// Per part, the global number of each of its vertices.
+    global: Vec<Vec<u32>>,
+    base: Vec<u32>,
+    /// Per global vertex, its part and number there (where its valence and sum gather).
+    home: Vec<(u32, u32)>,
+}
+
+impl Numbers {
+    /// True when vertex `k` of part `p` is that part's own (not a copy).
+    fn own(&self, p: usize, k: usize) -> bool {
+        self.global[p][k] >= self.base[p]
+    }
+}
+
+/// Numbers the control vertices of the decoded parts; checks that every copy names an
+/// original at the same lattice position and that the parts hold `vertices` in all.
+fn number_vertices(
+    states: &[State],
+    copies: &[Vec<SeamCopy>],
+    vertices: usize,
+) -> Result<Numbers, String> {
+    let mut numbers = Numbers {
+        global: Vec::with_capacity(states.len()),
+        base: Vec::with_capacity(states.len()),
+        home: Vec::with_capacity(vertices),
+    };
+    for (p, st) in states.iter().enumerate() {
+        let base = numbers.home.len() as u32;
+        let mut ids = Vec::with_capacity(st.positions.len());
+        let mut list = copies[p].iter().peekable();
+        for k in 0..st.positions.len() as u32 {
+            let Some(&(_, q, l)) = list.next_if(|c| c.0 == k) else {
+                ids.push(numbers.home.len() as u32);
+                numbers.home.push((p as u32, k));
+                continue;
+            };
+            let (q, l) = (q as usize, l as usize);
+            if !numbers.own(q, l) || st.quantized[k as usize] != states[q].quantized[l] {
                 return Err(format!(
                     "part {p}: copy of vertex {l} of part {q} does not match it"
                 ));
             }
-            global[p][k as usize] = g;
+            ids.push(numbers.global[q][l]);
         }
+        numbers.global.push(ids);
+        numbers.base.push(base);
     }
-    if next as usize != vertices {
+    if numbers.home.len() != vertices {
         return Err(format!(
-            "parts hold {next} distinct vertices, header says {vertices}"
+            "parts hold {} distinct vertices, header says {vertices}",
+            numbers.home.len()
         ));
     }
-    // Where each global vertex lives with its own (complete) valence and sum.
-    let mut home: Vec<(u32, u32)> = Vec::with_capacity(vertices);
-    for (p, ids) in global.iter().enumerate() {
-        for (k, &g) in ids.iter().enumerate() {
-            // A part's own vertices are numbered from its base on, copies below it.
-            if g >= vertex_base[p] {
-                home.push((p as u32, k as u32));
-            }
-        }
-    }
-    if home.len() != vertices {
-        return Err("vertex numbering of the parts is inconsistent".into());
-    }
-    for p in 1..parts {
-        for &(k, q, l) in &copies[p] {
-            let (n, s) = (states[p].valence[k as usize], states[p].sum[k as usize]);
-            let original = &mut states[q as usize];
-            original.valence[l as usize] += n;
-            original.sum[l as usize] += s;
-        }
-    }
-    // The cut edges: sides left open, paired by their global ends.
+    Ok(numbers)
+}
+
+/// Pairs the sides the parts left open (the cut edges) by their global ends: makes each
+/// cut edge's point, numbers it in the sides' `side_edge` (marked [`CUT`]) and adds its
+/// ends to each other's neighbourhood at their home. Returns the cut edges' points.
+fn pair_cuts(states: &mut [State], numbers: &Numbers) -> Result<Vec<Vec3>, String> {
+    // (smaller end, larger end, the side's first end, part, side), global ends.
     let mut open: Vec<(u32, u32, u32, u32, u32)> = Vec::new();
     for (p, st) in states.iter().enumerate() {
         for side in st.unpaired_sides() {
-            let (t, k) = (side as usize / 3, side as usize % 3);
-            let tri = st.triangles[t];
-            let a = global[p][tri[k] as usize];
-            let b = global[p][tri[(k + 1) % 3] as usize];
+            let [a, b, _] = side_corners(st, side).map(|v| numbers.global[p][v as usize]);
             open.push((a.min(b), a.max(b), a, p as u32, side));
         }
     }
     open.sort_unstable();
+    let unpaired = || "the mesh stored as closed has sides without a partner".to_string();
     let mut cut_points: Vec<Vec3> = Vec::with_capacity(open.len() / 2);
-    let corner = |states: &[State], p: u32, side: u32, offset: usize| {
-        let st = &states[p as usize];
-        let (t, k) = (side as usize / 3, side as usize % 3);
-        st.triangles[t][(k + offset) % 3] as usize
-    };
     for pair in open.chunks(2) {
-        let [s, t] = pair else {
-            return Err("the mesh stored as closed has sides without a partner".into());
+        let [(lo, hi, first, p, s), (lo2, hi2, first2, p2, t)] = *pair else {
+            return Err(unpaired());
         };
-        if (s.0, s.1) != (t.0, t.1) || s.2 == t.2 {
-            return Err("the mesh stored as closed has sides without a partner".into());
+        if (lo, hi) != (lo2, hi2) || first == first2 {
+            return Err(unpaired());
         }
+        let [a, b, c] = side_corners(&states[p as usize], s);
+        let [.., d] = side_corners(&states[p2 as usize], t);
+        let st = &states[p as usize];
+        let (pa, pb, pc) = (st.position(a), st.position(b), st.position(c));
+        let pd = states[p2 as usize].position(d);
         let e = cut_points.len() as u32;
-        let (pa, pb) = {
-            let st = &states[s.3 as usize];
-            let a = corner(&states, s.3, s.4, 0);
-            let b = corner(&states, s.3, s.4, 1);
-            // Smaller global vertex first, as the general subdivision adds them.
-            (st.positions[a].as_dvec3(), st.positions[b].as_dvec3())
-        };
-        let ends = if s.2 == s.0 { pa + pb } else { pb + pa };
-        let pc = states[s.3 as usize].positions[corner(&states, s.3, s.4, 2)].as_dvec3();
-        let pd = states[t.3 as usize].positions[corner(&states, t.3, t.4, 2)].as_dvec3();
-        cut_points.push((0.375 * ends + 0.125 * (pc + pd)).as_vec3());
-        for &(p, side) in &[(s.3, s.4), (t.3, t.4)] {
-            let st = &mut states[p as usize];
-            st.side_edge[side as usize / 3][side as usize % 3] = CUT | e;
+        cut_points.push(edge_point(pa, pb, first == lo, pc, pd));
+        for (part, side) in [(p, s), (p2, t)] {
+            states[part as usize].side_edge[side as usize / 3][side as usize % 3] = CUT | e;
         }
-        let (ga, gb) = (s.2, if s.2 == s.0 { s.1 } else { s.0 });
-        for (v, other) in [(ga, pb), (gb, pa)] {
-            let (q, l) = home[v as usize];
-            let st = &mut states[q as usize];
-            st.valence[l as usize] += 1;
-            st.sum[l as usize] += other;
+        let other_end = if first == lo { hi } else { lo };
+        for (v, other) in [(first, pb), (other_end, pa)] {
+            let (q, l) = numbers.home[v as usize];
+            states[q as usize].add_neighbour(l, other);
         }
     }
-    let inner: usize = states.iter().map(|s| s.edge_points.len()).sum();
-    if (inner + cut_points.len()) * 2 != triangles * 3 {
-        return Err("the mesh stored as closed has sides without a partner".into());
-    }
-    // The subdivided mesh, part by part in parallel.
+    Ok(cut_points)
+}
+
+/// The corners of side `3t + k` of a part: from corner `k` to `k + 1`, then the apex.
+fn side_corners(st: &State, side: u32) -> [u32; 3] {
+    let (t, k) = (side as usize / 3, side as usize % 3);
+    let tri = st.triangles[t];
+    [tri[k], tri[(k + 1) % 3], tri[(k + 2) % 3]]
+}
+
+/// The subdivided mesh, part by part in parallel: control vertices (each part's own, in
+/// part order), the edge points of each part, then those of the cut edges.
+fn write_subdivision(
+    states: &[State],
+    numbers: &Numbers,
+    cut_points: &[Vec3],
+    triangles: usize,
+) -> TriMesh {
     let max_valence = states
         .iter()
         .flat_map(|s| s.valence.iter().copied())
         .max()
         .unwrap_or(0);
     let beta = loop_betas(&[max_valence]);
-    let edges = inner + cut_points.len();
+    let vertices = numbers.home.len();
+    let inner: usize = states.iter().map(|s| s.edge_points.len()).sum();
     let nv = vertices as u32;
     let cut_base = nv + inner as u32;
-    let mut positions = vec![Vec3::ZERO; vertices + edges];
+    let mut positions = vec![Vec3::ZERO; vertices + inner + cut_points.len()];
     let mut fine = vec![[0u32; 3]; triangles * 4];
     let (vertex_out, edge_out) = positions.split_at_mut(vertices);
     let (edge_out, cut_out) = edge_out.split_at_mut(inner);
-    cut_out.copy_from_slice(&cut_points);
-    let mut jobs = Vec::with_capacity(parts);
+    cut_out.copy_from_slice(cut_points);
+    // Each part's slices of the outputs.
+    let mut jobs = Vec::with_capacity(states.len());
     let (mut vrest, mut erest, mut trest) = (vertex_out, edge_out, fine.as_mut_slice());
     let mut edge_base = nv;
     for (p, st) in states.iter().enumerate() {
-        let own = if p + 1 < parts {
-            vertex_base[p + 1] - vertex_base[p]
-        } else {
-            nv - vertex_base[p]
-        } as usize;
+        let own_end = numbers.base.get(p + 1).copied().unwrap_or(nv);
+        let own = (own_end - numbers.base[p]) as usize;
         let (v, vr) = std::mem::take(&mut vrest).split_at_mut(own);
         let (e, er) = std::mem::take(&mut erest).split_at_mut(st.edge_points.len());
         let (t, tr) = std::mem::take(&mut trest).split_at_mut(st.triangles.len() * 4);
@@ -331,15 +381,12 @@ pub(crate) fn decode_parts_subdivided(
     }
     jobs.into_par_iter()
         .for_each(|(p, st, vertex_out, edge_out, tri_out, edge_base)| {
-            let ids = &global[p];
-            let own = ids
-                .iter()
-                .enumerate()
-                .filter(|&(_, &g)| g >= vertex_base[p]);
-            for (out, (k, _)) in vertex_out.iter_mut().zip(own) {
+            let own = (0..st.positions.len()).filter(|&k| numbers.own(p, k));
+            for (out, k) in vertex_out.iter_mut().zip(own) {
                 *out = st.vertex_point(k, &beta);
             }
             edge_out.copy_from_slice(&st.edge_points);
+            let ids = &numbers.global[p];
             for ((out, tri), sides) in tri_out
                 .chunks_exact_mut(4)
                 .zip(&st.triangles)
@@ -355,11 +402,11 @@ pub(crate) fn decode_parts_subdivided(
                 out.copy_from_slice(&children(tri.map(|v| ids[v as usize]), m));
             }
         });
-    Ok(TriMesh {
+    TriMesh {
         positions,
         triangles: fine,
         normals: Vec::new(),
-    })
+    }
 }
 
 #[cfg(test)]
