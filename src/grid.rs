@@ -190,6 +190,27 @@ pub fn sort_by_key_zyx(keys: &[[i32; 3]]) -> Vec<u32> {
     packed.into_par_iter().map(|(_, i)| i).collect()
 }
 
+/// Per key (cell or block), the range of a sorted index list holding its entries.
+pub type KeyRanges = hashbrown::HashMap<[i32; 3], (u32, u32)>;
+
+/// `keys` binned: the indices in [`sort_by_key_zyx`] order, and for every key present the
+/// range of that order holding its indices (ascending index within a key).
+pub fn bin_by_key(keys: &[[i32; 3]]) -> (Vec<u32>, KeyRanges) {
+    let order = sort_by_key_zyx(keys);
+    let mut ranges = hashbrown::HashMap::new();
+    let mut start = 0;
+    while start < order.len() {
+        let key = keys[order[start] as usize];
+        let mut end = start + 1;
+        while end < order.len() && keys[order[end] as usize] == key {
+            end += 1;
+        }
+        ranges.insert(key, (start as u32, end as u32));
+        start = end;
+    }
+    (order, ranges)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

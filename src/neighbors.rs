@@ -20,18 +20,7 @@ impl CellHash {
     pub fn new(positions: &[Vec3], cell_size: f32) -> Self {
         let inv = 1.0 / cell_size;
         let keys: Vec<[i32; 3]> = positions.par_iter().map(|p| cell_of(*p, inv)).collect();
-        let order = crate::grid::sort_by_key_zyx(&keys);
-        let mut cells = HashMap::new();
-        let mut start = 0usize;
-        while start < order.len() {
-            let key = keys[order[start] as usize];
-            let mut end = start + 1;
-            while end < order.len() && keys[order[end] as usize] == key {
-                end += 1;
-            }
-            cells.insert(key, (start as u32, end as u32));
-            start = end;
-        }
+        let (order, cells) = crate::grid::bin_by_key(&keys);
         CellHash {
             cell_size,
             order,

@@ -308,18 +308,7 @@ fn compute_blocks_with(
 
     // Particle indices sorted by (home block, index).
     let home = home_blocks(positions, options);
-    let order = crate::grid::sort_by_key_zyx(&home);
-    let mut home_ranges: HashMap<BlockKey, (u32, u32)> = HashMap::new();
-    let mut start = 0;
-    while start < order.len() {
-        let key = home[order[start] as usize];
-        let mut end = start + 1;
-        while end < order.len() && home[order[end] as usize] == key {
-            end += 1;
-        }
-        home_ranges.insert(key, (start as u32, end as u32));
-        start = end;
-    }
+    let (order, home_ranges) = crate::grid::bin_by_key(&home);
 
     // Candidate blocks: within `reach` blocks of a populated home block.
     let mut candidates: HashSet<BlockKey> = HashSet::new();
