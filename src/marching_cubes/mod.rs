@@ -21,7 +21,7 @@
 mod table;
 
 use crate::field::BlockRange;
-use crate::grid::{local_index, BlockKey, SparseField, BLOCK_EDGE};
+use crate::grid::{local_index, BlockKey, BlockValues, SparseField, BLOCK_EDGE};
 use crate::mesh::TriMesh;
 use glam::{DVec3, Vec3};
 use hashbrown::{HashMap, HashSet};
@@ -159,14 +159,13 @@ fn number_blocks(surfaces: &[BlockSurface]) -> (Vec<u32>, HashMap<BlockKey, usiz
 /// references can point to (the block itself and its +x/+y/+z neighbours, by offset
 /// bits), looked up once per block instead of once per reference.
 fn owner_table(index_of: &HashMap<BlockKey, usize>, key: BlockKey) -> [Option<usize>; 8] {
-    std::array::from_fn(|o| {
-        let owner = [
-            key[0] + (o & 1) as i32,
-            key[1] + ((o >> 1) & 1) as i32,
-            key[2] + ((o >> 2) & 1) as i32,
-        ];
-        index_of.get(&owner).copied()
-    })
+    std::array::from_fn(|o| index_of.get(&upper_neighbour(key, o)).copied())
+}
+
+/// Block `key` moved by +1 along the axes whose bits are set in `offset` (x = 1, y = 2,
+/// z = 4): the blocks whose values and vertices a block's cells use.
+fn upper_neighbour(key: BlockKey, offset: usize) -> BlockKey {
+    [0, 1, 2].map(|a| key[a] + ((offset >> a) & 1) as i32)
 }
 
 /// The index of the vertex `r` of a triangle of a block whose [`owner_table`] is
@@ -288,15 +287,8 @@ fn cube_index(a: i32, b: i32, c: i32) -> usize {
 /// Marches the 8³ cells whose lower corner lies in block `key`.
 fn march_block(field: &SparseField, key: BlockKey, cube: &mut [f32]) -> BlockSurface {
     // Gather the (E+1)³ values: this block plus the +x/+y/+z neighbours' first layers.
-    let mut neighbours = [None; 8];
-    for (o, slot) in neighbours.iter_mut().enumerate() {
-        let o = o as i32;
-        *slot = field.block(&[
-            key[0] + (o & 1),
-            key[1] + ((o >> 1) & 1),
-            key[2] + ((o >> 2) & 1),
-        ]);
-    }
+    let neighbours: [Option<&BlockValues>; 8] =
+        std::array::from_fn(|o| field.block(&upper_neighbour(key, o)));
     // Row by row: eight values of a block row, then the first of the +x neighbour's.
     let outside = field.outside_value;
     for c in 0..=E {
