@@ -186,6 +186,16 @@ mod tests {
         assert!((ev - 4.0).abs() < 1e-7, "{ev}");
     }
 
+    /// Pseudo-random numbers uniform in [−2, 2) (a 64-bit LCG seeded with `seed`).
+    fn uniform(mut seed: u64) -> impl FnMut() -> f64 {
+        move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 4.0 - 2.0
+        }
+    }
+
     #[test]
     fn cos_third_of_acos_matches_libm() {
         for k in 0..=20_000 {
@@ -201,13 +211,7 @@ mod tests {
         // Symmetric matrices (real eigenvalues, the three-root branch): the largest
         // eigenvalue from the closed form against the Rayleigh quotient of a long power
         // iteration on the matrix shifted to be positive definite.
-        let mut seed = 11u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 4.0 - 2.0
-        };
+        let mut next = uniform(11);
         for _ in 0..200 {
             let (d, e, f, g, h, i) = (next(), next(), next(), next(), next(), next());
             let m = [d, e, f, e, g, h, f, h, i];
@@ -235,13 +239,7 @@ mod tests {
     fn lanes_give_the_scalar_eigenvalue_bit_for_bit() {
         // Random non-symmetric matrices (both the one- and the three-real-root case),
         // a triple root, zero, and non-finite entries.
-        let mut seed = 3u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 4.0 - 2.0
-        };
+        let mut next = uniform(3);
         let mut matrices: Vec<[f64; 9]> =
             (0..400).map(|_| std::array::from_fn(|_| next())).collect();
         matrices.push([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]);
