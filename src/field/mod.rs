@@ -19,9 +19,9 @@
 //! root, the trigonometric form for three); "largest" is the largest real part.
 //!
 //! **Evaluation order (the invariant that makes tiling exact):** the sums at a vertex run
-//! over particles binned by *home block* (the lattice block containing the particle), home
-//! blocks visited in a fixed (z, y, x) offset order, particles of a home block in ascending
-//! input index. The order depends only on global lattice coordinates, never on the thread
+//! over particles binned by *home half-block* (the 4³-cell half of a lattice block that
+//! contains the particle), half-blocks visited in a fixed (z, y, x) offset order, particles
+//! of a half-block in ascending input index. The order depends only on global lattice coordinates, never on the thread
 //! count or on how the domain is cut. Sums are accumulated in f32 on block-local
 //! coordinates (in cells), which keeps them exact enough far from the origin.
 
@@ -227,6 +227,14 @@ pub fn home_blocks(positions: &[Vec3], options: &FieldOptions) -> Vec<BlockKey> 
         .collect()
 }
 
+/// The home half-block of one position (the 4³ cells of its home block's eighth that
+/// contain it), `inv_h` = 1 / cell size (world units).
+#[inline]
+fn home_half_block(p: Vec3, inv_h: f64) -> BlockKey {
+    let c = p.as_dvec3() * inv_h;
+    [c.x, c.y, c.z].map(|v| (v.floor() as i32).div_euclid(HALF as i32))
+}
+
 /// The home block of one position, `inv_h` = 1 / cell size (world units).
 #[inline]
 pub fn home_block(p: Vec3, inv_h: f64) -> BlockKey {
@@ -305,14 +313,25 @@ fn compute_blocks_with(
     let h = options.cell_size_world();
     let inv_h = 1.0 / h;
     let reach = block_reach(options);
+    let radius_cells = options.influence_radius / options.cell_size;
 
-    // Particle indices sorted by (home block, index).
-    let home = home_blocks(positions, options);
-    let (order, home_ranges) = crate::grid::bin_by_key(&home);
+    // Particle indices sorted by (home half-block, index): a block then scans the particles
+    // of the half-blocks within reach, not of whole neighbour blocks (with R = 4 h, 512
+    // particle slots instead of 1728, most of which would be out of reach).
+    let halves: Vec<BlockKey> = positions
+        .par_iter()
+        .map(|p| home_half_block(*p, inv_h))
+        .collect();
+    let (order, half_ranges) = crate::grid::bin_by_key(&halves);
+    drop(halves);
+    let homes: HashSet<BlockKey> = half_ranges
+        .keys()
+        .map(|k| k.map(|c| c.div_euclid(2)))
+        .collect();
 
     // Candidate blocks: within `reach` blocks of a populated home block.
     let mut candidates: HashSet<BlockKey> = HashSet::new();
-    for key in home_ranges.keys() {
+    for key in &homes {
         for dz in -reach..=reach {
             for dy in -reach..=reach {
                 for dx in -reach..=reach {
@@ -330,10 +349,10 @@ fn compute_blocks_with(
     let kernel = BlockKernel {
         positions,
         order: &order,
-        home_ranges: &home_ranges,
-        reach,
+        half_ranges: &half_ranges,
+        half_reach: (radius_cells / HALF as f32).ceil() as i32,
         inv_h,
-        radius_cells: options.influence_radius / options.cell_size,
+        radius_cells,
         h,
         options,
         simd,
@@ -370,30 +389,29 @@ fn compute_blocks_with(
     (field, stats)
 }
 
-/// Number of running sums per vertex: Σw, Σw·r (3), Σ∇w (3), Σ g·r⊗r (6, symmetric),
-/// with `r = v − x_i` (cells) and `∇w_i = g·r`, `g = −6 (1 − s²)² / R²`.
-const SUMS: usize = 13;
-/// Row length: one block row of vertices along x.
-const ROW: usize = BLOCK_EDGE as usize;
+/// Rows of vertices in a block.
+const ROWS: usize = BLOCK_VOLUME / ROW;
 
-/// Per-thread scratch: the running sums of every vertex of one block, as
-/// `[sum][row][x]` so that one particle updates whole rows with vector instructions.
+/// Per-thread scratch of one block: the particles within reach (with the rows of
+/// vertices their influence spheres may meet) and, per row, the particles that do.
 struct Accumulators {
-    sums: Vec<[[f32; ROW]; BLOCK_VOLUME / ROW]>,
+    /// Block-local particle positions (cells), in scan order.
+    particles: Vec<[f32; 3]>,
+    /// Per particle: lowest and highest row coordinates `[y, z]` it may meet.
+    extents: Vec<[[i32; 2]; 2]>,
+    /// Row `k`'s particles (indices into `particles`, in scan order) are
+    /// `entries[k · particles.len()..][..row_len[k]]`.
+    entries: Vec<u32>,
+    row_len: [usize; ROWS],
 }
 
 impl Accumulators {
     fn new() -> Self {
         Accumulators {
-            sums: vec![[[0.0; ROW]; BLOCK_VOLUME / ROW]; SUMS],
-        }
-    }
-
-    fn clear(&mut self) {
-        for s in &mut self.sums {
-            for row in s.iter_mut() {
-                *row = [0.0; ROW];
-            }
+            particles: Vec::new(),
+            extents: Vec::new(),
+            entries: Vec::new(),
+            row_len: [0; ROWS],
         }
     }
 }
@@ -401,8 +419,11 @@ impl Accumulators {
 struct BlockKernel<'a> {
     positions: &'a [Vec3],
     order: &'a [u32],
-    home_ranges: &'a HashMap<BlockKey, (u32, u32)>,
-    reach: i32,
+    /// Range of `order` of every populated home half-block.
+    half_ranges: &'a HashMap<BlockKey, (u32, u32)>,
+    /// Half-blocks, per axis, beyond a block's own two whose particles can reach it
+    /// (`⌈R / 4h⌉`).
+    half_reach: i32,
     inv_h: f64,
     radius_cells: f32,
     h: f64,
@@ -416,8 +437,9 @@ impl BlockKernel<'_> {
     ///
     /// On x86-64 CPUs with AVX2 the same code is compiled a second time with AVX2 and FMA
     /// enabled and picked at run time: one row of eight vertices is then one vector
-    /// instruction instead of two. Rust never contracts `a * b + c` into a fused
-    /// multiply-add, so both versions round identically and give bit-identical fields.
+    /// instruction instead of two. The fused products are written as `mul_add` (one
+    /// rounding, in hardware or in libm) and Rust never contracts other `a * b + c`, so
+    /// both versions round identically and give bit-identical fields.
     fn evaluate(
         &self,
         key: BlockKey,
@@ -446,6 +468,10 @@ impl BlockKernel<'_> {
         self.evaluate_portable(key, acc, values)
     }
 
+    /// Two steps: the particles within reach are listed per row of vertices (in scan
+    /// order), then each row sums its particles with its running sums in registers and
+    /// is finalised at once. Each vertex adds its particles in scan order, whatever the
+    /// steps.
     // Index loops over lanes on purpose: they inline into (and vectorize within) the AVX2
     // copy, where iterator adaptors' closures may not.
     #[allow(clippy::needless_range_loop)]
@@ -456,19 +482,22 @@ impl BlockKernel<'_> {
         acc: &mut Accumulators,
         values: &mut BlockValues,
     ) -> Option<usize> {
-        acc.clear();
+        acc.particles.clear();
+        acc.extents.clear();
         let origin = [0, 1, 2].map(|a| key[a] as f64 * BLOCK_EDGE as f64);
         let rc = self.radius_cells;
         let rc2 = rc * rc;
         let inv_rc2 = 1.0 / rc2;
-        let mut touched = false;
-        for dz in -self.reach..=self.reach {
-            for dy in -self.reach..=self.reach {
-                for dx in -self.reach..=self.reach {
-                    let Some(&(s, e)) =
-                        self.home_ranges
-                            .get(&[key[0] + dx, key[1] + dy, key[2] + dz])
-                    else {
+        // A particle of half-block j lies in cells [4j, 4j + 4): it reaches the block's
+        // vertices [8k, 8k + 7] only for 2k − ⌈R/4h⌉ ≤ j ≤ 2k + 1 + ⌈R/4h⌉.
+        let (first, last) = (
+            key.map(|k| 2 * k - self.half_reach),
+            key.map(|k| 2 * k + 1 + self.half_reach),
+        );
+        for hz in first[2]..=last[2] {
+            for hy in first[1]..=last[1] {
+                for hx in first[0]..=last[0] {
+                    let Some(&(s, e)) = self.half_ranges.get(&[hx, hy, hz]) else {
                         continue;
                     };
                     for &pi in &self.order[s as usize..e as usize] {
@@ -484,138 +513,153 @@ impl BlockKernel<'_> {
                         if lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2] {
                             continue;
                         }
-                        touched = true;
-                        let mut rx = [0.0f32; ROW];
-                        let mut rx2 = [0.0f32; ROW];
-                        for i in 0..ROW {
-                            rx[i] = i as f32 - x[0];
-                            rx2[i] = rx[i] * rx[i];
-                        }
-                        for c in lo[2]..=hi[2] {
-                            let rz = c as f32 - x[2];
-                            for b in lo[1]..=hi[1] {
-                                let ry = b as f32 - x[1];
-                                let ryz2 = ry * ry + rz * rz;
-                                if ryz2 >= rc2 {
-                                    continue;
-                                }
-                                let row = (c * BLOCK_EDGE + b) as usize;
-                                let args = (&rx, &rx2, ry, rz, ryz2, inv_rc2);
-                                // A sphere within one half of the row (particles of the
-                                // ±x neighbour blocks, mostly) updates four lanes only;
-                                // the others would add zeros.
-                                if hi[0] < HALF as i32 {
-                                    accumulate_row::<0, HALF>(&mut acc.sums, row, args);
-                                } else if lo[0] >= HALF as i32 {
-                                    accumulate_row::<HALF, ROW>(&mut acc.sums, row, args);
-                                } else {
-                                    accumulate_row::<0, ROW>(&mut acc.sums, row, args);
-                                }
-                            }
-                        }
+                        acc.particles.push(x);
+                        acc.extents.push([[lo[1], lo[2]], [hi[1], hi[2]]]);
                     }
                 }
             }
         }
-        if !touched {
+        let n = acc.particles.len();
+        if n == 0 {
             return None;
         }
+        // Row lists, written without branches: every particle writes its index into each
+        // row of its extent, and the row's length grows only where the sphere meets it.
+        acc.row_len = [0; ROWS];
+        acc.entries.resize(ROWS * n, 0);
+        for (index, (x, &[lo, hi])) in acc.particles.iter().zip(&acc.extents).enumerate() {
+            for c in lo[1]..=hi[1] {
+                let rz = c as f32 - x[2];
+                for b in lo[0]..=hi[0] {
+                    let ry = b as f32 - x[1];
+                    let row = (c * BLOCK_EDGE + b) as usize;
+                    acc.entries[row * n + acc.row_len[row]] = index as u32;
+                    acc.row_len[row] += (ry * ry + rz * rz < rc2) as usize;
+                }
+            }
+        }
         let mut in_band = 0;
-        let r = self.options.particle_radius as f64;
-        let (t_low, t_high) = (self.options.t_low as f64, self.options.t_high as f64);
-        for row in 0..BLOCK_VOLUME / ROW {
-            // One row of vertices at a time, each quantity as a lane array, so that the
-            // Jacobians and their eigenvalues run as vector instructions. Lanes outside
-            // the band (Σw = 0) compute garbage that is not stored.
-            // (Plain loops rather than closures: they stay inside the AVX2 copy of the
-            // kernel.)
-            let mut sums = [[0.0f64; ROW]; SUMS];
-            for k in 0..SUMS {
-                for i in 0..ROW {
-                    sums[k][i] = acc.sums[k][row][i] as f64;
-                }
+        for row in 0..ROWS {
+            if acc.row_len[row] == 0 {
+                // No particle within reach of the row: outside the band.
+                values[row * ROW..][..ROW].fill(self.options.outside_value());
+                continue;
             }
-            let w = sums[0];
-            // v − vbar = Σ w r / Σ w.
-            let mut d = [[0.0f64; ROW]; 3];
-            for a in 0..3 {
-                for i in 0..ROW {
-                    d[a][i] = sums[1 + a][i] / w[i];
-                }
+            let (b, c) = ((row % ROW) as f32, (row / ROW) as f32);
+            let mut sums = [[0.0f32; ROW]; SUMS];
+            for &k in &acc.entries[row * n..][..acc.row_len[row]] {
+                let x = acc.particles[k as usize];
+                let (ry, rz) = (b - x[1], c - x[2]);
+                accumulate_row(&mut sums, x[0], ry, rz, ry * ry + rz * rz, inv_rc2);
             }
-            // x_i = v − r_i gives J_ab = ((v − vbar)_a Σ∂_b w − Σ g r_a r_b) / Σ w, with
-            // Σ∂_b w = sums[4 + b] and the symmetric Σ g r_a r_b in sums[7..13].
-            const SYMMETRIC: [usize; 9] = [7, 8, 9, 8, 10, 11, 9, 11, 12];
-            let mut jac = [[0.0f64; ROW]; 9];
-            for a in 0..3 {
-                for b in 0..3 {
-                    for i in 0..ROW {
-                        jac[a * 3 + b][i] =
-                            (d[a][i] * sums[4 + b][i] - sums[SYMMETRIC[a * 3 + b]][i]) / w[i];
-                    }
-                }
-            }
-            let ev = largest_eigenvalue_real_part_lanes(&jac);
-            for i in 0..ROW {
-                let idx = row * ROW + i;
-                if w[i] <= 0.0 {
-                    values[idx] = self.options.outside_value();
-                    continue;
-                }
-                in_band += 1;
-                let f = concavity_factor(ev[i], t_low, t_high);
-                let dist_cells = (d[0][i] * d[0][i] + d[1][i] * d[1][i] + d[2][i] * d[2][i]).sqrt();
-                values[idx] = (dist_cells * self.h - r * f) as f32;
-            }
+            in_band += self.finalize_row(&sums, row, values);
         }
         Some(in_band)
     }
+
+    /// Turns one row's running sums into field values; returns how many of its vertices
+    /// are in the band (`Σw > 0`).
+    #[allow(clippy::needless_range_loop)]
+    #[inline(always)]
+    fn finalize_row(
+        &self,
+        row_sums: &[[f32; ROW]; SUMS],
+        row: usize,
+        values: &mut BlockValues,
+    ) -> usize {
+        let r = self.options.particle_radius as f64;
+        let (t_low, t_high) = (self.options.t_low as f64, self.options.t_high as f64);
+        // Each quantity as a lane array, so that the Jacobians and their eigenvalues run
+        // as vector instructions. Lanes outside the band (Σw = 0) compute garbage that is
+        // not stored. (Plain loops rather than closures: they stay inside the AVX2 copy of
+        // the kernel.)
+        let mut sums = [[0.0f64; ROW]; SUMS];
+        for k in 0..SUMS {
+            for i in 0..ROW {
+                sums[k][i] = row_sums[k][i] as f64;
+            }
+        }
+        let w = sums[0];
+        // v − vbar = Σ w r / Σ w.
+        let mut d = [[0.0f64; ROW]; 3];
+        for a in 0..3 {
+            for i in 0..ROW {
+                d[a][i] = sums[1 + a][i] / w[i];
+            }
+        }
+        // x_i = v − r_i gives J_ab = ((v − vbar)_a Σ∂_b w − Σ g r_a r_b) / Σ w, with
+        // Σ∂_b w = sums[4 + b] and the symmetric Σ g r_a r_b in sums[7..13].
+        const SYMMETRIC: [usize; 9] = [7, 8, 9, 8, 10, 11, 9, 11, 12];
+        let mut jac = [[0.0f64; ROW]; 9];
+        for a in 0..3 {
+            for b in 0..3 {
+                for i in 0..ROW {
+                    jac[a * 3 + b][i] =
+                        (d[a][i] * sums[4 + b][i] - sums[SYMMETRIC[a * 3 + b]][i]) / w[i];
+                }
+            }
+        }
+        let ev = largest_eigenvalue_real_part_lanes(&jac);
+        let mut in_band = 0;
+        for i in 0..ROW {
+            let idx = row * ROW + i;
+            if w[i] <= 0.0 {
+                values[idx] = self.options.outside_value();
+                continue;
+            }
+            in_band += 1;
+            let f = concavity_factor(ev[i], t_low, t_high);
+            let dist_cells = (d[0][i] * d[0][i] + d[1][i] * d[1][i] + d[2][i] * d[2][i]).sqrt();
+            values[idx] = (dist_cells * self.h - r * f) as f32;
+        }
+        in_band
+    }
 }
 
+/// Number of running sums per vertex: Σw, Σw·r (3), Σ∇w (3), Σ g·r⊗r (6, symmetric),
+/// with `r = v − x_i` (cells) and `∇w_i = g·r`, `g = −6 (1 − s²)² / R²`.
+const SUMS: usize = 13;
+/// Row length: one block row of vertices along x.
+const ROW: usize = BLOCK_EDGE as usize;
 /// Half a row.
 const HALF: usize = ROW / 2;
 
-/// Adds one particle's terms to lanes `FROM..TO` of one row of vertices (`args`: the
-/// lanes' `x` offsets and their squares, `y` and `z` offsets, `y² + z²`, `1 / R²` in
-/// cells). Lanes outside the influence sphere get `q = 0`, hence zero weight and zero
-/// gradient; lanes outside `FROM..TO` must be outside the sphere.
+/// Adds one particle's terms to one row of vertices' running sums (`x`: the particle's
+/// block-local x (cells), `ry`, `rz`: the row's offsets from it, `ryz2 = ry² + rz²`,
+/// `inv_rc2 = 1 / R²` in cells). Lanes outside the influence sphere get `q = 0`, hence
+/// zero weight and zero gradient: adding them leaves every sum as it was.
+#[allow(clippy::needless_range_loop)]
 #[inline(always)]
-fn accumulate_row<const FROM: usize, const TO: usize>(
-    sums: &mut [[[f32; ROW]; BLOCK_VOLUME / ROW]],
-    row: usize,
-    (rx, rx2, ry, rz, ryz2, inv_rc2): (&[f32; ROW], &[f32; ROW], f32, f32, f32, f32),
+fn accumulate_row(
+    sums: &mut [[f32; ROW]; SUMS],
+    x: f32,
+    ry: f32,
+    rz: f32,
+    ryz2: f32,
+    inv_rc2: f32,
 ) {
-    let [s0, s1, s2, s3, s4, s5, s6, s7, s8, s9, s10, s11, s12] = sums else {
-        unreachable!("SUMS accumulators")
-    };
-    let (s0, s1, s2, s3) = (&mut s0[row], &mut s1[row], &mut s2[row], &mut s3[row]);
-    let (s4, s5, s6, s7) = (&mut s4[row], &mut s5[row], &mut s6[row], &mut s7[row]);
-    let (s8, s9, s10, s11, s12) = (
-        &mut s8[row],
-        &mut s9[row],
-        &mut s10[row],
-        &mut s11[row],
-        &mut s12[row],
-    );
-    for i in FROM..TO {
-        let q = (1.0 - (rx2[i] + ryz2) * inv_rc2).max(0.0);
+    let g_scale = -6.0 * inv_rc2;
+    let [s0, s1, s2, s3, s4, s5, s6, s7, s8, s9, s10, s11, s12] = sums;
+    for i in 0..ROW {
+        let rx = i as f32 - x;
+        let q = (1.0 - (rx * rx + ryz2) * inv_rc2).max(0.0);
         let q2 = q * q;
         let w = q2 * q;
-        let g = -6.0 * q2 * inv_rc2;
-        let (gx, gy, gz) = (g * rx[i], g * ry, g * rz);
+        let g = q2 * g_scale;
+        let (gx, gy, gz) = (g * rx, g * ry, g * rz);
         s0[i] += w;
-        s1[i] += w * rx[i];
-        s2[i] += w * ry;
-        s3[i] += w * rz;
+        s1[i] = w.mul_add(rx, s1[i]);
+        s2[i] = w.mul_add(ry, s2[i]);
+        s3[i] = w.mul_add(rz, s3[i]);
         s4[i] += gx;
         s5[i] += gy;
         s6[i] += gz;
-        s7[i] += gx * rx[i];
-        s8[i] += gx * ry;
-        s9[i] += gx * rz;
-        s10[i] += gy * ry;
-        s11[i] += gy * rz;
-        s12[i] += gz * rz;
+        s7[i] = gx.mul_add(rx, s7[i]);
+        s8[i] = gx.mul_add(ry, s8[i]);
+        s9[i] = gx.mul_add(rz, s9[i]);
+        s10[i] = gy.mul_add(ry, s10[i]);
+        s11[i] = gy.mul_add(rz, s11[i]);
+        s12[i] = gz.mul_add(rz, s12[i]);
     }
 }
 

@@ -12,8 +12,9 @@
 //!   marches its own
 //!   blocks only (reading the field one block further up), and every mesh vertex is owned
 //!   by exactly one block;
-//! * a field block sums over the particles whose home block is within `reach` blocks
-//!   ([`crate::field::block_reach`]), in (home block, global index) order — the tile loads
+//! * a field block sums over particles whose home block is within `reach` blocks
+//!   ([`crate::field::block_reach`]), in (home half-block, global index) order (which
+//!   follows from (home block, global index) order) — the tile loads
 //!   every particle within `reach` of its field blocks ("zone 1") in that order, which is
 //!   also the order every neighbour search of the tile sees;
 //! * the isolation flag of a zone-1 particle depends on the particles within `R` of it, so
