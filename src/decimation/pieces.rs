@@ -220,9 +220,13 @@ pub(super) fn decimate_by_regions(
         triangles,
         normals: Vec::new(),
     };
-    let (last, _) = decimate_locked(mesh, target, options.max_error, &[]);
+    let mut at_seam = vec![false; mesh.vertex_count()];
+    for &i in seam_index.iter().filter(|&&i| i != u32::MAX) {
+        at_seam[i as usize] = true;
+    }
+    drop(seam_index);
+    let last = decimate_band(mesh, &at_seam, target, options.max_error);
     stats.add_work(&last);
-    stats.refused_boundary = last.refused_boundary;
     stats.triangles_after = last.triangles_after;
     stats
 }
