@@ -161,11 +161,16 @@ impl DecimateStats {
 /// number of threads.
 pub const CHUNK_TRIANGLES: usize = 16 * 1024;
 
-/// An edge collapse candidate of one pass; the placement is recomputed when it is taken.
-/// `u == u32::MAX` marks a candidate the parallel walk has already decided.
+/// An edge collapse candidate of one pass, with the placement computed when it was
+/// costed: still valid when it is taken, since a collapse is taken only while neither end
+/// has moved in the pass. `u == u32::MAX` marks a candidate the parallel walk has already
+/// decided.
 #[derive(Clone, Copy)]
 struct Candidate {
+    /// Squared RMS distance of the collapse, `Q(p) / area` (unit-box units).
     cost: f64,
+    /// Where the merged vertex goes.
+    target: DVec3,
     u: u32,
     v: u32,
 }
@@ -507,10 +512,10 @@ impl State {
 
     /// The candidate ranked by its squared RMS distance, `Q(p) / area`.
     fn candidate(&self, u: u32, v: u32) -> Candidate {
-        let (_, cost) = placement(&self.pos, &self.quadric, u, v);
+        let (target, cost) = placement(&self.pos, &self.quadric, u, v);
         let w = self.quadric[u as usize].weight + self.quadric[v as usize].weight;
         let cost = if w > 0.0 { cost / w } else { 0.0 };
-        Candidate { cost, u, v }
+        Candidate { cost, target, u, v }
     }
 
     fn view(&mut self) -> View {
@@ -648,8 +653,8 @@ impl View {
         if !self.alive(u) || !self.alive(v) || self.touched(u) == pass || self.touched(v) == pass {
             return false;
         }
-        let (target_point, cost) = self.placement(u, v);
-        let error = self.error(u, v, cost);
+        // Neither end has moved since the candidate was costed: its placement holds.
+        let (target_point, error) = (c.target, c.cost.sqrt());
         if max_cost_error.is_some_and(|m| error > m) {
             return false;
         }
@@ -667,27 +672,6 @@ impl View {
         tally.collapses += 1;
         tally.max_error = tally.max_error.max(error);
         true
-    }
-
-    unsafe fn placement(&self, u: u32, v: u32) -> (DVec3, f64) {
-        let (pu, pv) = (self.pos(u), self.pos(v));
-        let q = *self.quadric.add(u as usize) + *self.quadric.add(v as usize);
-        let mid = (pu + pv) * 0.5;
-        let target = match q.optimum() {
-            Some(p) if (p - mid).length() <= (pv - pu).length() => p,
-            _ => q.segment_minimum(pu, pv),
-        };
-        (target, q.evaluate(target))
-    }
-
-    /// RMS distance (unit-box units) of a collapse: √(cost / area weight).
-    unsafe fn error(&self, u: u32, v: u32, cost: f64) -> f64 {
-        let w = (*self.quadric.add(u as usize)).weight + (*self.quadric.add(v as usize)).weight;
-        if w > 0.0 {
-            (cost / w).sqrt()
-        } else {
-            0.0
-        }
     }
 
     unsafe fn is_neighbour(&self, a: u32, b: u32) -> bool {
