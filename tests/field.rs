@@ -290,3 +290,46 @@ fn field_matches_direct_sum_at_random_vertices() {
 fn covered_field_matches_direct_sum_at_random_vertices() {
     check_against_oracle(0.9);
 }
+
+/// The field with other cell sizes and influence radii against the oracle: a block scans
+/// the particles of the half-blocks within reach, `⌈R / 4h⌉` of them beyond its own, and
+/// misses none (a missed particle would move vbar and the value).
+#[test]
+fn field_matches_direct_sum_for_other_cell_sizes_and_radii() {
+    let r = 0.05f64;
+    let mut rng = Lcg(77);
+    let pts = blob(r, &mut rng);
+    // (cell size, influence radius) in multiples of r: R/h = 8 cells (two half-blocks of
+    // reach), 3.85 (one) and 4.29 (two, not a whole number).
+    for (cell_size, influence_radius) in [(0.5f32, 4.0f32), (1.3, 5.0), (0.7, 3.0)] {
+        let options = FieldOptions {
+            cell_size,
+            influence_radius,
+            particle_coverage: 0.0,
+            ..FieldOptions::new(r as f32)
+        };
+        let (field, _) = compute_field(&pts, &options).unwrap();
+        let h = options.cell_size_world();
+        let keys = field.sorted_keys();
+        let (mut checked, mut tries) = (0, 0);
+        while checked < 120 {
+            tries += 1;
+            assert!(tries < 100_000);
+            let key = keys[(rng.next() * keys.len() as f64) as usize];
+            let g = [0, 1, 2].map(|a| key[a] * 8 + (rng.next() * 8.0) as i32);
+            let value = field.value(g[0], g[1], g[2]) as f64;
+            let v = g.map(|c| c as f64 * h);
+            match oracle_phi(v, &pts, r, influence_radius as f64 * r) {
+                None => assert_eq!(value as f32, field.outside_value, "vertex {g:?}"),
+                Some(phi) => {
+                    assert!(
+                        (value - phi).abs() < 1e-3 * r,
+                        "h = {cell_size} r, R = {influence_radius} r, vertex {g:?}: field \
+                         {value}, oracle {phi}"
+                    );
+                    checked += 1;
+                }
+            }
+        }
+    }
+}
