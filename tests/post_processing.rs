@@ -366,7 +366,7 @@ fn mean_vertex_distance(mesh: &TriMesh, reference: &TriMesh, cell: f32) -> f64 {
 #[test]
 fn decimating_by_regions_keeps_the_surface_closed_deterministic_and_on_target() {
     // Regions of 8 k triangles on frame 25's ~112 k: 7 regions, their seams locked until
-    // the final pass over the whole mesh.
+    // the band around the seams is decimated last.
     let r = 0.012;
     let (raw, _) = reconstruct(
         &dataset("dambreak_small/ParticleData_Fluid_25.xyz"),
