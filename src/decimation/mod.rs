@@ -176,6 +176,8 @@ struct Candidate {
 }
 
 const MIN_NORMAL_DOT: f64 = 0.5;
+/// Triangles of a vertex whose corners the link test gathers on the stack.
+const LINK_TRIANGLES: usize = 16;
 const MIN_QUALITY: f64 = 0.02;
 
 /// Counters of one walk.
@@ -699,10 +701,27 @@ impl View {
         if shared != 2 || opposite[0] == opposite[1] {
             return false;
         }
+        // The corners of v's triangles, gathered once (each of v's neighbours is among
+        // them), unless v has too many triangles for the buffer.
+        let mut around_v = [u32::MAX; 3 * LINK_TRIANGLES];
+        let v_tris = self.vert_tris(v);
+        let gathered = v_tris.len() <= LINK_TRIANGLES;
+        if gathered {
+            for (corners, &t) in around_v.chunks_exact_mut(3).zip(v_tris.iter()) {
+                corners.copy_from_slice(&self.tri(t));
+            }
+        }
         for &t in self.vert_tris(u) {
             for &w in &self.tri(t) {
-                if w != u && w != v && !opposite.contains(&w) && self.is_neighbour(v, w) {
-                    return false;
+                if w != u && w != v && !opposite.contains(&w) {
+                    let neighbour = if gathered {
+                        around_v.contains(&w)
+                    } else {
+                        self.is_neighbour(v, w)
+                    };
+                    if neighbour {
+                        return false;
+                    }
                 }
             }
         }
