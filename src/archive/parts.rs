@@ -360,48 +360,85 @@ fn write_subdivision(
     let inner: usize = states.iter().map(|s| s.edge_points.len()).sum();
     let nv = vertices as u32;
     let cut_base = nv + inner as u32;
-    let mut positions = vec![Vec3::ZERO; vertices + inner + cut_points.len()];
-    let mut fine = vec![[0u32; 3]; triangles * 4];
-    let (vertex_out, edge_out) = positions.split_at_mut(vertices);
-    let (edge_out, cut_out) = edge_out.split_at_mut(inner);
-    cut_out.copy_from_slice(cut_points);
-    // Each part's slices of the outputs.
-    let mut jobs = Vec::with_capacity(states.len());
-    let (mut vrest, mut erest, mut trest) = (vertex_out, edge_out, fine.as_mut_slice());
-    let mut edge_base = nv;
-    for (p, st) in states.iter().enumerate() {
-        let own_end = numbers.base.get(p + 1).copied().unwrap_or(nv);
-        let own = (own_end - numbers.base[p]) as usize;
-        let (v, vr) = std::mem::take(&mut vrest).split_at_mut(own);
-        let (e, er) = std::mem::take(&mut erest).split_at_mut(st.edge_points.len());
-        let (t, tr) = std::mem::take(&mut trest).split_at_mut(st.triangles.len() * 4);
-        (vrest, erest, trest) = (vr, er, tr);
-        jobs.push((p, st, v, e, t, edge_base));
-        edge_base += st.edge_points.len() as u32;
-    }
-    jobs.into_par_iter()
-        .for_each(|(p, st, vertex_out, edge_out, tri_out, edge_base)| {
-            let own = (0..st.positions.len()).filter(|&k| numbers.own(p, k));
-            for (out, k) in vertex_out.iter_mut().zip(own) {
-                *out = st.vertex_point(k, &beta);
-            }
-            edge_out.copy_from_slice(&st.edge_points);
-            let ids = &numbers.global[p];
-            for ((out, tri), sides) in tri_out
-                .chunks_exact_mut(4)
-                .zip(&st.triangles)
-                .zip(&st.side_edge)
-            {
-                let m = sides.map(|e| {
-                    if e & CUT != 0 {
-                        cut_base + (e & !CUT)
-                    } else {
-                        edge_base + e
+    // The outputs are written slot by slot by the parts in parallel, without zeroing them
+    // first (a serial pass over the whole output before the parallel one); every slot is
+    // written exactly once, which is counted before the lengths are set.
+    let vertex_total = vertices + inner + cut_points.len();
+    let mut positions: Vec<Vec3> = Vec::with_capacity(vertex_total);
+    let mut fine: Vec<[u32; 3]> = Vec::with_capacity(triangles * 4);
+    {
+        let (vertex_out, edge_out) =
+            positions.spare_capacity_mut()[..vertex_total].split_at_mut(vertices);
+        let (edge_out, cut_out) = edge_out.split_at_mut(inner);
+        for (out, p) in cut_out.iter_mut().zip(cut_points) {
+            out.write(*p);
+        }
+        // Each part's slices of the outputs.
+        let mut jobs = Vec::with_capacity(states.len());
+        let (mut vrest, mut erest, mut trest) = (
+            vertex_out,
+            edge_out,
+            &mut fine.spare_capacity_mut()[..triangles * 4],
+        );
+        let mut edge_base = nv;
+        for (p, st) in states.iter().enumerate() {
+            let own_end = numbers.base.get(p + 1).copied().unwrap_or(nv);
+            let own = (own_end - numbers.base[p]) as usize;
+            let (v, vr) = std::mem::take(&mut vrest).split_at_mut(own);
+            let (e, er) = std::mem::take(&mut erest).split_at_mut(st.edge_points.len());
+            let (t, tr) = std::mem::take(&mut trest).split_at_mut(st.triangles.len() * 4);
+            (vrest, erest, trest) = (vr, er, tr);
+            jobs.push((p, st, v, e, t, edge_base));
+            edge_base += st.edge_points.len() as u32;
+        }
+        let covered = vrest.is_empty() && erest.is_empty() && trest.is_empty();
+        let complete = jobs
+            .into_par_iter()
+            .map(|(p, st, vertex_out, edge_out, tri_out, edge_base)| {
+                let own = (0..st.positions.len()).filter(|&k| numbers.own(p, k));
+                let mut vertex_count = 0;
+                for (out, k) in vertex_out.iter_mut().zip(own) {
+                    out.write(st.vertex_point(k, &beta));
+                    vertex_count += 1;
+                }
+                for (out, e) in edge_out.iter_mut().zip(&st.edge_points) {
+                    out.write(*e);
+                }
+                let ids = &numbers.global[p];
+                let mut triangle_count = 0;
+                for ((out, tri), sides) in tri_out
+                    .chunks_exact_mut(4)
+                    .zip(&st.triangles)
+                    .zip(&st.side_edge)
+                {
+                    let m = sides.map(|e| {
+                        if e & CUT != 0 {
+                            cut_base + (e & !CUT)
+                        } else {
+                            edge_base + e
+                        }
+                    });
+                    for (slot, child) in out
+                        .iter_mut()
+                        .zip(children(tri.map(|v| ids[v as usize]), m))
+                    {
+                        slot.write(child);
                     }
-                });
-                out.copy_from_slice(&children(tri.map(|v| ids[v as usize]), m));
-            }
-        });
+                    triangle_count += 4;
+                }
+                vertex_count == vertex_out.len()
+                    && edge_out.len() == st.edge_points.len()
+                    && triangle_count == tri_out.len()
+            })
+            .all(|filled| filled);
+        assert!(covered && complete, "every output slot is written");
+    }
+    // SAFETY: every slot of both outputs was written (asserted above: each part filled
+    // its slices exactly, and the slices cover the outputs).
+    unsafe {
+        positions.set_len(vertex_total);
+        fine.set_len(triangles * 4);
+    }
     TriMesh {
         positions,
         triangles: fine,
