@@ -363,8 +363,8 @@ fn compute_blocks_with(
     let in_band: Vec<Option<usize>> = candidates
         .par_iter()
         .zip(values.par_iter_mut())
-        .map_init(Accumulators::new, |acc, (&key, out)| {
-            kernel.evaluate(key, acc, out)
+        .map_init(RowLists::new, |lists, (&key, out)| {
+            kernel.evaluate(key, lists, out)
         })
         .collect();
     let mut stats = FieldStats {
@@ -394,7 +394,7 @@ const ROWS: usize = BLOCK_VOLUME / ROW;
 
 /// Per-thread scratch of one block: the particles within reach (with the rows of
 /// vertices their influence spheres may meet) and, per row, the particles that do.
-struct Accumulators {
+struct RowLists {
     /// Block-local particle positions (cells), in scan order.
     particles: Vec<[f32; 3]>,
     /// Per particle: lowest and highest row coordinates `[y, z]` it may meet.
@@ -405,9 +405,9 @@ struct Accumulators {
     row_len: [usize; ROWS],
 }
 
-impl Accumulators {
+impl RowLists {
     fn new() -> Self {
-        Accumulators {
+        RowLists {
             particles: Vec::new(),
             extents: Vec::new(),
             entries: Vec::new(),
@@ -443,7 +443,7 @@ impl BlockKernel<'_> {
     fn evaluate(
         &self,
         key: BlockKey,
-        acc: &mut Accumulators,
+        acc: &mut RowLists,
         values: &mut BlockValues,
     ) -> Option<usize> {
         #[cfg(target_arch = "x86_64")]
@@ -462,7 +462,7 @@ impl BlockKernel<'_> {
     unsafe fn evaluate_avx2(
         &self,
         key: BlockKey,
-        acc: &mut Accumulators,
+        acc: &mut RowLists,
         values: &mut BlockValues,
     ) -> Option<usize> {
         self.evaluate_portable(key, acc, values)
@@ -479,7 +479,7 @@ impl BlockKernel<'_> {
     fn evaluate_portable(
         &self,
         key: BlockKey,
-        acc: &mut Accumulators,
+        acc: &mut RowLists,
         values: &mut BlockValues,
     ) -> Option<usize> {
         acc.particles.clear();
