@@ -138,9 +138,9 @@ pub struct DecimateStats {
     pub refused_geometry: usize,
     /// Largest error of a performed collapse, world units.
     pub max_error: f32,
-    /// Sorted passes over the edges (summed over the regions and the final pass).
+    /// Sorted passes over the edges (summed over the regions and the seam band).
     pub passes: u32,
-    /// Regions decimated before the final pass over the whole mesh (0: not split).
+    /// Regions decimated before the band around their seams (0: not split).
     pub regions: usize,
 }
 

@@ -79,7 +79,8 @@ pub(crate) fn place_survivors(
     output_of
 }
 
-/// Decimates region by region, seams locked, then the whole mesh to `target` triangles.
+/// Decimates region by region, seams locked, then the band around the seams until the
+/// whole mesh has `target` triangles.
 pub(super) fn decimate_by_regions(
     mesh: &mut TriMesh,
     options: &DecimateOptions,
