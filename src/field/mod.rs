@@ -19,10 +19,10 @@
 //! root, the trigonometric form for three); "largest" is the largest real part.
 //!
 //! **Evaluation order (the invariant that makes tiling exact):** the sums at a vertex run
-//! over particles binned by *home half-block* (the 4³-cell half of a lattice block that
+//! over particles binned by *home half-block* (the 4³-cell eighth of a lattice block that
 //! contains the particle), half-blocks visited in a fixed (z, y, x) offset order, particles
-//! of a half-block in ascending input index. The order depends only on global lattice coordinates, never on the thread
-//! count or on how the domain is cut. Sums are accumulated in f32 on block-local
+//! of a half-block in ascending input index. The order depends only on global lattice
+//! coordinates, never on the thread count or on how the domain is cut. Sums are accumulated in f32 on block-local
 //! coordinates (in cells), which keeps them exact enough far from the origin.
 
 use crate::error::{Error, Result};
@@ -218,28 +218,24 @@ pub fn block_reach(options: &FieldOptions) -> i32 {
     (options.influence_radius / options.cell_size / BLOCK_EDGE as f32).ceil() as i32
 }
 
-/// The home block (lattice block containing the point) of every position.
-pub fn home_blocks(positions: &[Vec3], options: &FieldOptions) -> Vec<BlockKey> {
-    let inv_h = 1.0 / options.cell_size_world();
-    positions
-        .par_iter()
-        .map(|p| home_block(*p, inv_h))
-        .collect()
-}
-
 /// The home half-block of one position (the 4³ cells of its home block's eighth that
 /// contain it), `inv_h` = 1 / cell size (world units).
 #[inline]
 fn home_half_block(p: Vec3, inv_h: f64) -> BlockKey {
-    let c = p.as_dvec3() * inv_h;
-    [c.x, c.y, c.z].map(|v| (v.floor() as i32).div_euclid(HALF as i32))
+    home_cube(p, inv_h, HALF as i32)
 }
 
 /// The home block of one position, `inv_h` = 1 / cell size (world units).
 #[inline]
 pub fn home_block(p: Vec3, inv_h: f64) -> BlockKey {
+    home_cube(p, inv_h, BLOCK_EDGE)
+}
+
+/// The cube of `edge`³ cells, on the global lattice, that contains `p`.
+#[inline]
+fn home_cube(p: Vec3, inv_h: f64, edge: i32) -> BlockKey {
     let c = p.as_dvec3() * inv_h;
-    [c.x, c.y, c.z].map(|v| (v.floor() as i32).div_euclid(BLOCK_EDGE))
+    [c.x, c.y, c.z].map(|v| (v.floor() as i32).div_euclid(edge))
 }
 
 /// Checks that every position is finite and within the lattice's coordinate range.
@@ -443,7 +439,7 @@ impl BlockKernel<'_> {
     fn evaluate(
         &self,
         key: BlockKey,
-        acc: &mut RowLists,
+        lists: &mut RowLists,
         values: &mut BlockValues,
     ) -> Option<usize> {
         #[cfg(target_arch = "x86_64")]
@@ -452,9 +448,9 @@ impl BlockKernel<'_> {
             && std::arch::is_x86_feature_detected!("fma")
         {
             // SAFETY: the CPU supports the features the function is compiled for.
-            return unsafe { self.evaluate_avx2(key, acc, values) };
+            return unsafe { self.evaluate_avx2(key, lists, values) };
         }
-        self.evaluate_portable(key, acc, values)
+        self.evaluate_portable(key, lists, values)
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -462,10 +458,10 @@ impl BlockKernel<'_> {
     unsafe fn evaluate_avx2(
         &self,
         key: BlockKey,
-        acc: &mut RowLists,
+        lists: &mut RowLists,
         values: &mut BlockValues,
     ) -> Option<usize> {
-        self.evaluate_portable(key, acc, values)
+        self.evaluate_portable(key, lists, values)
     }
 
     /// Two steps: the particles within reach are listed per row of vertices (in scan
@@ -479,11 +475,11 @@ impl BlockKernel<'_> {
     fn evaluate_portable(
         &self,
         key: BlockKey,
-        acc: &mut RowLists,
+        lists: &mut RowLists,
         values: &mut BlockValues,
     ) -> Option<usize> {
-        acc.particles.clear();
-        acc.extents.clear();
+        lists.particles.clear();
+        lists.extents.clear();
         let origin = [0, 1, 2].map(|a| key[a] as f64 * BLOCK_EDGE as f64);
         let rc = self.radius_cells;
         let rc2 = rc * rc;
@@ -513,44 +509,43 @@ impl BlockKernel<'_> {
                         if lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2] {
                             continue;
                         }
-                        acc.particles.push(x);
-                        acc.extents.push([[lo[1], lo[2]], [hi[1], hi[2]]]);
+                        lists.particles.push(x);
+                        lists.extents.push([[lo[1], lo[2]], [hi[1], hi[2]]]);
                     }
                 }
             }
         }
-        let n = acc.particles.len();
+        let n = lists.particles.len();
         if n == 0 {
             return None;
         }
         // Row lists, written without branches: every particle writes its index into each
         // row of its extent, and the row's length grows only where the sphere meets it.
-        acc.row_len = [0; ROWS];
-        acc.entries.resize(ROWS * n, 0);
-        for (index, (x, &[lo, hi])) in acc.particles.iter().zip(&acc.extents).enumerate() {
+        lists.row_len = [0; ROWS];
+        lists.entries.resize(ROWS * n, 0);
+        for (index, (x, &[lo, hi])) in lists.particles.iter().zip(&lists.extents).enumerate() {
             for c in lo[1]..=hi[1] {
                 let rz = c as f32 - x[2];
                 for b in lo[0]..=hi[0] {
                     let ry = b as f32 - x[1];
                     let row = (c * BLOCK_EDGE + b) as usize;
-                    acc.entries[row * n + acc.row_len[row]] = index as u32;
-                    acc.row_len[row] += (ry * ry + rz * rz < rc2) as usize;
+                    lists.entries[row * n + lists.row_len[row]] = index as u32;
+                    lists.row_len[row] += (ry * ry + rz * rz < rc2) as usize;
                 }
             }
         }
         let mut in_band = 0;
         for row in 0..ROWS {
-            if acc.row_len[row] == 0 {
+            if lists.row_len[row] == 0 {
                 // No particle within reach of the row: outside the band.
                 values[row * ROW..][..ROW].fill(self.options.outside_value());
                 continue;
             }
             let (b, c) = ((row % ROW) as f32, (row / ROW) as f32);
             let mut sums = [[0.0f32; ROW]; SUMS];
-            for &k in &acc.entries[row * n..][..acc.row_len[row]] {
-                let x = acc.particles[k as usize];
-                let (ry, rz) = (b - x[1], c - x[2]);
-                accumulate_row(&mut sums, x[0], ry, rz, ry * ry + rz * rz, inv_rc2);
+            for &k in &lists.entries[row * n..][..lists.row_len[row]] {
+                let x = lists.particles[k as usize];
+                accumulate_row(&mut sums, x[0], b - x[1], c - x[2], inv_rc2);
             }
             in_band += self.finalize_row(&sums, row, values);
         }
@@ -625,19 +620,13 @@ const ROW: usize = BLOCK_EDGE as usize;
 const HALF: usize = ROW / 2;
 
 /// Adds one particle's terms to one row of vertices' running sums (`x`: the particle's
-/// block-local x (cells), `ry`, `rz`: the row's offsets from it, `ryz2 = ry² + rz²`,
-/// `inv_rc2 = 1 / R²` in cells). Lanes outside the influence sphere get `q = 0`, hence
+/// block-local x (cells), `ry`, `rz`: the row's offsets from it, `inv_rc2 = 1 / R²` in
+/// cells). Lanes outside the influence sphere get `q = 0`, hence
 /// zero weight and zero gradient: adding them leaves every sum as it was.
 #[allow(clippy::needless_range_loop)]
 #[inline(always)]
-fn accumulate_row(
-    sums: &mut [[f32; ROW]; SUMS],
-    x: f32,
-    ry: f32,
-    rz: f32,
-    ryz2: f32,
-    inv_rc2: f32,
-) {
+fn accumulate_row(sums: &mut [[f32; ROW]; SUMS], x: f32, ry: f32, rz: f32, inv_rc2: f32) {
+    let ryz2 = ry * ry + rz * rz;
     let g_scale = -6.0 * inv_rc2;
     let [s0, s1, s2, s3, s4, s5, s6, s7, s8, s9, s10, s11, s12] = sums;
     for i in 0..ROW {
