@@ -93,22 +93,8 @@ pub(crate) fn encode_parts(mesh: &TriMesh, parts: usize, step: f64, out: &mut Ve
             .map(|&k| k as u32)
             .collect();
         tris.sort_unstable();
-        let mut piece = TriMesh::default();
-        let mut original: Vec<u32> = Vec::new();
-        for &t in &tris {
-            let tri = mesh.triangles[t as usize].map(|v| {
-                if local[v as usize] == NONE {
-                    local[v as usize] = original.len() as u32;
-                    original.push(v);
-                    piece.positions.push(mesh.positions[v as usize]);
-                }
-                local[v as usize]
-            });
-            piece.triangles.push(tri);
-        }
-        for &v in &original {
-            local[v as usize] = NONE;
-        }
+        let (piece, original) =
+            mesh.submesh(tris.iter().map(|&t| mesh.triangles[t as usize]), &mut local);
         streams.clear();
         let numbering = HalfEdges::of(&piece).encode(&piece, step, &mut streams);
         put_varint(out, numbering.len() as u64);

@@ -2,7 +2,7 @@
 //! of a large mesh ([`decimate_by_regions`]) and the band around the seams of tiles that
 //! were decimated on their own ([`decimate_band`], called by [`crate::tiles`]).
 //!
-//! A piece is taken out of the mesh ([`extract`]), decimated by
+//! A piece is taken out of the mesh ([`TriMesh::submesh`]), decimated by
 //! [`super::decimate_locked`] with the vertices it shares with the rest of the mesh
 //! locked, and put back ([`place_survivors`]): a locked survivor keeps its identity, the
 //! piece's other survivors are new vertices.
@@ -20,36 +20,6 @@ struct Piece {
     mesh: TriMesh,
     /// Mesh vertex of every piece vertex.
     global_of: Vec<u32>,
-}
-
-/// Takes `triangles` (of `mesh`) out as a piece. `scratch` has one entry per mesh vertex,
-/// all `u32::MAX`, and is left that way.
-fn extract(
-    mesh: &TriMesh,
-    triangles: impl Iterator<Item = [u32; 3]>,
-    scratch: &mut [u32],
-) -> Piece {
-    let mut piece = TriMesh::default();
-    let mut global_of: Vec<u32> = Vec::new();
-    piece.triangles = triangles
-        .map(|t| {
-            t.map(|v| {
-                if scratch[v as usize] == u32::MAX {
-                    scratch[v as usize] = global_of.len() as u32;
-                    global_of.push(v);
-                    piece.positions.push(mesh.positions[v as usize]);
-                }
-                scratch[v as usize]
-            })
-        })
-        .collect();
-    for &g in &global_of {
-        scratch[g as usize] = u32::MAX;
-    }
-    Piece {
-        mesh: piece,
-        global_of,
-    }
 }
 
 /// The output index of every vertex of a decimated piece (`remap` from
@@ -111,9 +81,10 @@ pub(super) fn decimate_by_regions(
     drop(order);
     let regions = nv.div_ceil(region_vertices);
     // Triangles with all three vertices in one region are that region's; the others are
-    // seam triangles, and their vertices stay locked until the final pass. A region's
-    // vertices are numbered in order of first use by its triangles (what [`extract`]
-    // does), in one pass here so that the regions can then be decimated in parallel.
+    // seam triangles, and their vertices stay locked until the seam band is decimated. A
+    // region's vertices are numbered in order of first use by its triangles (what
+    // [`TriMesh::submesh`] does), in one pass here so that the regions can then be
+    // decimated in parallel.
     // Triangles are kept as indices (4 bytes each) and renumbered when their region is
     // taken out.
     let mut region_tris: Vec<Vec<u32>> = vec![Vec::new(); regions];
@@ -280,7 +251,11 @@ pub fn decimate_band(
             in_rest[v as usize] = true;
         }
     }
-    let mut piece = extract(mesh, band.into_iter(), &mut vec![u32::MAX; nv]);
+    let (band_mesh, global_of) = mesh.submesh(band.into_iter(), &mut vec![u32::MAX; nv]);
+    let mut piece = Piece {
+        mesh: band_mesh,
+        global_of,
+    };
     let locked: Vec<bool> = piece
         .global_of
         .iter()

@@ -149,6 +149,34 @@ impl TriMesh {
         }
     }
 
+    /// `triangles` (of this mesh) as a mesh of their own, vertices numbered in order of
+    /// first use, with the index here of each of its vertices. `scratch` has one entry
+    /// per vertex of this mesh, all `u32::MAX`, and is left that way.
+    pub(crate) fn submesh(
+        &self,
+        triangles: impl Iterator<Item = [u32; 3]>,
+        scratch: &mut [u32],
+    ) -> (TriMesh, Vec<u32>) {
+        let mut piece = TriMesh::default();
+        let mut index_here: Vec<u32> = Vec::new();
+        piece.triangles = triangles
+            .map(|t| {
+                t.map(|v| {
+                    if scratch[v as usize] == u32::MAX {
+                        scratch[v as usize] = index_here.len() as u32;
+                        index_here.push(v);
+                        piece.positions.push(self.positions[v as usize]);
+                    }
+                    scratch[v as usize]
+                })
+            })
+            .collect();
+        for &g in &index_here {
+            scratch[g as usize] = u32::MAX;
+        }
+        (piece, index_here)
+    }
+
     /// Appends another mesh (its vertices and triangles, re-indexed). Normals are kept only
     /// when both meshes have them.
     pub fn append(&mut self, other: &TriMesh) {
