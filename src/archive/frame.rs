@@ -28,7 +28,7 @@ use super::codec::{
     decode_streams, decompress, encode_streams, get_varint, put_varint, raw_capacity, read_count,
     unzigzag, zigzag, HalfEdges,
 };
-use super::fused::decode_streams_subdivided;
+use super::parts::decode_streams_subdivided;
 use super::parts::{decode_parts_subdivided, encode_parts, part_count};
 use crate::mesh::{SphereInstances, Surface, TriMesh};
 use crate::subdivision::{subdivide, SubdivideOptions};

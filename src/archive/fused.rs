@@ -8,15 +8,12 @@
 //! are decoded as their vertices are introduced, so each edge point
 //! `3/8 (a + b) + 1/8 (c + d)` is made as soon as its edge is paired, and each vertex
 //! gathers its valence and neighbour sum on the way; Loop's vertex mask is one pass at the
-//! end. The result is [`crate::subdivision::subdivide`]'s (edge points are bit for bit the
+//! end ([`super::parts`] writes the subdivided mesh, of one part or several). The result is [`crate::subdivision::subdivide`]'s (edge points are bit for bit the
 //! same; vertex points can differ in the last bit, since the neighbour sums are added in
 //! another order), with the edge points numbered in order of pairing.
 
 use super::codec::{get_varint, push_gates, split_streams, unzigzag, Gate, Prediction};
-use crate::mesh::TriMesh;
-use crate::subdivision::{children, loop_betas};
 use glam::{DVec3, Vec3};
-use rayon::prelude::*;
 
 const NONE: u32 = u32::MAX;
 
@@ -43,7 +40,7 @@ pub(crate) struct State<'a> {
 
 impl State<'_> {
     /// Loop's vertex point of control vertex `v` once its valence and neighbour sum are
-    /// complete (`beta` from [`loop_betas`]).
+    /// complete (`beta` from [`crate::subdivision::loop_betas`]).
     pub(crate) fn vertex_point(&self, v: usize, beta: &[f64]) -> Vec3 {
         let (p, n) = (self.positions[v].as_dvec3(), self.valence[v]);
         let (nf, b) = (n as f64, beta[n as usize]);
@@ -233,95 +230,4 @@ pub(crate) fn traverse<'a>(
         ));
     }
     Ok(st)
-}
-
-/// Decodes the streams at `raw[*pos..]` of a closed, consistently oriented mesh of
-/// `vertices` vertices and `triangles` triangles and returns its Loop subdivision (one
-/// step). Moves `pos` past the streams.
-pub(crate) fn decode_streams_subdivided(
-    raw: &[u8],
-    pos: &mut usize,
-    vertices: usize,
-    triangles: usize,
-    step: f64,
-) -> Result<TriMesh, String> {
-    let st = traverse(raw, pos, vertices, triangles, step)?;
-    if st.edge_points.len() * 2 != triangles * 3 {
-        return Err("the mesh stored as closed has sides without a partner".into());
-    }
-    // Loop's vertex mask.
-    let beta = loop_betas(&st.valence);
-    let mut positions: Vec<Vec3> = Vec::with_capacity(vertices + st.edge_points.len());
-    positions.par_extend(
-        (0..vertices)
-            .into_par_iter()
-            .map(|v| st.vertex_point(v, &beta)),
-    );
-    positions.extend_from_slice(&st.edge_points);
-    let nv = vertices as u32;
-    let mut fine: Vec<[u32; 3]> = vec![[0; 3]; triangles * 4];
-    fine.par_chunks_mut(4)
-        .zip(st.triangles.par_iter().zip(st.side_edge.par_iter()))
-        .for_each(|(out, (tri, edges))| {
-            out.copy_from_slice(&children(*tri, edges.map(|e| nv + e)));
-        });
-    Ok(TriMesh {
-        positions,
-        triangles: fine,
-        normals: Vec::new(),
-    })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::archive::codec::{decode_streams, encode_streams};
-    use crate::isolated::icosphere;
-    use crate::subdivision::{subdivide, SubdivideOptions};
-
-    #[test]
-    fn the_fused_step_is_loop_subdivision_of_the_decoded_mesh() {
-        // Two closed components (valences 5 and 6, one vertex pulled out) so that the
-        // traversal starts twice.
-        let mut mesh = icosphere(2, 1.0);
-        mesh.positions[7] *= 1.4;
-        let mut second = icosphere(1, 0.5);
-        for p in &mut second.positions {
-            *p += Vec3::new(3.0, 0.0, 0.0);
-        }
-        mesh.append(&second);
-        let step = 1e-4;
-        let mut raw = Vec::new();
-        let coded = encode_streams(&mesh, step, &mut raw);
-        assert!(coded.closed_oriented);
-        let (nv, nt) = (coded.vertices as usize, coded.triangles as usize);
-        let mut generic = decode_streams(&raw, &mut 0, nv, nt, step).unwrap();
-        subdivide(&mut generic, &SubdivideOptions { levels: 1 });
-        let mut pos = 0;
-        let fused = decode_streams_subdivided(&raw, &mut pos, nv, nt, step).unwrap();
-        assert_eq!(pos, raw.len());
-        // Same control vertices and children; edge points may be numbered differently.
-        assert_eq!(fused.vertex_count(), generic.vertex_count());
-        assert_eq!(fused.triangle_count(), generic.triangle_count());
-        for v in 0..nv {
-            let d = (fused.positions[v] - generic.positions[v])
-                .abs()
-                .max_element();
-            assert!(d <= 1e-6, "vertex point {v} differs by {d}");
-        }
-        let key = |m: &TriMesh, t: usize| {
-            m.triangles[t].map(|v| {
-                m.positions[v as usize]
-                    .to_array()
-                    .map(|c| (c as f64 * 1e5).round() as i64)
-            })
-        };
-        for t in 0..nt * 4 {
-            assert_eq!(key(&fused, t), key(&generic, t), "child triangle {t}");
-        }
-        // An open mesh is not flagged closed.
-        let mut open = mesh.clone();
-        open.triangles.pop();
-        assert!(!encode_streams(&open, step, &mut Vec::new()).closed_oriented);
-    }
 }

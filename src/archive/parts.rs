@@ -10,7 +10,8 @@
 //! every slab in parallel, then pairs the sides left open at the cuts, folds each copy's
 //! valence and neighbour sum into its original and writes the subdivided mesh: control
 //! vertices in slab order (copies left out), the edge points of each slab, then those of
-//! the cut edges.
+//! the cut edges. A closed mesh stored whole is written the same way, as one part
+//! ([`decode_streams_subdivided`]).
 //!
 //! The result is the Loop subdivision of the stored control mesh (the same vertices and
 //! triangles as [`crate::subdivision::subdivide`] of the decoded mesh, up to their order
@@ -119,6 +120,28 @@ pub(crate) fn encode_parts(mesh: &TriMesh, parts: usize, step: f64, out: &mut Ve
             (previous, previous_there) = (k, l);
         }
     }
+}
+
+/// Decodes the streams at `raw[*pos..]` of a closed, consistently oriented mesh of
+/// `vertices` vertices and `triangles` triangles stored whole and returns its Loop
+/// subdivision (one step), written as a mesh of one part. Moves `pos` past the streams.
+pub(crate) fn decode_streams_subdivided(
+    raw: &[u8],
+    pos: &mut usize,
+    vertices: usize,
+    triangles: usize,
+    step: f64,
+) -> Result<TriMesh, String> {
+    let st = traverse(raw, pos, vertices, triangles, step)?;
+    if st.edge_points.len() * 2 != triangles * 3 {
+        return Err("the mesh stored as closed has sides without a partner".into());
+    }
+    let numbers = Numbers {
+        global: vec![(0..vertices as u32).collect()],
+        base: vec![0],
+        home: (0..vertices as u32).map(|k| (0, k)).collect(),
+    };
+    Ok(write_subdivision(&[st], &numbers, &[], triangles))
 }
 
 /// Decodes what [`encode_parts`] wrote at `raw[*pos..]` (a closed mesh of `vertices`
@@ -528,5 +551,51 @@ mod tests {
         }
         // Cut off.
         assert!(decode_parts_subdivided(&raw[..raw.len() - 1], &mut 0, nv, nt, step).is_err());
+    }
+
+    #[test]
+    fn the_fused_step_is_loop_subdivision_of_the_decoded_mesh() {
+        // Two closed components (valences 5 and 6, one vertex pulled out) so that the
+        // traversal starts twice.
+        let mut mesh = icosphere(2, 1.0);
+        mesh.positions[7] *= 1.4;
+        let mut second = icosphere(1, 0.5);
+        for p in &mut second.positions {
+            *p += Vec3::new(3.0, 0.0, 0.0);
+        }
+        mesh.append(&second);
+        let step = 1e-4;
+        let mut raw = Vec::new();
+        let coded = encode_streams(&mesh, step, &mut raw);
+        assert!(coded.closed_oriented);
+        let (nv, nt) = (coded.vertices as usize, coded.triangles as usize);
+        let mut generic = decode_streams(&raw, &mut 0, nv, nt, step).unwrap();
+        subdivide(&mut generic, &SubdivideOptions { levels: 1 });
+        let mut pos = 0;
+        let fused = decode_streams_subdivided(&raw, &mut pos, nv, nt, step).unwrap();
+        assert_eq!(pos, raw.len());
+        // Same control vertices and children; edge points may be numbered differently.
+        assert_eq!(fused.vertex_count(), generic.vertex_count());
+        assert_eq!(fused.triangle_count(), generic.triangle_count());
+        for v in 0..nv {
+            let d = (fused.positions[v] - generic.positions[v])
+                .abs()
+                .max_element();
+            assert!(d <= 1e-6, "vertex point {v} differs by {d}");
+        }
+        let key = |m: &TriMesh, t: usize| {
+            m.triangles[t].map(|v| {
+                m.positions[v as usize]
+                    .to_array()
+                    .map(|c| (c as f64 * 1e5).round() as i64)
+            })
+        };
+        for t in 0..nt * 4 {
+            assert_eq!(key(&fused, t), key(&generic, t), "child triangle {t}");
+        }
+        // An open mesh is not flagged closed.
+        let mut open = mesh.clone();
+        open.triangles.pop();
+        assert!(!encode_streams(&open, step, &mut Vec::new()).closed_oriented);
     }
 }
