@@ -711,17 +711,17 @@ impl View {
                 corners.copy_from_slice(&self.tri(t));
             }
         }
+        let neighbour_of_v = |w: u32| {
+            if gathered {
+                around_v.contains(&w)
+            } else {
+                self.is_neighbour(v, w)
+            }
+        };
         for &t in self.vert_tris(u) {
             for &w in &self.tri(t) {
-                if w != u && w != v && !opposite.contains(&w) {
-                    let neighbour = if gathered {
-                        around_v.contains(&w)
-                    } else {
-                        self.is_neighbour(v, w)
-                    };
-                    if neighbour {
-                        return false;
-                    }
+                if w != u && w != v && !opposite.contains(&w) && neighbour_of_v(w) {
+                    return false;
                 }
             }
         }

@@ -19,9 +19,9 @@ pub const TILE_BYTES_PER_PARTICLE: u64 = 600;
 pub const MC_TRIANGLES_PER_PARTICLE: f64 = 2.7;
 /// Peak working set of one Loop step, bytes per input triangle (the input, side → edge
 /// indices, the output mesh; measured 104 on 32M particles, 134 on 4M where heap left
-/// over from the tiles counts more). 110 keeps the 32M scene's whole-run estimate
-/// (1906 MiB) above its measured peak (1875–1892 MiB over two sessions) and under a
-/// 2 GiB budget; 120 refused that run.
+/// over from the tiles counts more). 110 puts the 32M scene's whole-run estimate
+/// (1906 MiB) within 1 % of its measured peaks (1863–1922 MiB over three sessions) and
+/// under a 2 GiB budget; 120 refused that run.
 pub const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 110.0;
 /// Memory of the process before any particle (code, thread stacks, allocator), bytes.
 pub const BASE_BYTES: u64 = 64 << 20;
