@@ -500,16 +500,23 @@ mod tests {
         mesh
     }
 
+    /// `mesh` (closed, oriented) coded whole, its vertex and triangle counts, and the
+    /// general Loop step of the decoded mesh: what the fused decoders must give.
+    fn coded_with_loop_step(mesh: &TriMesh, step: f64) -> (Vec<u8>, usize, usize, TriMesh) {
+        let mut raw = Vec::new();
+        let coded = encode_streams(mesh, step, &mut raw);
+        assert!(coded.closed_oriented);
+        let (nv, nt) = (coded.vertices as usize, coded.triangles as usize);
+        let mut expected = decode_streams(&raw, &mut 0, nv, nt, step).unwrap();
+        subdivide(&mut expected, &SubdivideOptions { levels: 1 });
+        (raw, nv, nt, expected)
+    }
+
     #[test]
     fn parts_decode_to_the_loop_step_of_the_whole_mesh() {
         let mesh = test_mesh();
         let step = 1e-4;
-        let mut whole = Vec::new();
-        let coded = encode_streams(&mesh, step, &mut whole);
-        assert!(coded.closed_oriented);
-        let (nv, nt) = (coded.vertices as usize, coded.triangles as usize);
-        let mut expected = decode_streams(&whole, &mut 0, nv, nt, step).unwrap();
-        subdivide(&mut expected, &SubdivideOptions { levels: 1 });
+        let (_, nv, nt, expected) = coded_with_loop_step(&mesh, step);
         let (expected_positions, expected_triangles) = canonical(&expected);
         // Two parts, several, and thin slabs whose vertices lie in three parts.
         for parts in [1, 2, 5, 60] {
@@ -565,12 +572,7 @@ mod tests {
         }
         mesh.append(&second);
         let step = 1e-4;
-        let mut raw = Vec::new();
-        let coded = encode_streams(&mesh, step, &mut raw);
-        assert!(coded.closed_oriented);
-        let (nv, nt) = (coded.vertices as usize, coded.triangles as usize);
-        let mut generic = decode_streams(&raw, &mut 0, nv, nt, step).unwrap();
-        subdivide(&mut generic, &SubdivideOptions { levels: 1 });
+        let (raw, nv, nt, generic) = coded_with_loop_step(&mesh, step);
         let mut pos = 0;
         let fused = decode_streams_subdivided(&raw, &mut pos, nv, nt, step).unwrap();
         assert_eq!(pos, raw.len());
