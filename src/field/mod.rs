@@ -27,7 +27,8 @@
 
 use crate::error::{Error, Result};
 use crate::grid::{
-    local_index, split_coordinate, BlockKey, BlockValues, SparseField, BLOCK_EDGE, BLOCK_VOLUME,
+    local_index, split_coordinate, zeroed_blocks, BlockKey, BlockValues, SparseField, BLOCK_EDGE,
+    BLOCK_VOLUME,
 };
 use glam::{DVec3, Vec3};
 use hashbrown::{HashMap, HashSet};
@@ -355,7 +356,7 @@ fn compute_blocks_with(
     };
     // Evaluate every candidate into one contiguous array, then compact away the
     // candidates no particle reaches.
-    let mut values: Vec<BlockValues> = vec![[0.0; BLOCK_VOLUME]; candidates.len()];
+    let mut values: Vec<BlockValues> = zeroed_blocks(candidates.len());
     let in_band: Vec<Option<usize>> = candidates
         .par_iter()
         .zip(values.par_iter_mut())
@@ -686,11 +687,32 @@ pub fn apply_coverage(
             let base = [g.x.floor(), g.y.floor(), g.z.floor()];
             let t = [g.x - base[0], g.y - base[1], g.z - base[2]];
             let b = base.map(|c| c as i32);
+            // The cell's corners, from one block lookup when they share a block (7 cells
+            // of 8 per axis), else one lookup per corner.
+            let (home, local) = (
+                b.map(|c| split_coordinate(c).0),
+                b.map(|c| split_coordinate(c).1),
+            );
+            let one_block = local.iter().all(|&l| l + 1 < BLOCK_EDGE);
+            let home_values = if one_block {
+                match field.block(&home) {
+                    Some(values) => Some(values),
+                    None => return false,
+                }
+            } else {
+                None
+            };
             let mut value = 0.0;
             for corner in 0..8 {
                 let o = [corner & 1, (corner >> 1) & 1, (corner >> 2) & 1];
-                let Some(v) = stored_value(field, [b[0] + o[0], b[1] + o[1], b[2] + o[2]]) else {
-                    return false;
+                let v = match home_values {
+                    Some(values) => {
+                        values[local_index(local[0] + o[0], local[1] + o[1], local[2] + o[2])]
+                    }
+                    None => match stored_value(field, [b[0] + o[0], b[1] + o[1], b[2] + o[2]]) {
+                        Some(v) => v,
+                        None => return false,
+                    },
                 };
                 let weight: f64 = (0..3)
                     .map(|a| if o[a] == 1 { t[a] } else { 1.0 - t[a] })
