@@ -8,7 +8,8 @@
 #   SCALE_COPIES="24 96" bash benches/scale.sh # a subset (24 copies ≈ 1M particles)
 #
 # Budgets per scene: the default (half the available memory) and, for 4M and more, the
-# issue's targets (512MiB for 4M, 2GiB for 16M and 32M). Needs python3 for the summary.
+# issue's targets (512MiB for 4M, 2GiB for 16M and 32M). Each run writes a fresh output
+# after a `sync`. Needs python3 for the summary.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release --quiet
@@ -23,6 +24,11 @@ run() { # copies budget
     [ -f "$scene" ] || target/release/examples/tile_scene "$FRAME" "$copies" "$scene" >/dev/null
     local args=(reconstruct "$scene" -r 0.012 -o "$WORK/out.ply" --stats "$WORK/stats.json" -q)
     [ "$budget" != default ] && args+=(--memory-budget "$budget")
+    # Every run writes a fresh file with the previous runs' output flushed: replacing a
+    # 300 MB output that is still in the page cache, or writing while the last one is
+    # written back, costs 0.3-0.6 s more on this VM (kernel time, not meniscus).
+    rm -f "$WORK/out.ply"
+    sync
     if ! /usr/bin/time -v "$BIN" "${args[@]}" 2>"$WORK/time.txt"; then
         echo "$copies copies, budget $budget: failed: $(head -1 "$WORK/time.txt")"
         return
