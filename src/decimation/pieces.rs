@@ -11,6 +11,7 @@ use super::{bounds, decimate_locked, morton3, DecimateOptions, DecimateStats};
 use crate::mesh::TriMesh;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU32, Ordering};
 
 /// Rings of triangles around the flagged vertices that [`decimate_band`] works on.
 pub const BAND_RINGS: usize = 2;
@@ -81,36 +82,53 @@ pub(super) fn decimate_by_regions(
     drop(order);
     let regions = nv.div_ceil(region_vertices);
     // Triangles with all three vertices in one region are that region's; the others are
-    // seam triangles, and their vertices stay locked until the seam band is decimated. A
-    // region's vertices are numbered in order of first use by its triangles (what
-    // [`TriMesh::submesh`] does), in one pass here so that the regions can then be
-    // decimated in parallel.
-    // Triangles are kept as indices (4 bytes each) and renumbered when their region is
-    // taken out.
-    let mut region_tris: Vec<Vec<u32>> = vec![Vec::new(); regions];
-    let mut region_vertices_of: Vec<Vec<u32>> = vec![Vec::new(); regions];
-    let mut local_of = vec![u32::MAX; nv];
+    // seam triangles, and their vertices stay locked until the seam band is decimated.
+    // Triangles are kept as indices (4 bytes each), grouped by region in mesh order, and
+    // renumbered when their region is taken out.
+    const SEAM: u32 = u32::MAX;
+    let triangle_region: Vec<u32> = mesh
+        .triangles
+        .par_iter()
+        .map(|tri| {
+            let r = region_of[tri[0] as usize];
+            if tri.iter().all(|&v| region_of[v as usize] == r) {
+                r
+            } else {
+                SEAM
+            }
+        })
+        .collect();
+    drop(region_of);
+    let mut region_start = vec![0usize; regions + 1];
     let mut seam_tris = Vec::new();
     let mut on_seam = vec![false; nv];
-    for (t, tri) in mesh.triangles.iter().enumerate() {
-        let r = region_of[tri[0] as usize];
-        if tri.iter().all(|&v| region_of[v as usize] == r) {
-            let globals = &mut region_vertices_of[r as usize];
-            for &v in tri {
-                if local_of[v as usize] == u32::MAX {
-                    local_of[v as usize] = globals.len() as u32;
-                    globals.push(v);
-                }
-            }
-            region_tris[r as usize].push(t as u32);
-        } else {
+    for (t, &r) in triangle_region.iter().enumerate() {
+        if r == SEAM {
             seam_tris.push(t as u32);
-            for &v in tri {
+            for &v in &mesh.triangles[t] {
                 on_seam[v as usize] = true;
             }
+        } else {
+            region_start[r as usize + 1] += 1;
         }
     }
-    drop(region_of);
+    for r in 0..regions {
+        region_start[r + 1] += region_start[r];
+    }
+    let mut grouped = vec![0u32; region_start[regions]];
+    let mut fill = region_start.clone();
+    for (t, &r) in triangle_region.iter().enumerate() {
+        if r != SEAM {
+            grouped[fill[r as usize]] = t as u32;
+            fill[r as usize] += 1;
+        }
+    }
+    drop(fill);
+    drop(triangle_region);
+    // A region's vertices are numbered in order of first use by its triangles (what
+    // [`TriMesh::submesh`] does), inside its own task: a vertex belongs to one region
+    // only, so the tasks write disjoint entries of `local_of`.
+    let local_of: Vec<AtomicU32> = (0..nv).map(|_| AtomicU32::new(u32::MAX)).collect();
 
     let mut stats = DecimateStats {
         triangles_before: before,
@@ -119,16 +137,29 @@ pub(super) fn decimate_by_regions(
     };
     // Regions are decimated in parallel (each also runs its passes in parallel inside),
     // and placed in region order, so the output does not depend on the thread count.
-    let decimated: Vec<(Piece, DecimateStats, Vec<u32>)> = region_tris
+    let decimated: Vec<(Piece, DecimateStats, Vec<u32>)> = (0..regions)
         .into_par_iter()
-        .zip(region_vertices_of)
-        .filter(|(tris, _)| !tris.is_empty())
-        .map(|(tris, global_of)| {
+        .map(|r| &grouped[region_start[r]..region_start[r + 1]])
+        .filter(|tris| !tris.is_empty())
+        .map(|tris| {
+            let mut global_of: Vec<u32> = Vec::new();
             let triangles = tris
                 .iter()
-                .map(|&t| mesh.triangles[t as usize].map(|v| local_of[v as usize]))
+                .map(|&t| {
+                    mesh.triangles[t as usize].map(|v| {
+                        let slot = &local_of[v as usize];
+                        match slot.load(Ordering::Relaxed) {
+                            u32::MAX => {
+                                let local = global_of.len() as u32;
+                                slot.store(local, Ordering::Relaxed);
+                                global_of.push(v);
+                                local
+                            }
+                            local => local,
+                        }
+                    })
+                })
                 .collect();
-            drop(tris);
             let mut piece = Piece {
                 mesh: TriMesh {
                     positions: global_of
@@ -152,6 +183,7 @@ pub(super) fn decimate_by_regions(
         })
         .collect();
     drop(local_of);
+    drop(grouped);
     let mut positions: Vec<Vec3> = Vec::new();
     let mut triangles: Vec<[u32; 3]> = Vec::new();
     // Output index of each seam vertex, once placed; seam vertices keep their exact input
