@@ -106,6 +106,67 @@ pub fn find_isolated_where(positions: &[Vec3], radius: f32, wanted: &[bool]) -> 
         .collect()
 }
 
+/// [`find_isolated_where`] for positions already grouped by a cubic bin of edge `bin_edge`
+/// (world units): `bins[i]` is the bin of `positions[i]` (as `floor(p / bin_edge)`, in
+/// any rounding that keeps a point within one bin edge of its bin), equal bins
+/// contiguous. The bins serve as the search cells, so no second binning is needed; the
+/// flags are those of [`find_isolated_where`] (the same test on the same pairs).
+pub fn find_isolated_binned(
+    positions: &[Vec3],
+    bins: &[[i32; 3]],
+    bin_edge: f32,
+    radius: f32,
+    wanted: &[bool],
+) -> Vec<bool> {
+    assert_eq!(positions.len(), bins.len(), "one bin per position");
+    let mut ranges: HashMap<[i32; 3], (u32, u32)> = HashMap::new();
+    let mut start = 0;
+    while start < bins.len() {
+        let mut end = start + 1;
+        while end < bins.len() && bins[end] == bins[start] {
+            end += 1;
+        }
+        let previous = ranges.insert(bins[start], (start as u32, end as u32));
+        assert!(previous.is_none(), "equal bins must be contiguous");
+        start = end;
+    }
+    // Two points closer than d lie at most ⌊d / edge⌋ + 1 bins apart on every axis (a
+    // hair more for d, against the rounding of their bins).
+    let reach = (radius as f64 / bin_edge as f64 * (1.0 + 1e-6)).floor() as i32 + 1;
+    let r2 = radius * radius;
+    positions
+        .par_iter()
+        .enumerate()
+        .map(|(i, &p)| {
+            if !wanted[i] {
+                return false;
+            }
+            let close = |range: Option<&(u32, u32)>| {
+                range.is_some_and(|&(s, e)| {
+                    (s as usize..e as usize)
+                        .any(|j| j != i && (positions[j] - p).length_squared() < r2)
+                })
+            };
+            let own = bins[i];
+            if close(ranges.get(&own)) {
+                return false;
+            }
+            for dz in -reach..=reach {
+                for dy in -reach..=reach {
+                    for dx in -reach..=reach {
+                        if (dx, dy, dz) != (0, 0, 0)
+                            && close(ranges.get(&[own[0] + dx, own[1] + dy, own[2] + dz]))
+                        {
+                            return false;
+                        }
+                    }
+                }
+            }
+            true
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -133,5 +194,34 @@ mod tests {
             assert_eq!(fast[i], brute, "particle {i}");
         }
         assert!(fast.iter().any(|&b| b) && fast.iter().any(|&b| !b));
+    }
+
+    #[test]
+    fn isolation_from_bins_matches_the_cell_hash() {
+        // Clusters and strays, binned by cubes smaller and larger than the radius.
+        let mut seed = 11;
+        let mut pts: Vec<Vec3> = (0..800)
+            .map(|_| Vec3::new(lcg(&mut seed), lcg(&mut seed), lcg(&mut seed)) * 6.0 - 3.0)
+            .collect();
+        pts.extend((0..200).map(|k| Vec3::splat(0.7) + Vec3::new(k as f32 * 0.01, 0.0, 0.0)));
+        let radius = 0.35;
+        let wanted: Vec<bool> = (0..pts.len()).map(|i| i % 7 != 3).collect();
+        let expected = find_isolated_where(&pts, radius, &wanted);
+        assert!(expected.iter().filter(|&&b| b).count() > 20);
+        for edge in [0.1f32, 0.35, 1.0] {
+            let bin = |p: &Vec3| (*p / edge).floor().as_ivec3().to_array();
+            let mut order: Vec<usize> = (0..pts.len()).collect();
+            order.sort_by_key(|&i| {
+                let b = bin(&pts[i]);
+                (b[2], b[1], b[0], i)
+            });
+            let sorted: Vec<Vec3> = order.iter().map(|&i| pts[i]).collect();
+            let bins: Vec<[i32; 3]> = sorted.iter().map(bin).collect();
+            let sorted_wanted: Vec<bool> = order.iter().map(|&i| wanted[i]).collect();
+            let flags = find_isolated_binned(&sorted, &bins, edge, radius, &sorted_wanted);
+            for (k, &i) in order.iter().enumerate() {
+                assert_eq!(flags[k], expected[i], "particle {i}, bin edge {edge}");
+            }
+        }
     }
 }

@@ -56,12 +56,12 @@ use crate::field::{
     apply_coverage, apply_iso_offset, block_reach, check_positions_from, compute_blocks,
     home_block, BlockRange, FieldOptions, FieldStats,
 };
-use crate::grid::BlockKey;
+use crate::grid::{BlockKey, BLOCK_EDGE};
 use crate::marching_cubes::{
     march_blocks, stitch, stitch_range, BlockSurface, MarchingCubesStats, VertexKey,
 };
 use crate::mesh::TriMesh;
-use crate::neighbors::find_isolated_where;
+use crate::neighbors::find_isolated_binned;
 use budget::choose_tile_blocks;
 pub use budget::{default_memory_budget, output_bytes_per_particle, parse_memory_size};
 use glam::Vec3;
@@ -335,6 +335,8 @@ pub fn reconstruct_tiled<S: ParticleSource>(
             Some(spill) => {
                 let mut records = Vec::new();
                 spill.read_cells(cell_of(zone2.lo), cell_of(zone2.hi), &mut records)?;
+                // Serially: a filtered parallel extend would hold a second copy of the
+                // tile's records, outside the memory model.
                 loaded.extend(
                     records
                         .into_iter()
@@ -342,7 +344,11 @@ pub fn reconstruct_tiled<S: ParticleSource>(
                         .filter(|(h, _, _)| zone2.contains(*h)),
                 );
             }
-            None => loaded.extend(all.iter().enumerate().map(|(i, p)| homed((*p, i as u32)))),
+            None => loaded.par_extend(
+                all.par_iter()
+                    .enumerate()
+                    .map(|(i, p)| homed((*p, i as u32))),
+            ),
         }
         loaded.par_sort_unstable_by_key(|&(h, i, _)| (h[2], h[1], h[0], i));
         stats.max_tile_particles = stats.max_tile_particles.max(loaded.len());
@@ -350,8 +356,13 @@ pub fn reconstruct_tiled<S: ParticleSource>(
 
         // Flags are needed for zone 1 only; zone 2 is there to complete their neighbours.
         let in_zone1: Vec<bool> = loaded.iter().map(|r| zone1.contains(r.0)).collect();
+        // `loaded` is sorted by home block: the blocks are the cells of the search.
         let lonely = match isolation_radius {
-            Some(radius) => find_isolated_where(&local, radius, &in_zone1),
+            Some(radius) => {
+                let homes: Vec<BlockKey> = loaded.iter().map(|r| r.0).collect();
+                let block_edge = (field_options.cell_size_world() * BLOCK_EDGE as f64) as f32;
+                find_isolated_binned(&local, &homes, block_edge, radius, &in_zone1)
+            }
             None => vec![false; local.len()],
         };
         let mut field_particles = Vec::new();
