@@ -45,8 +45,16 @@ const T_MIN: f64 = 1.0 / 1024.0;
 
 /// A reference to a mesh vertex: the owning block (offset bits x, y, z from the referring
 /// block) and the vertex's id in that block (`local vertex index · 3 + axis` for edge
-/// vertices, from `CENTER_ID_BASE` for cell-centre vertices).
+/// vertices, from `CENTER_ID_BASE` for cell-centre vertices); or, with [`OWN_INDEX`] set,
+/// the position of a vertex of the referring block itself in its `owned` list (what
+/// [`march_block`] makes of every reference to its own vertices).
 type EdgeRef = u32;
+
+/// Flag of an [`EdgeRef`] already resolved to an index into the block's own vertices.
+const OWN_INDEX: EdgeRef = 1 << 31;
+
+/// Ids a block's vertices can have: edge ids, then four centre ids per cell.
+const VERTEX_IDS: usize = CENTER_ID_BASE as usize + 4 * (E * E * E) as usize;
 
 fn edge_ref(owner_offset: u32, local_edge: u32) -> EdgeRef {
     (owner_offset << 16) | local_edge
@@ -98,8 +106,8 @@ pub fn march_blocks(field: &SparseField, range: Option<BlockRange>) -> Vec<Block
     keys.sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
     keys.par_iter()
         .map_init(
-            || vec![0.0f32; CUBE],
-            |cube, &key| march_block(field, key, cube),
+            || (vec![0.0f32; CUBE], vec![0u16; VERTEX_IDS]),
+            |(cube, slots), &key| march_block(field, key, cube, slots),
         )
         .collect()
 }
@@ -176,6 +184,10 @@ fn resolve(
     base: &[u32],
     r: EdgeRef,
 ) -> u32 {
+    if r & OWN_INDEX != 0 {
+        let bi = owners[0].expect("a block's own surface is in the list");
+        return base[bi] + (r & 0xffff);
+    }
     let bi = owners[(r >> 16) as usize].expect("the owner of a crossed edge is always marched");
     let local = (r & 0xffff) as u16;
     let pos = surfaces[bi]
@@ -284,8 +296,14 @@ fn cube_index(a: i32, b: i32, c: i32) -> usize {
     ((c * (E + 1) + b) * (E + 1) + a) as usize
 }
 
-/// Marches the 8³ cells whose lower corner lies in block `key`.
-fn march_block(field: &SparseField, key: BlockKey, cube: &mut [f32]) -> BlockSurface {
+/// Marches the 8³ cells whose lower corner lies in block `key`; `cube` and `slots` are
+/// scratch ((E+1)³ values, one entry per vertex id).
+fn march_block(
+    field: &SparseField,
+    key: BlockKey,
+    cube: &mut [f32],
+    slots: &mut [u16],
+) -> BlockSurface {
     // Gather the (E+1)³ values: this block plus the +x/+y/+z neighbours' first layers.
     let neighbours: [Option<&BlockValues>; 8] =
         std::array::from_fn(|o| field.block(&upper_neighbour(key, o)));
@@ -398,6 +416,16 @@ fn march_block(field: &SparseField, key: BlockKey, cube: &mut [f32]) -> BlockSur
         })
         .collect();
     owned.extend(centers);
+    // References to the block's own vertices become their positions in `owned` (the
+    // stitcher then looks up only the references into neighbour blocks).
+    for (k, &(id, _)) in owned.iter().enumerate() {
+        slots[id as usize] = k as u16;
+    }
+    for r in triangles.iter_mut().flatten() {
+        if *r >> 16 == 0 {
+            *r = OWN_INDEX | slots[*r as usize] as u32;
+        }
+    }
     BlockSurface {
         key,
         owned,
