@@ -1,6 +1,8 @@
 //! Neighbour search with a cell hash: particles binned into cubic cells of edge equal to
 //! the search radius, cells kept in a hashbrown map (no dense grid), so a query visits the
-//! 27 cells around a point.
+//! 27 cells around a point. Particles that are already grouped by a cubic bin (the tiles
+//! sort theirs by home block) are searched through those bins instead
+//! ([`find_isolated_binned`]), with no second binning.
 
 use glam::Vec3;
 use hashbrown::HashMap;
