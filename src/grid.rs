@@ -221,18 +221,36 @@ pub type KeyRanges = hashbrown::HashMap<[i32; 3], (u32, u32)>;
 /// range of that order holding its indices (ascending index within a key).
 pub fn bin_by_key(keys: &[[i32; 3]]) -> (Vec<u32>, KeyRanges) {
     let order = sort_by_key_zyx(keys);
-    let mut ranges = hashbrown::HashMap::new();
-    let mut start = 0;
-    while start < order.len() {
-        let key = keys[order[start] as usize];
-        let mut end = start + 1;
-        while end < order.len() && keys[order[end] as usize] == key {
-            end += 1;
-        }
-        ranges.insert(key, (start as u32, end as u32));
-        start = end;
-    }
+    let ranges = group_runs(order.iter().map(|&i| keys[i as usize]));
     (order, ranges)
+}
+
+/// The range of positions each key holds in `keys`, a sequence in which equal keys are
+/// contiguous (panics otherwise).
+pub fn group_runs(keys: impl IntoIterator<Item = [i32; 3]>) -> KeyRanges {
+    let mut ranges = KeyRanges::new();
+    let mut close_run = |key: [i32; 3], start: u32, end: u32| {
+        let previous = ranges.insert(key, (start, end));
+        assert!(previous.is_none(), "equal keys must be contiguous");
+    };
+    // The key of the run being read and where it started.
+    let mut run: Option<([i32; 3], u32)> = None;
+    let mut n = 0u32;
+    for key in keys {
+        match run {
+            Some((k, _)) if k == key => {}
+            Some((k, start)) => {
+                close_run(k, start, n);
+                run = Some((key, n));
+            }
+            None => run = Some((key, n)),
+        }
+        n += 1;
+    }
+    if let Some((k, start)) = run {
+        close_run(k, start, n);
+    }
+    ranges
 }
 
 #[cfg(test)]

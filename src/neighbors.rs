@@ -1,8 +1,9 @@
 //! Neighbour search with a cell hash: particles binned into cubic cells of edge equal to
 //! the search radius, cells kept in a hashbrown map (no dense grid), so a query visits the
-//! 27 cells around a point. Particles that are already grouped by a cubic bin (the tiles
-//! sort theirs by home block) are searched through those bins instead
-//! ([`find_isolated_binned`]), with no second binning.
+//! 27 cells around a point. Particles that are already grouped by a cubic cell of another
+//! edge (the tiles sort theirs by home block) make a cell hash as they are
+//! ([`CellHash::from_grouped`]), with no second binning; a query then visits the cells
+//! within reach of the radius.
 
 use glam::Vec3;
 use hashbrown::HashMap;
@@ -15,6 +16,8 @@ pub struct CellHash {
     order: Vec<u32>,
     /// Cell key → range in `order`.
     cells: HashMap<[i32; 3], (u32, u32)>,
+    /// Cells searched around a point's own, per axis.
+    reach: i32,
 }
 
 impl CellHash {
@@ -27,11 +30,35 @@ impl CellHash {
             cell_size,
             order,
             cells,
+            reach: 1,
         }
     }
 
-    /// True when `stop(j)` holds for some particle `j` in the 27 cells around `p`; the
-    /// point's own cell is searched first and the search ends at the first hit.
+    /// A cell hash of particles already grouped by cell: `cells` yields the cell of every
+    /// particle in index order (`floor(p / cell_size)`, in any rounding that keeps a point
+    /// within one cell edge of its cell), equal cells contiguous. Queries search every
+    /// cell that can hold a particle closer than `radius` (world units).
+    pub fn from_grouped(
+        cells: impl IntoIterator<Item = [i32; 3]>,
+        cell_size: f32,
+        radius: f32,
+    ) -> Self {
+        let cells = crate::grid::group_runs(cells);
+        let count = cells.values().map(|&(_, e)| e).max().unwrap_or(0);
+        // Two points closer than d lie at most ⌊d / edge⌋ + 1 cells apart on every axis
+        // (a hair more for d, against the rounding of their cells).
+        let reach = (radius as f64 / cell_size as f64 * (1.0 + 1e-6)).floor() as i32 + 1;
+        CellHash {
+            cell_size,
+            order: (0..count).collect(),
+            cells,
+            reach,
+        }
+    }
+
+    /// True when `stop(j)` holds for some particle `j` in the cells around `p` (27 for a
+    /// hash made by [`CellHash::new`]); the point's own cell is searched first and the
+    /// search ends at the first hit.
     pub fn any_candidate(&self, p: Vec3, mut stop: impl FnMut(u32) -> bool) -> bool {
         let c = cell_of(p, 1.0 / self.cell_size);
         let own = self.cells.get(&c).copied();
@@ -40,9 +67,10 @@ impl CellHash {
                 return true;
             }
         }
-        for dz in -1..=1 {
-            for dy in -1..=1 {
-                for dx in -1..=1 {
+        let reach = self.reach;
+        for dz in -reach..=reach {
+            for dy in -reach..=reach {
+                for dx in -reach..=reach {
                     if (dx, dy, dz) == (0, 0, 0) {
                         continue;
                     }
@@ -57,14 +85,15 @@ impl CellHash {
         false
     }
 
-    /// Calls `visit(j)` for every particle `j` within the 27 cells around `p` (a superset of
-    /// the particles within one cell size of `p`), cells in (z, y, x) order, particles of a
-    /// cell in ascending index.
+    /// Calls `visit(j)` for every particle `j` within the cells around `p` (27 for a hash
+    /// made by [`CellHash::new`]: a superset of the particles within one cell size of
+    /// `p`), cells in (z, y, x) order, particles of a cell in ascending index.
     pub fn for_each_candidate(&self, p: Vec3, mut visit: impl FnMut(u32)) {
         let c = cell_of(p, 1.0 / self.cell_size);
-        for dz in -1..=1 {
-            for dy in -1..=1 {
-                for dx in -1..=1 {
+        let reach = self.reach;
+        for dz in -reach..=reach {
+            for dy in -reach..=reach {
+                for dx in -reach..=reach {
                     if let Some(&(s, e)) = self.cells.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
                         for &j in &self.order[s as usize..e as usize] {
                             visit(j);
@@ -92,7 +121,25 @@ pub fn find_isolated(positions: &[Vec3], radius: f32) -> Vec<bool> {
 
 /// [`find_isolated`] evaluated only where `wanted` is true (`false` elsewhere).
 pub fn find_isolated_where(positions: &[Vec3], radius: f32, wanted: &[bool]) -> Vec<bool> {
-    let hash = CellHash::new(positions, radius);
+    isolated_in(&CellHash::new(positions, radius), positions, radius, wanted)
+}
+
+/// [`find_isolated_where`] for positions already grouped by a cubic cell of edge
+/// `cell_size` (world units; see [`CellHash::from_grouped`] for `cells`): no second
+/// binning, the same test on the same pairs, so the same flags.
+pub fn find_isolated_grouped(
+    positions: &[Vec3],
+    cells: impl IntoIterator<Item = [i32; 3]>,
+    cell_size: f32,
+    radius: f32,
+    wanted: &[bool],
+) -> Vec<bool> {
+    let hash = CellHash::from_grouped(cells, cell_size, radius);
+    isolated_in(&hash, positions, radius, wanted)
+}
+
+/// The isolation flags of `positions` with `hash` as the search structure.
+fn isolated_in(hash: &CellHash, positions: &[Vec3], radius: f32, wanted: &[bool]) -> Vec<bool> {
     let r2 = radius * radius;
     positions
         .par_iter()
@@ -104,67 +151,6 @@ pub fn find_isolated_where(positions: &[Vec3], radius: f32, wanted: &[bool]) -> 
             !hash.any_candidate(p, |j| {
                 j as usize != i && (positions[j as usize] - p).length_squared() < r2
             })
-        })
-        .collect()
-}
-
-/// [`find_isolated_where`] for positions already grouped by a cubic bin of edge `bin_edge`
-/// (world units): `bins[i]` is the bin of `positions[i]` (as `floor(p / bin_edge)`, in
-/// any rounding that keeps a point within one bin edge of its bin), equal bins
-/// contiguous. The bins serve as the search cells, so no second binning is needed; the
-/// flags are those of [`find_isolated_where`] (the same test on the same pairs).
-pub fn find_isolated_binned(
-    positions: &[Vec3],
-    bins: &[[i32; 3]],
-    bin_edge: f32,
-    radius: f32,
-    wanted: &[bool],
-) -> Vec<bool> {
-    assert_eq!(positions.len(), bins.len(), "one bin per position");
-    let mut ranges: HashMap<[i32; 3], (u32, u32)> = HashMap::new();
-    let mut start = 0;
-    while start < bins.len() {
-        let mut end = start + 1;
-        while end < bins.len() && bins[end] == bins[start] {
-            end += 1;
-        }
-        let previous = ranges.insert(bins[start], (start as u32, end as u32));
-        assert!(previous.is_none(), "equal bins must be contiguous");
-        start = end;
-    }
-    // Two points closer than d lie at most ⌊d / edge⌋ + 1 bins apart on every axis (a
-    // hair more for d, against the rounding of their bins).
-    let reach = (radius as f64 / bin_edge as f64 * (1.0 + 1e-6)).floor() as i32 + 1;
-    let r2 = radius * radius;
-    positions
-        .par_iter()
-        .enumerate()
-        .map(|(i, &p)| {
-            if !wanted[i] {
-                return false;
-            }
-            let close = |range: Option<&(u32, u32)>| {
-                range.is_some_and(|&(s, e)| {
-                    (s as usize..e as usize)
-                        .any(|j| j != i && (positions[j] - p).length_squared() < r2)
-                })
-            };
-            let own = bins[i];
-            if close(ranges.get(&own)) {
-                return false;
-            }
-            for dz in -reach..=reach {
-                for dy in -reach..=reach {
-                    for dx in -reach..=reach {
-                        if (dx, dy, dz) != (0, 0, 0)
-                            && close(ranges.get(&[own[0] + dx, own[1] + dy, own[2] + dz]))
-                        {
-                            return false;
-                        }
-                    }
-                }
-            }
-            true
         })
         .collect()
 }
@@ -199,7 +185,7 @@ mod tests {
     }
 
     #[test]
-    fn isolation_from_bins_matches_the_cell_hash() {
+    fn isolation_from_grouped_cells_matches_the_binned_search() {
         // Clusters and strays, binned by cubes smaller and larger than the radius.
         let mut seed = 11;
         let mut pts: Vec<Vec3> = (0..800)
@@ -218,9 +204,14 @@ mod tests {
                 (b[2], b[1], b[0], i)
             });
             let sorted: Vec<Vec3> = order.iter().map(|&i| pts[i]).collect();
-            let bins: Vec<[i32; 3]> = sorted.iter().map(bin).collect();
             let sorted_wanted: Vec<bool> = order.iter().map(|&i| wanted[i]).collect();
-            let flags = find_isolated_binned(&sorted, &bins, edge, radius, &sorted_wanted);
+            let flags = find_isolated_grouped(
+                &sorted,
+                sorted.iter().map(bin),
+                edge,
+                radius,
+                &sorted_wanted,
+            );
             for (k, &i) in order.iter().enumerate() {
                 assert_eq!(flags[k], expected[i], "particle {i}, bin edge {edge}");
             }

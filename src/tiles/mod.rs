@@ -61,7 +61,7 @@ use crate::marching_cubes::{
     march_blocks, stitch, stitch_range, BlockSurface, MarchingCubesStats, VertexKey,
 };
 use crate::mesh::TriMesh;
-use crate::neighbors::find_isolated_binned;
+use crate::neighbors::find_isolated_grouped;
 use budget::choose_tile_blocks;
 pub use budget::{default_memory_budget, output_bytes_per_particle, parse_memory_size};
 use glam::Vec3;
@@ -359,9 +359,9 @@ pub fn reconstruct_tiled<S: ParticleSource>(
         // `loaded` is sorted by home block: the blocks are the cells of the search.
         let lonely = match isolation_radius {
             Some(radius) => {
-                let homes: Vec<BlockKey> = loaded.iter().map(|r| r.0).collect();
                 let block_edge = (field_options.cell_size_world() * BLOCK_EDGE as f64) as f32;
-                find_isolated_binned(&local, &homes, block_edge, radius, &in_zone1)
+                let homes = loaded.iter().map(|r| r.0);
+                find_isolated_grouped(&local, homes, block_edge, radius, &in_zone1)
             }
             None => vec![false; local.len()],
         };
