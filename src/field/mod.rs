@@ -311,20 +311,29 @@ fn compute_blocks_with(
     let reach = block_reach(options);
     let radius_cells = options.influence_radius / options.cell_size;
 
-    // Particle indices sorted by (home half-block, index): a block then scans the particles
-    // of the half-blocks within reach, not of whole neighbour blocks (with R = 4 h, 512
-    // particle slots instead of 1728, most of which would be out of reach).
+    // Particles sorted by (home half-block, index) in (z, y, x) order, copied into that
+    // order: a block then scans the particles of the half-blocks within reach, not of whole
+    // neighbour blocks (with R = 4 h, 512 particle slots instead of 1728, most of which
+    // would be out of reach), and the half-blocks of one (y, z) half-row within reach are
+    // one contiguous run of the copy.
     let halves: Vec<BlockKey> = positions
         .par_iter()
         .map(|p| home_half_block(*p, inv_h))
         .collect();
-    let (order, half_ranges) = crate::grid::bin_by_key(&halves);
+    let order = crate::grid::sort_by_key_zyx(&halves);
+    let index = HalfRowIndex::new(order.iter().map(|&i| halves[i as usize]));
     drop(halves);
-    let homes: HashSet<BlockKey> = half_ranges
-        .keys()
-        .map(|k| k.map(|c| c.div_euclid(2)))
+    let sorted: Vec<Vec3> = order.par_iter().map(|&i| positions[i as usize]).collect();
+    drop(order);
+    let homes: HashSet<BlockKey> = index
+        .rows
+        .iter()
+        .flat_map(|(&[y, z], &(a, b))| {
+            index.cells[a as usize..b as usize]
+                .iter()
+                .map(move |c| [c.x, y, z].map(|h| h.div_euclid(2)))
+        })
         .collect();
-
     // Candidate blocks: within `reach` blocks of a populated home block.
     let mut candidates: HashSet<BlockKey> = HashSet::new();
     for key in &homes {
@@ -343,9 +352,8 @@ fn compute_blocks_with(
     candidates.sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
 
     let kernel = BlockKernel {
-        positions,
-        order: &order,
-        half_ranges: &half_ranges,
+        sorted: &sorted,
+        index: &index,
         half_reach: (radius_cells / HALF as f32).ceil() as i32,
         inv_h,
         radius_cells,
@@ -388,35 +396,119 @@ fn compute_blocks_with(
 /// Rows of vertices in a block.
 const ROWS: usize = BLOCK_VOLUME / ROW;
 
-/// Per-thread scratch of one block: the particles within reach (with the rows of
-/// vertices their influence spheres may meet) and, per row, the particles that do.
+/// Per-thread scratch of one block: the particles within reach and, per row of vertices,
+/// the set of those that have a weight somewhere on it.
 struct RowLists {
     /// Block-local particle positions (cells), in scan order.
     particles: Vec<[f32; 3]>,
-    /// Per particle: lowest and highest row coordinates `[y, z]` it may meet.
-    extents: Vec<[[i32; 2]; 2]>,
-    /// Row `k`'s particles (indices into `particles`, in scan order) are
-    /// `entries[k · particles.len()..][..row_len[k]]`.
-    entries: Vec<u32>,
-    row_len: [usize; ROWS],
+    /// Per group of 64 particles (in scan order), per row: a bit per particle of the
+    /// group that meets the row. Built as one row mask per particle (bit `k` = row `k`)
+    /// and transposed in place.
+    rows: Vec<[u64; ROWS]>,
 }
 
 impl RowLists {
     fn new() -> Self {
         RowLists {
             particles: Vec::new(),
-            extents: Vec::new(),
-            entries: Vec::new(),
-            row_len: [0; ROWS],
+            rows: Vec::new(),
         }
     }
 }
 
+/// Transposes a 64×64 bit matrix in place: bit `j` of `m[i]` becomes bit `i` of `m[j]`
+/// (block swaps of halves, quarters, …, bits).
+fn transpose_bits(m: &mut [u64; 64]) {
+    let mut width = 32;
+    let mut low: u64 = 0x0000_0000_FFFF_FFFF;
+    while width != 0 {
+        let mut k = 0;
+        while k < 64 {
+            // Row k's high half (of each 2·width-bit pair) swaps with row k + width's
+            // low half.
+            let t = ((m[k] >> width) ^ m[k + width]) & low;
+            m[k + width] ^= t;
+            m[k] ^= t << width;
+            k = (k + width + 1) & !width;
+        }
+        width >>= 1;
+        low ^= low << width;
+    }
+}
+
+/// One populated home half-block of a [`HalfRowIndex`].
+#[derive(Clone, Copy)]
+struct HalfBlockRun {
+    /// Half-block x coordinate.
+    x: i32,
+    /// Its particles: `start..end` of the sorted positions.
+    start: u32,
+    end: u32,
+}
+
+/// The populated home half-blocks, in (z, y, x) order, grouped by half-row (the
+/// half-blocks of one y and z): a block finds the particles of the four half-blocks of a
+/// half-row within its reach with one lookup, as one contiguous run.
+struct HalfRowIndex {
+    /// Per half-row `[y, z]`: the range of `cells` holding its half-blocks.
+    rows: HashMap<[i32; 2], (u32, u32)>,
+    cells: Vec<HalfBlockRun>,
+}
+
+impl HalfRowIndex {
+    /// The index of particles whose home half-blocks, in sorted order, are `keys`.
+    fn new(keys: impl IntoIterator<Item = BlockKey>) -> HalfRowIndex {
+        let mut rows: HashMap<[i32; 2], (u32, u32)> = HashMap::new();
+        let mut cells: Vec<HalfBlockRun> = Vec::new();
+        let mut row_start = 0u32;
+        let mut n = 0u32;
+        let mut current: Option<BlockKey> = None;
+        for key in keys {
+            if current != Some(key) {
+                if let Some(c) = current {
+                    cells.last_mut().expect("open run").end = n;
+                    if [c[1], c[2]] != [key[1], key[2]] {
+                        rows.insert([c[1], c[2]], (row_start, cells.len() as u32));
+                        row_start = cells.len() as u32;
+                    }
+                }
+                cells.push(HalfBlockRun {
+                    x: key[0],
+                    start: n,
+                    end: n,
+                });
+                current = Some(key);
+            }
+            n += 1;
+        }
+        if let Some(c) = current {
+            cells.last_mut().expect("open run").end = n;
+            rows.insert([c[1], c[2]], (row_start, cells.len() as u32));
+        }
+        HalfRowIndex { rows, cells }
+    }
+
+    /// The particles (a range of the sorted positions) of the half-blocks `x0..=x1` of
+    /// half-row `[y, z]`.
+    #[inline(always)]
+    fn run(&self, y: i32, z: i32, x0: i32, x1: i32) -> std::ops::Range<usize> {
+        let Some(&(a, b)) = self.rows.get(&[y, z]) else {
+            return 0..0;
+        };
+        let row = &self.cells[a as usize..b as usize];
+        let first = row.partition_point(|c| c.x < x0);
+        let last = row.partition_point(|c| c.x <= x1);
+        if first >= last {
+            return 0..0;
+        }
+        row[first].start as usize..row[last - 1].end as usize
+    }
+}
+
 struct BlockKernel<'a> {
-    positions: &'a [Vec3],
-    order: &'a [u32],
-    /// Range of `order` of every populated home half-block.
-    half_ranges: &'a HashMap<BlockKey, (u32, u32)>,
+    /// Particle positions (world units) sorted by home half-block (see [`HalfRowIndex`]).
+    sorted: &'a [Vec3],
+    index: &'a HalfRowIndex,
     /// Half-blocks, per axis, beyond a block's own two whose particles can reach it
     /// (`⌈R / 4h⌉`).
     half_reach: i32,
@@ -464,10 +556,11 @@ impl BlockKernel<'_> {
         self.evaluate_portable(key, lists, values)
     }
 
-    /// Two steps: the particles within reach are listed per row of vertices (in scan
-    /// order), then each row sums its particles with its running sums in registers and
-    /// is finalised at once. Each vertex adds its particles in scan order, whatever the
-    /// steps.
+    /// Two steps: the particles within reach are listed (in scan order) with the set of
+    /// rows of vertices each one meets, a 64-bit mask, and the masks of every 64 particles
+    /// are transposed into per-row sets of particles; then each row sums its particles
+    /// with its running sums in registers and is finalised at once. Each vertex adds its
+    /// particles in scan order, whatever the steps.
     // Index loops over lanes on purpose: they inline into (and vectorize within) the AVX2
     // copy, where iterator adaptors' closures may not.
     #[allow(clippy::needless_range_loop)]
@@ -479,7 +572,7 @@ impl BlockKernel<'_> {
         values: &mut BlockValues,
     ) -> Option<usize> {
         lists.particles.clear();
-        lists.extents.clear();
+        lists.rows.clear();
         let origin = [0, 1, 2].map(|a| key[a] as f64 * BLOCK_EDGE as f64);
         let rc = self.radius_cells;
         let rc2 = rc * rc;
@@ -492,26 +585,26 @@ impl BlockKernel<'_> {
         );
         for hz in first[2]..=last[2] {
             for hy in first[1]..=last[1] {
-                for hx in first[0]..=last[0] {
-                    let Some(&(s, e)) = self.half_ranges.get(&[hx, hy, hz]) else {
+                for p in &self.sorted[self.index.run(hy, hz, first[0], last[0])] {
+                    let p = p.as_dvec3() * self.inv_h;
+                    // Particle in block-local cell units.
+                    let x = [
+                        (p.x - origin[0]) as f32,
+                        (p.y - origin[1]) as f32,
+                        (p.z - origin[2]) as f32,
+                    ];
+                    let lo = x.map(|c| ((c - rc).ceil() as i32).max(0));
+                    let hi = x.map(|c| ((c + rc).floor() as i32).min(BLOCK_EDGE - 1));
+                    if lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2] {
                         continue;
-                    };
-                    for &pi in &self.order[s as usize..e as usize] {
-                        let p = self.positions[pi as usize].as_dvec3() * self.inv_h;
-                        // Particle in block-local cell units.
-                        let x = [
-                            (p.x - origin[0]) as f32,
-                            (p.y - origin[1]) as f32,
-                            (p.z - origin[2]) as f32,
-                        ];
-                        let lo = x.map(|c| ((c - rc).ceil() as i32).max(0));
-                        let hi = x.map(|c| ((c + rc).floor() as i32).min(BLOCK_EDGE - 1));
-                        if lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2] {
-                            continue;
-                        }
-                        lists.particles.push(x);
-                        lists.extents.push([[lo[1], lo[2]], [hi[1], hi[2]]]);
                     }
+                    let index = lists.particles.len();
+                    if index % 64 == 0 {
+                        lists.rows.push([0; ROWS]);
+                    }
+                    let group = lists.rows.last_mut().expect("a group");
+                    group[index % 64] = row_mask(x, lo, hi, inv_rc2);
+                    lists.particles.push(x);
                 }
             }
         }
@@ -519,33 +612,25 @@ impl BlockKernel<'_> {
         if n == 0 {
             return None;
         }
-        // Row lists, written without branches: every particle writes its index into each
-        // row of its extent, and the row's length grows only where the sphere meets it.
-        lists.row_len = [0; ROWS];
-        lists.entries.resize(ROWS * n, 0);
-        for (index, (x, &[lo, hi])) in lists.particles.iter().zip(&lists.extents).enumerate() {
-            for c in lo[1]..=hi[1] {
-                let rz = c as f32 - x[2];
-                for b in lo[0]..=hi[0] {
-                    let ry = b as f32 - x[1];
-                    let row = (c * BLOCK_EDGE + b) as usize;
-                    lists.entries[row * n + lists.row_len[row]] = index as u32;
-                    lists.row_len[row] += (ry * ry + rz * rz < rc2) as usize;
-                }
-            }
+        for group in &mut lists.rows {
+            transpose_bits(group);
         }
         let mut in_band = 0;
         for row in 0..ROWS {
-            if lists.row_len[row] == 0 {
+            if lists.rows.iter().all(|group| group[row] == 0) {
                 // No particle within reach of the row: outside the band.
                 values[row * ROW..][..ROW].fill(self.options.outside_value());
                 continue;
             }
             let (b, c) = ((row % ROW) as f32, (row / ROW) as f32);
             let mut sums = [[0.0f32; ROW]; SUMS];
-            for &k in &lists.entries[row * n..][..lists.row_len[row]] {
-                let x = lists.particles[k as usize];
-                accumulate_row(&mut sums, x[0], b - x[1], c - x[2], inv_rc2);
+            for (group, members) in lists.particles.chunks(64).zip(&lists.rows) {
+                let mut bits = members[row];
+                while bits != 0 {
+                    let x = group[bits.trailing_zeros() as usize];
+                    accumulate_row(&mut sums, x[0], b - x[1], c - x[2], inv_rc2);
+                    bits &= bits - 1;
+                }
             }
             in_band += self.finalize_row(&sums, row, values);
         }
@@ -619,6 +704,34 @@ const ROW: usize = BLOCK_EDGE as usize;
 /// Half a row.
 const HALF: usize = ROW / 2;
 
+/// The rows of a block (bit `8z + y`) on which a particle at block-local `x` (cells) has a
+/// weight: the rows within the block extent `lo..=hi` (`[x, y, z]` vertex coordinates)
+/// where the weight at the row's vertex nearest to the particle, by the test
+/// [`accumulate_row`] makes, is not zero (the weight falls with the distance, so no other
+/// vertex of the row has one where that one has none). Rows the influence sphere meets
+/// only beyond the block's ends are left out: their terms would all be zero.
+#[inline(always)]
+fn row_mask(x: [f32; 3], lo: [i32; 3], hi: [i32; 3], inv_rc2: f32) -> u64 {
+    let nearest = x[0].round().clamp(0.0, (ROW - 1) as f32);
+    let rx = nearest - x[0];
+    let rx2 = rx * rx;
+    let mut mask = 0u64;
+    for c in 0..ROW {
+        let rz = c as f32 - x[2];
+        let mut byte = 0u64;
+        for b in 0..ROW {
+            let ry = b as f32 - x[1];
+            byte |= (((rx2 + (ry * ry + rz * rz)) * inv_rc2 < 1.0) as u64) << b;
+        }
+        mask |= byte << (ROW * c);
+    }
+    // The extent: rows lo[1]..=hi[1] of the planes lo[2]..=hi[2].
+    let y_bits = (1u64 << (hi[1] + 1)) - (1u64 << lo[1]);
+    let z_bytes =
+        (u64::MAX >> (ROW as i32 * (BLOCK_EDGE - 1 - hi[2]))) & (u64::MAX << (ROW as i32 * lo[2]));
+    mask & (y_bits * 0x0101_0101_0101_0101) & z_bytes
+}
+
 /// Adds one particle's terms to one row of vertices' running sums (`x`: the particle's
 /// block-local x (cells), `ry`, `rz`: the row's offsets from it, `inv_rc2 = 1 / R²` in
 /// cells). Lanes outside the influence sphere get `q = 0`, hence
@@ -655,6 +768,27 @@ fn accumulate_row(sums: &mut [[f32; ROW]; SUMS], x: f32, ry: f32, rz: f32, inv_r
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bit_matrices_transpose() {
+        let mut seed = 11u64;
+        let mut m = [0u64; 64];
+        for row in &mut m {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            *row = seed ^ (seed >> 29);
+        }
+        let original = m;
+        transpose_bits(&mut m);
+        for (i, row) in original.iter().enumerate() {
+            for (j, column) in m.iter().enumerate() {
+                assert_eq!((column >> i) & 1, (row >> j) & 1, "bit {j} of row {i}");
+            }
+        }
+        transpose_bits(&mut m);
+        assert_eq!(m, original);
+    }
 
     #[test]
     fn the_vector_kernel_gives_the_portable_kernel_values_bit_for_bit() {
