@@ -46,7 +46,7 @@ pub struct SubdivideStats {
 pub fn subdivide(mesh: &mut TriMesh, options: &SubdivideOptions) -> SubdivideStats {
     let before = mesh.triangle_count();
     for _ in 0..options.levels {
-        *mesh = subdivide_once(mesh);
+        *mesh = subdivide_once(std::mem::take(mesh));
     }
     SubdivideStats {
         triangles_before: before,
@@ -54,9 +54,18 @@ pub fn subdivide(mesh: &mut TriMesh, options: &SubdivideOptions) -> SubdivideSta
     }
 }
 
-fn subdivide_once(mesh: &TriMesh) -> TriMesh {
-    let nv = mesh.positions.len();
-    let tris = &mesh.triangles;
+/// One step. Takes the mesh by value so that its positions are freed as soon as the new
+/// ones exist: the last step, writing four triangles per triangle, is the peak of memory
+/// of a large run (the 32M scene under a 2 GiB budget), and holds only the input's
+/// triangles, the side → edge map and the output.
+fn subdivide_once(mesh: TriMesh) -> TriMesh {
+    let TriMesh {
+        positions: old_positions,
+        triangles: old_triangles,
+        ..
+    } = mesh;
+    let nv = old_positions.len();
+    let tris = &old_triangles;
     // Triangle side `s` is side `s % 3` of triangle `s / 3`, from corner `s % 3` to the
     // next; its undirected edge is (smaller vertex, larger vertex).
     let ends = |s: u32| -> (u32, u32) {
@@ -83,7 +92,7 @@ fn subdivide_once(mesh: &TriMesh) -> TriMesh {
             fill[a] += 1;
         }
     }
-    let pos = |i: u32| mesh.positions[i as usize].as_dvec3();
+    let pos = |i: u32| old_positions[i as usize].as_dvec3();
     let opposite = |s: u32| tris[s as usize / 3][(s as usize % 3 + 2) % 3];
     // One pass over the buckets in vertex order: sort each by the larger vertex (sides of
     // one edge stay in side order), number the edges in (min, max) order, give every side
@@ -144,40 +153,36 @@ fn subdivide_once(mesh: &TriMesh) -> TriMesh {
     let ne = edge_start.len();
     edge_start.push(sides.len() as u32);
     let beta = loop_betas(&valence);
-    let mut positions: Vec<glam::Vec3> = (0..nv)
-        .into_par_iter()
-        .map(|v| {
-            let p = pos(v as u32);
-            let n = valence[v];
-            let moved = if non_manifold[v] || boundary_count[v] > 2 || n == 0 {
-                p
-            } else if boundary_count[v] == 2 {
-                0.75 * p + 0.125 * boundary_sum[v]
-            } else if boundary_count[v] == 0 {
-                let (nf, beta) = (n as f64, beta[n as usize]);
-                (1.0 - nf * beta) * p + beta * sum[v]
-            } else {
-                p
-            };
-            moved.as_vec3()
-        })
-        .collect();
+    // Vertex points, then edge points, written straight into the output's positions.
+    let mut positions: Vec<glam::Vec3> = Vec::with_capacity(nv + ne);
+    positions.par_extend((0..nv).into_par_iter().map(|v| {
+        let p = pos(v as u32);
+        let n = valence[v];
+        let moved = if non_manifold[v] || boundary_count[v] > 2 || n == 0 {
+            p
+        } else if boundary_count[v] == 2 {
+            0.75 * p + 0.125 * boundary_sum[v]
+        } else if boundary_count[v] == 0 {
+            let (nf, beta) = (n as f64, beta[n as usize]);
+            (1.0 - nf * beta) * p + beta * sum[v]
+        } else {
+            p
+        };
+        moved.as_vec3()
+    }));
     drop((valence, sum, boundary_count, boundary_sum, non_manifold));
-    let edge_points: Vec<glam::Vec3> = (0..ne)
-        .into_par_iter()
-        .map(|e| {
-            let group = &sides[edge_start[e] as usize..edge_start[e + 1] as usize];
-            let (a, b) = ends(group[0]);
-            let (a, b) = (pos(a), pos(b));
-            let p = if group.len() == 2 {
-                0.375 * (a + b) + 0.125 * (pos(opposite(group[0])) + pos(opposite(group[1])))
-            } else {
-                0.5 * (a + b)
-            };
-            p.as_vec3()
-        })
-        .collect();
-    positions.extend(edge_points);
+    positions.par_extend((0..ne).into_par_iter().map(|e| {
+        let group = &sides[edge_start[e] as usize..edge_start[e + 1] as usize];
+        let (a, b) = ends(group[0]);
+        let (a, b) = (pos(a), pos(b));
+        let p = if group.len() == 2 {
+            0.375 * (a + b) + 0.125 * (pos(opposite(group[0])) + pos(opposite(group[1])))
+        } else {
+            0.5 * (a + b)
+        };
+        p.as_vec3()
+    }));
+    drop(old_positions);
     drop(sides);
     drop(edge_start);
     let mut triangles: Vec<[u32; 3]> = vec![[0; 3]; tris.len() * 4];
