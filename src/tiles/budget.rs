@@ -17,11 +17,13 @@ pub const TILE_BYTES_PER_PARTICLE: u64 = 600;
 /// Marching-cubes triangles per particle of a fluid body at h = r (`dambreak_small`:
 /// 2.67).
 pub const MC_TRIANGLES_PER_PARTICLE: f64 = 2.7;
-/// Peak working set of one Loop step, bytes per input triangle (the input, side → edge
-/// indices, the output mesh; measured 104 on 32M particles, 134 on 4M where heap left
-/// over from the tiles counts more). 110 puts the 32M scene's whole-run estimate
+/// Peak working set of one Loop step, bytes per input triangle (the input's triangles,
+/// side → edge indices, the output mesh; measured 104 on 32M particles, 134 on 4M where
+/// heap left over from the tiles counts more). 110 put the 32M scene's whole-run estimate
 /// (1906 MiB) within 1 % of its measured peaks (1863–1922 MiB over three sessions) and
-/// under a 2 GiB budget; 120 refused that run.
+/// under a 2 GiB budget; 120 refused that run. Since the step frees the input positions
+/// before writing the triangles (2026-11-24) that run peaks at 1762 MiB: the estimate is
+/// now 8 % high, kept as margin.
 pub const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 110.0;
 /// Memory of the process before any particle (code, thread stacks, allocator), bytes.
 pub const BASE_BYTES: u64 = 64 << 20;
