@@ -11,9 +11,10 @@
 //! in mesh order, each vertex at most once per pass (several passes approximate the
 //! greedy order of a heap, without the heap's cache misses) → compact.
 //!
-//! **Parallel walk.** The triangles are cut into fixed chunks of [`CHUNK_TRIANGLES`] in
-//! mesh order (spatially coherent: marching cubes emits them block by block). At the start
-//! of a pass every vertex is owned by the chunk of its lowest-numbered triangle. The chunks
+//! **Parallel walk** (meshes decimated whole, not region by region). The triangles are
+//! cut into fixed chunks of [`CHUNK_TRIANGLES`] in mesh order (spatially coherent:
+//! marching cubes emits them block by block). At the start of a pass every vertex is
+//! owned by the chunk of its lowest-numbered triangle. The chunks
 //! then walk their own candidates in parallel, each taking only collapses whose two closed
 //! one-rings are owned by the chunk, so no two chunks ever read or write the same vertex or
 //! triangle; each chunk may do its share of the pass's goal (in proportion to its
@@ -26,17 +27,20 @@
 //! `region_triangles / 2` vertices in Morton order of position (compact pieces of
 //! surface). Triangles with vertices in two regions are seam triangles; their vertices are
 //! locked. Each region is decimated on its own, to the same fraction (or error bound), with
-//! only its own state in memory (regions run in parallel, one per thread, so the serial
-//! parts of one region's passes overlap another's work), and replaced by its result in
-//! region order; then the band around the seams ([`decimate_band`]: the seam vertices and
-//! two rings around them) is decimated to the overall target, the rest of the mesh left
-//! as the regions made it. Seam vertices keep their exact input positions until that
+//! only its own state in memory (regions run in parallel, one per thread), and replaced by
+//! its result in region order. A region's passes take their collapses in the sequential
+//! walk alone: with the cores busy on other regions, the parallel walk's ownership tests
+//! were pure cost (4M scene: decimation 4.0 → 3.5 s, 2026-11-24), and walking each region
+//! in plain mesh order is closer to the greedy order (1M scene: flat bumpiness 0.0080 r
+//! instead of 0.0083 r). Then the band around the seams ([`decimate_band`]: the seam
+//! vertices and two rings around them) is decimated to the overall target, the rest of
+//! the mesh left as the regions made it. Seam vertices keep their exact input positions until that
 //! pass. (A final pass over the whole mesh instead took 0.90 s of 5.8 s on the 4M scene
 //! for 2 % of the collapses, 2026-11-23.) On a 4M-particle scene (11.1 M raw
 //! triangles, 41 regions) this keeps decimation under the field's memory peak (whole mesh
 //! at once: +0.9 GB) and made it faster when introduced (regions one at a time: 4.8 s
 //! instead of 7.6 s on that day's machine), since each region's state stays in cache;
-//! the price, measured on the 1M-particle scene, is a flat-region
+//! the price, measured on the 1M-particle scene when regions came in, was a flat-region
 //! bumpiness of 0.0076 r instead of 0.0075 r (regions of 2^17 triangles: faster still, but
 //! 0.0078 r). The regions depend only on the mesh and the option, never on the
 //! thread count.
@@ -217,6 +221,28 @@ pub fn decimate_locked(
     max_error: Option<f32>,
     extra_locked: &[bool],
 ) -> (DecimateStats, Vec<u32>) {
+    decimate_locked_walk(mesh, target, max_error, extra_locked, Walk::Chunked)
+}
+
+/// How the passes of [`decimate_locked_walk`] take their collapses.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Walk {
+    /// The parallel walk inside chunks, then the sequential walk over what is left.
+    Chunked,
+    /// The sequential walk alone, over all candidates in mesh order: for meshes that are
+    /// themselves decimated in parallel with others (the regions), where the chunked walk's
+    /// ownership tests are pure cost.
+    Sequential,
+}
+
+/// [`decimate_locked`] with the choice of walk.
+pub(crate) fn decimate_locked_walk(
+    mesh: &mut TriMesh,
+    target: usize,
+    max_error: Option<f32>,
+    extra_locked: &[bool],
+    walk: Walk,
+) -> (DecimateStats, Vec<u32>) {
     let before = mesh.triangle_count();
     let mut stats = DecimateStats {
         triangles_before: before,
@@ -299,7 +325,7 @@ pub fn decimate_locked(
 
         // Parallel walk inside chunks, then the sequential walk over what is left.
         let mut done = 0;
-        if chunks.len() > 1 && alive_tris > target + 2 {
+        if walk == Walk::Chunked && chunks.len() > 1 && alive_tris > target + 2 {
             s.assign_owners();
             let below: Vec<usize> = chunks
                 .par_iter()

@@ -7,7 +7,9 @@
 //! locked, and put back ([`place_survivors`]): a locked survivor keeps its identity, the
 //! piece's other survivors are new vertices.
 
-use super::{bounds, decimate_locked, morton3, DecimateOptions, DecimateStats};
+use super::{
+    bounds, decimate_locked, decimate_locked_walk, morton3, DecimateOptions, DecimateStats, Walk,
+};
 use crate::mesh::TriMesh;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -177,8 +179,13 @@ pub(super) fn decimate_by_regions(
                 .map(|&g| on_seam[g as usize])
                 .collect();
             let region_target = options.target_triangles(piece.mesh.triangle_count());
-            let (region_stats, remap) =
-                decimate_locked(&mut piece.mesh, region_target, options.max_error, &locked);
+            let (region_stats, remap) = decimate_locked_walk(
+                &mut piece.mesh,
+                region_target,
+                options.max_error,
+                &locked,
+                Walk::Sequential,
+            );
             (piece, region_stats, remap)
         })
         .collect();
