@@ -380,7 +380,10 @@ fn compute_blocks_with(
     for (slot, (key, n)) in candidates.iter().zip(&in_band).enumerate() {
         if let Some(n) = n {
             stats.vertices_in_band += n;
-            values.swap(kept, slot);
+            if slot != kept {
+                // A move, not a swap: the block left behind is dropped.
+                values.copy_within(slot..=slot, kept);
+            }
             keys.push(*key);
             kept += 1;
         }
