@@ -229,28 +229,24 @@ pub fn bin_by_key(keys: &[[i32; 3]]) -> (Vec<u32>, KeyRanges) {
 /// contiguous (panics otherwise).
 pub fn group_runs(keys: impl IntoIterator<Item = [i32; 3]>) -> KeyRanges {
     let mut ranges = KeyRanges::new();
-    let mut close_run = |key: [i32; 3], start: u32, end: u32| {
+    for (key, start, end) in key_runs(keys) {
         let previous = ranges.insert(key, (start, end));
         assert!(previous.is_none(), "equal keys must be contiguous");
-    };
-    // The key of the run being read and where it started.
-    let mut run: Option<([i32; 3], u32)> = None;
-    let mut n = 0u32;
-    for key in keys {
-        match run {
-            Some((k, _)) if k == key => {}
-            Some((k, start)) => {
-                close_run(k, start, n);
-                run = Some((key, n));
-            }
-            None => run = Some((key, n)),
-        }
-        n += 1;
-    }
-    if let Some((k, start)) = run {
-        close_run(k, start, n);
     }
     ranges
+}
+
+/// The runs of equal keys in `keys`, in order: each key with the range of positions
+/// `start..end` it holds.
+pub fn key_runs(keys: impl IntoIterator<Item = [i32; 3]>) -> Vec<([i32; 3], u32, u32)> {
+    let mut runs: Vec<([i32; 3], u32, u32)> = Vec::new();
+    for (n, key) in (0u32..).zip(keys) {
+        match runs.last_mut() {
+            Some((k, _, end)) if *k == key => *end = n + 1,
+            _ => runs.push((key, n, n + 1)),
+        }
+    }
+    runs
 }
 
 #[cfg(test)]

@@ -321,19 +321,16 @@ fn compute_blocks_with(
         .map(|p| home_half_block(*p, inv_h))
         .collect();
     let order = crate::grid::sort_by_key_zyx(&halves);
-    let index = HalfRowIndex::new(order.iter().map(|&i| halves[i as usize]));
+    let runs = crate::grid::key_runs(order.iter().map(|&i| halves[i as usize]));
     drop(halves);
     let sorted: Vec<Vec3> = order.par_iter().map(|&i| positions[i as usize]).collect();
     drop(order);
-    let homes: HashSet<BlockKey> = index
-        .rows
+    let homes: HashSet<BlockKey> = runs
         .iter()
-        .flat_map(|(&[y, z], &(a, b))| {
-            index.cells[a as usize..b as usize]
-                .iter()
-                .map(move |c| [c.x, y, z].map(|h| h.div_euclid(2)))
-        })
+        .map(|(half, _, _)| half.map(|h| h.div_euclid(2)))
         .collect();
+    let index = HalfRowIndex::new(&runs);
+    drop(runs);
     // Candidate blocks: within `reach` blocks of a populated home block.
     let mut candidates: HashSet<BlockKey> = HashSet::new();
     for key in &homes {
@@ -459,34 +456,23 @@ struct HalfRowIndex {
 }
 
 impl HalfRowIndex {
-    /// The index of particles whose home half-blocks, in sorted order, are `keys`.
-    fn new(keys: impl IntoIterator<Item = BlockKey>) -> HalfRowIndex {
-        let mut rows: HashMap<[i32; 2], (u32, u32)> = HashMap::new();
-        let mut cells: Vec<HalfBlockRun> = Vec::new();
-        let mut row_start = 0u32;
-        let mut n = 0u32;
-        let mut current: Option<BlockKey> = None;
-        for key in keys {
-            if current != Some(key) {
-                if let Some(c) = current {
-                    cells.last_mut().expect("open run").end = n;
-                    if [c[1], c[2]] != [key[1], key[2]] {
-                        rows.insert([c[1], c[2]], (row_start, cells.len() as u32));
-                        row_start = cells.len() as u32;
-                    }
-                }
-                cells.push(HalfBlockRun {
-                    x: key[0],
-                    start: n,
-                    end: n,
-                });
-                current = Some(key);
-            }
-            n += 1;
-        }
-        if let Some(c) = current {
-            cells.last_mut().expect("open run").end = n;
-            rows.insert([c[1], c[2]], (row_start, cells.len() as u32));
+    /// The index of the runs of sorted particles sharing a home half-block
+    /// ([`crate::grid::key_runs`], in (z, y, x) order).
+    fn new(runs: &[(BlockKey, u32, u32)]) -> HalfRowIndex {
+        let cells = runs
+            .iter()
+            .map(|&(half, start, end)| HalfBlockRun {
+                x: half[0],
+                start,
+                end,
+            })
+            .collect();
+        let mut rows = HashMap::new();
+        let mut first = 0u32;
+        for row in runs.chunk_by(|a, b| a.0[1..] == b.0[1..]) {
+            let end = first + row.len() as u32;
+            rows.insert([row[0].0[1], row[0].0[2]], (first, end));
+            first = end;
         }
         HalfRowIndex { rows, cells }
     }
