@@ -137,8 +137,9 @@ pub(super) fn decimate_by_regions(
         regions,
         ..Default::default()
     };
-    // Regions are decimated in parallel (each also runs its passes in parallel inside),
-    // and placed in region order, so the output does not depend on the thread count.
+    // Regions are decimated in parallel, one per task (each costs its candidates in
+    // parallel too, but walks its collapses sequentially: `Walk::Sequential`), and placed
+    // in region order, so the output does not depend on the thread count.
     let decimated: Vec<(Piece, DecimateStats, Vec<u32>)> = (0..regions)
         .into_par_iter()
         .map(|r| &grouped[region_start[r]..region_start[r + 1]])
