@@ -72,6 +72,7 @@
 
 mod collapse;
 mod pieces;
+mod placement;
 mod quadric;
 mod tri_list;
 
@@ -80,6 +81,7 @@ use collapse::{Candidate, View, WalkTally};
 use glam::{DVec3, Vec3};
 pub(crate) use pieces::place_survivors;
 pub use pieces::{decimate_band, BAND_RINGS};
+use placement::place_candidates;
 use quadric::{Plane, Quadric};
 use rayon::prelude::*;
 use tri_list::TriList;
@@ -266,10 +268,16 @@ pub(crate) fn decimate_locked_walk(
                     for k in 0..3 {
                         let (u, v) = (tri[k], tri[(k + 1) % 3]);
                         if u < v && !s.locked[u as usize] && !s.locked[v as usize] {
-                            out.push(s.candidate(u, v));
+                            out.push(Candidate {
+                                cost: 0.0,
+                                target: DVec3::ZERO,
+                                u,
+                                v,
+                            });
                         }
                     }
                 }
+                place_candidates(&s.pos, &s.quadric, &mut out);
                 out
             })
             .collect();
@@ -510,14 +518,6 @@ impl State {
                 .map_or(u32::MAX, |&t| (t as usize / CHUNK_TRIANGLES) as u32);
         });
     }
-
-    /// The candidate ranked by its squared RMS distance, `Q(p) / area`.
-    fn candidate(&self, u: u32, v: u32) -> Candidate {
-        let (target, cost) = placement(&self.pos, &self.quadric, u, v);
-        let w = self.quadric[u as usize].weight + self.quadric[v as usize].weight;
-        let cost = if w > 0.0 { cost / w } else { 0.0 };
-        Candidate { cost, target, u, v }
-    }
 }
 
 /// Interleaves the bits of three 10-bit coordinates.
@@ -530,16 +530,4 @@ fn morton3(x: u32, y: u32, z: u32) -> u32 {
         (v | (v << 2)) & 0x0924_9249
     }
     spread(x) | (spread(y) << 1) | (spread(z) << 2)
-}
-
-/// Where the collapse of edge `(u, v)` puts the merged vertex, and its quadric cost.
-fn placement(pos: &[DVec3], quadric: &[Quadric], u: u32, v: u32) -> (DVec3, f64) {
-    let (pu, pv) = (pos[u as usize], pos[v as usize]);
-    let q = quadric[u as usize] + quadric[v as usize];
-    let mid = (pu + pv) * 0.5;
-    let target = match q.optimum() {
-        Some(p) if (p - mid).length() <= (pv - pu).length() => p,
-        _ => q.segment_minimum(pu, pv),
-    };
-    (target, q.evaluate(target))
 }

@@ -7,16 +7,16 @@ use glam::DVec3;
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(crate) struct Quadric {
     // A = [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]], b = (x, y, z), c
-    xx: f64,
-    xy: f64,
-    xz: f64,
-    yy: f64,
-    yz: f64,
-    zz: f64,
-    x: f64,
-    y: f64,
-    z: f64,
-    c: f64,
+    pub(super) xx: f64,
+    pub(super) xy: f64,
+    pub(super) xz: f64,
+    pub(super) yy: f64,
+    pub(super) yz: f64,
+    pub(super) zz: f64,
+    pub(super) x: f64,
+    pub(super) y: f64,
+    pub(super) z: f64,
+    pub(super) c: f64,
     /// Total area of the planes added (for errors as distances).
     pub weight: f64,
 }
@@ -77,12 +77,14 @@ impl Quadric {
         }
     }
 
+    #[cfg_attr(all(target_arch = "x86_64", not(test)), allow(dead_code))]
     /// `Q(p)`, clamped at zero against rounding.
     pub fn evaluate(&self, p: DVec3) -> f64 {
         let ap = self.mul_a(p);
         (p.dot(ap) + 2.0 * (self.x * p.x + self.y * p.y + self.z * p.z) + self.c).max(0.0)
     }
 
+    #[cfg_attr(all(target_arch = "x86_64", not(test)), allow(dead_code))]
     fn mul_a(&self, p: DVec3) -> DVec3 {
         DVec3::new(
             self.xx * p.x + self.xy * p.y + self.xz * p.z,
@@ -91,6 +93,7 @@ impl Quadric {
         )
     }
 
+    #[cfg_attr(all(target_arch = "x86_64", not(test)), allow(dead_code))]
     /// The minimiser of `Q` when `A` is well conditioned (its determinant is not tiny next
     /// to the cube of its mean eigenvalue), else `None`.
     pub fn optimum(&self) -> Option<DVec3> {
@@ -117,6 +120,7 @@ impl Quadric {
         p.is_finite().then_some(p)
     }
 
+    #[cfg_attr(all(target_arch = "x86_64", not(test)), allow(dead_code))]
     /// The minimiser of `Q` on the segment `a..b`.
     pub fn segment_minimum(&self, a: DVec3, b: DVec3) -> DVec3 {
         let d = b - a;
