@@ -63,25 +63,8 @@ pub(super) fn decimate_by_regions(
     let nv = mesh.vertex_count();
     // Regions: runs of `region_triangles / 2` vertices in Morton order of position (a
     // closed surface has about two triangles per vertex), so each is a compact piece.
-    let (lo, hi) = bounds(&mesh.positions);
-    let extent = (hi - lo).max_element().max(f64::MIN_POSITIVE);
-    let mut order: Vec<(u32, u32)> = mesh
-        .positions
-        .par_iter()
-        .enumerate()
-        .map(|(v, p)| {
-            let q =
-                ((p.as_dvec3() - lo) / extent * 1023.0).clamp(DVec3::ZERO, DVec3::splat(1023.0));
-            (morton3(q.x as u32, q.y as u32, q.z as u32), v as u32)
-        })
-        .collect();
-    order.par_sort_unstable();
     let region_vertices = (options.region_triangles / 2).max(1);
-    let mut region_of = vec![0u32; nv];
-    for (rank, &(_, v)) in order.iter().enumerate() {
-        region_of[v as usize] = (rank / region_vertices) as u32;
-    }
-    drop(order);
+    let region_of = morton_regions(&mesh.positions, region_vertices);
     let regions = nv.div_ceil(region_vertices);
     // Triangles with all three vertices in one region are that region's; the others are
     // seam triangles, and their vertices stay locked until the seam band is decimated.
@@ -243,6 +226,64 @@ pub(super) fn decimate_by_regions(
     stats
 }
 
+/// The Morton code of `p` on a 1024³ lattice over the cube of edge `extent` at `lo`.
+fn morton_code(p: Vec3, lo: DVec3, extent: f64) -> u32 {
+    let q = ((p.as_dvec3() - lo) / extent * 1023.0).clamp(DVec3::ZERO, DVec3::splat(1023.0));
+    morton3(q.x as u32, q.y as u32, q.z as u32)
+}
+
+/// The region of every vertex: its rank in (Morton code of position, index) order,
+/// divided by `region_vertices`.
+fn morton_regions(positions: &[Vec3], region_vertices: usize) -> Vec<u32> {
+    let (lo, hi) = bounds(positions);
+    let extent = (hi - lo).max_element().max(f64::MIN_POSITIVE);
+    // A vertex's rank in (Morton code, index) order, divided by the region size, is its
+    // region. Only the ranks at region boundaries need a sort: codes are counted by their
+    // top bits, each bucket's vertices take consecutive ranks, and a bucket that no
+    // region boundary splits sends all of its vertices to one region.
+    let codes: Vec<u32> = positions
+        .par_iter()
+        .map(|p| morton_code(*p, lo, extent))
+        .collect();
+    const BUCKET_SHIFT: u32 = 30 - 16;
+    let mut bucket_start = vec![0usize; (1 << 16) + 1];
+    for &code in &codes {
+        bucket_start[(code >> BUCKET_SHIFT) as usize + 1] += 1;
+    }
+    for b in 0..1 << 16 {
+        bucket_start[b + 1] += bucket_start[b];
+    }
+    let bucket_region = |b: usize| {
+        let (first, end) = (bucket_start[b], bucket_start[b + 1]);
+        (end > first && first / region_vertices == (end - 1) / region_vertices)
+            .then_some((first / region_vertices) as u32)
+    };
+    const SPLIT: u32 = u32::MAX;
+    let mut region_of: Vec<u32> = codes
+        .par_iter()
+        .map(|&code| bucket_region((code >> BUCKET_SHIFT) as usize).unwrap_or(SPLIT))
+        .collect();
+    let mut split: Vec<(u32, u32)> = codes
+        .iter()
+        .zip(0u32..)
+        .filter(|&(_, v)| region_of[v as usize] == SPLIT)
+        .map(|(&code, v)| (code, v))
+        .collect();
+    drop(codes);
+    split.sort_unstable();
+    let mut next_rank = 0;
+    let mut bucket = usize::MAX;
+    for &(code, v) in &split {
+        let b = (code >> BUCKET_SHIFT) as usize;
+        if b != bucket {
+            (bucket, next_rank) = (b, bucket_start[b]);
+        }
+        region_of[v as usize] = (next_rank / region_vertices) as u32;
+        next_rank += 1;
+    }
+    region_of
+}
+
 /// Decimates only the band of triangles around the `flagged` vertices (the triangles
 /// within [`BAND_RINGS`] + 1 rings of one) until the whole mesh has
 /// `target` triangles or the error bound stops it; the rest of the mesh is untouched and
@@ -328,5 +369,50 @@ pub fn decimate_band(
         triangles_before: before,
         triangles_after: mesh.triangle_count(),
         ..band_stats
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn regions_are_runs_of_the_morton_order() {
+        let mut seed = 5u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        // A cloud, and a flat sheet whose codes crowd into few buckets; duplicated
+        // positions share a code and are ranked by index.
+        let cloud: Vec<Vec3> = (0..30_000)
+            .map(|_| Vec3::new(next(), next(), next()))
+            .collect();
+        let mut sheet: Vec<Vec3> = (0..20_000)
+            .map(|_| Vec3::new(next() * 1e-3, next() * 1e-3, 0.5))
+            .collect();
+        sheet.push(Vec3::splat(1.0));
+        sheet.extend_from_within(..500);
+        for positions in [cloud, sheet] {
+            for region_vertices in [1, 7, 1000, 4096, 1 << 20] {
+                let (lo, hi) = bounds(&positions);
+                let extent = (hi - lo).max_element().max(f64::MIN_POSITIVE);
+                let mut order: Vec<(u32, u32)> = (0..positions.len() as u32)
+                    .map(|v| (morton_code(positions[v as usize], lo, extent), v))
+                    .collect();
+                order.sort_unstable();
+                let mut expected = vec![0u32; positions.len()];
+                for (rank, &(_, v)) in order.iter().enumerate() {
+                    expected[v as usize] = (rank / region_vertices) as u32;
+                }
+                assert_eq!(
+                    morton_regions(&positions, region_vertices),
+                    expected,
+                    "{region_vertices} vertices per region"
+                );
+            }
+        }
     }
 }
