@@ -118,20 +118,25 @@ pub fn march_blocks(field: &SparseField, range: Option<BlockRange>) -> Vec<Block
 pub fn stitch(mut surfaces: Vec<BlockSurface>) -> (TriMesh, MarchingCubesStats) {
     surfaces.sort_unstable_by_key(|s| [s.key[2], s.key[1], s.key[0]]);
     let (base, index_of) = number_blocks(&surfaces);
-    let (surfaces_ref, base_ref) = (&surfaces, &base);
-    let triangles: Vec<[u32; 3]> = surfaces
+    // Every block fills its own slices of the output, in parallel, in place.
+    let mut triangles = vec![[0u32; 3]; surfaces.iter().map(|s| s.triangles.len()).sum()];
+    let mut positions = vec![Vec3::ZERO; *base.last().unwrap() as usize];
+    let triangle_slices =
+        split_by_lengths(&mut triangles, surfaces.iter().map(|s| s.triangles.len()));
+    let position_slices = split_by_lengths(&mut positions, surfaces.iter().map(|s| s.owned.len()));
+    surfaces
         .par_iter()
-        .flat_map_iter(|s| {
+        .zip(triangle_slices)
+        .zip(position_slices)
+        .for_each(|((s, triangles), positions)| {
             let owners = owner_table(&index_of, s.key);
-            s.triangles
-                .iter()
-                .map(move |t| t.map(|r| resolve(surfaces_ref, &owners, base_ref, r)))
-        })
-        .collect();
-    let mut positions = Vec::with_capacity(*base.last().unwrap() as usize);
-    for s in &surfaces {
-        positions.extend(s.owned.iter().map(|e| e.1));
-    }
+            for (out, t) in triangles.iter_mut().zip(&s.triangles) {
+                *out = t.map(|r| resolve(&surfaces, &owners, &base, r));
+            }
+            for (out, e) in positions.iter_mut().zip(&s.owned) {
+                *out = e.1;
+            }
+        });
     let stats = MarchingCubesStats {
         blocks_visited: surfaces.len(),
         vertices: positions.len(),
@@ -145,6 +150,18 @@ pub fn stitch(mut surfaces: Vec<BlockSurface>) -> (TriMesh, MarchingCubesStats) 
         },
         stats,
     )
+}
+
+/// `items` cut into consecutive slices of the given lengths (which must add up to at
+/// most its length).
+fn split_by_lengths<T>(mut items: &mut [T], lengths: impl Iterator<Item = usize>) -> Vec<&mut [T]> {
+    lengths
+        .map(|n| {
+            let (head, tail) = std::mem::take(&mut items).split_at_mut(n);
+            items = tail;
+            head
+        })
+        .collect()
 }
 
 /// The vertex numbering of `surfaces` in their order: the first index of each block's
