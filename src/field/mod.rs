@@ -28,7 +28,7 @@
 use crate::error::{Error, Result};
 use crate::grid::{zeroed_blocks, BlockKey, BlockValues, SparseField, BLOCK_EDGE, BLOCK_VOLUME};
 use glam::Vec3;
-use hashbrown::HashSet;
+use hashbrown::{HashMap, HashSet};
 use rayon::prelude::*;
 
 mod concavity;
@@ -327,33 +327,15 @@ fn compute_blocks_with(
     drop(halves);
     let sorted: Vec<Vec3> = order.par_iter().map(|&i| positions[i as usize]).collect();
     drop(order);
-    let homes: HashSet<BlockKey> = runs
-        .iter()
-        .map(|(half, _, _)| half.map(|h| h.div_euclid(2)))
-        .collect();
+    let half_reach = (radius_cells / HALF as f32).ceil() as i32;
+    let candidates = candidate_blocks(runs.iter().map(|r| r.0), half_reach, reach, range);
     let index = HalfRowIndex::new(&runs);
     drop(runs);
-    // Candidate blocks: within `reach` blocks of a populated home block.
-    let mut candidates: HashSet<BlockKey> = HashSet::new();
-    for key in &homes {
-        for dz in -reach..=reach {
-            for dy in -reach..=reach {
-                for dx in -reach..=reach {
-                    let c = [key[0] + dx, key[1] + dy, key[2] + dz];
-                    if range.is_none_or(|r| r.contains(c)) {
-                        candidates.insert(c);
-                    }
-                }
-            }
-        }
-    }
-    let mut candidates: Vec<BlockKey> = candidates.into_iter().collect();
-    candidates.sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
 
     let kernel = BlockKernel {
         sorted: &sorted,
         index: &index,
-        half_reach: (radius_cells / HALF as f32).ceil() as i32,
+        half_reach,
         inv_h,
         radius_cells,
         h,
@@ -393,6 +375,60 @@ fn compute_blocks_with(
     let field = SparseField::from_parts(h, options.outside_value(), &keys, values);
     stats.block_bytes = field.memory_bytes();
     (field, stats)
+}
+
+/// The blocks a particle may reach, in (z, y, x) order: those with a vertex within
+/// `half_reach` half-blocks (per axis) of a populated half-block (`halves`). A particle is
+/// within R of a vertex only if their half-blocks are that close (`half_reach =
+/// ⌈R / 4h⌉`), so every block in the band is a candidate; a candidate no particle
+/// reaches is dropped after its evaluation. Half-blocks, not whole home blocks: the
+/// outer shell of candidates is half as thick, and a third of the candidates of whole
+/// blocks were empty (4M scene). The candidates lie within `reach` blocks of a home.
+fn candidate_blocks(
+    halves: impl IntoIterator<Item = BlockKey>,
+    half_reach: i32,
+    reach: i32,
+    range: Option<BlockRange>,
+) -> Vec<BlockKey> {
+    // The populated halves of every home block, as a mask (bit x + 2y + 4z).
+    let mut homes: HashMap<BlockKey, u8> = HashMap::new();
+    for half in halves {
+        let bit = half[0].rem_euclid(2) | half[1].rem_euclid(2) << 1 | half[2].rem_euclid(2) << 2;
+        *homes.entry(half.map(|h| h.div_euclid(2))).or_default() |= 1 << bit;
+    }
+    // Per half offset (0 or 1 along an axis), the block offsets within reach of it:
+    // blocks b with [2b, 2b + 1] within half_reach of half 2B + o.
+    let span = |o: i32| {
+        ((o - 1 - half_reach).div_euclid(2) + ((o - 1 - half_reach).rem_euclid(2) != 0) as i32)
+            ..=(o + half_reach).div_euclid(2)
+    };
+    let side = (2 * reach + 1) as usize;
+    let mut candidates: HashSet<BlockKey> = HashSet::new();
+    let mut near = vec![false; side * side * side];
+    for (key, &halves) in &homes {
+        near.fill(false);
+        for bit in (0..8).filter(|b| halves & (1 << b) != 0) {
+            let o = [bit & 1, (bit >> 1) & 1, (bit >> 2) & 1];
+            for dz in span(o[2]) {
+                for dy in span(o[1]) {
+                    for dx in span(o[0]) {
+                        let at = [dx, dy, dz].map(|d| (d + reach) as usize);
+                        near[(at[2] * side + at[1]) * side + at[0]] = true;
+                    }
+                }
+            }
+        }
+        for (n, _) in near.iter().enumerate().filter(|(_, &is)| is) {
+            let d = [n % side, (n / side) % side, n / (side * side)].map(|d| d as i32 - reach);
+            let c = [0, 1, 2].map(|a| key[a] + d[a]);
+            if range.is_none_or(|r| r.contains(c)) {
+                candidates.insert(c);
+            }
+        }
+    }
+    let mut candidates: Vec<BlockKey> = candidates.into_iter().collect();
+    candidates.sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
+    candidates
 }
 
 /// Rows of vertices in a block.
@@ -669,6 +705,50 @@ mod tests {
             for (a, b) in values.iter().zip(other.iter()) {
                 assert_eq!(a.to_bits(), b.to_bits(), "block {key:?}");
             }
+        }
+    }
+
+    #[test]
+    fn every_block_a_particle_reaches_is_a_candidate() {
+        let mut seed = 9u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        // Particles around the origin (negative keys too), in cells of h = 1.
+        let positions: Vec<Vec3> = (0..60)
+            .map(|_| Vec3::new(next(), next(), next()) * 40.0 - 20.0)
+            .collect();
+        for influence in [1.5f32, 4.0, 7.0, 16.0] {
+            let mut options = FieldOptions::new(1.0);
+            options.influence_radius = influence;
+            let reach = block_reach(&options);
+            let half_reach = (influence / HALF as f32).ceil() as i32;
+            let halves = positions.iter().map(|p| home_half_block(*p, 1.0));
+            let candidates: HashSet<BlockKey> = candidate_blocks(halves, half_reach, reach, None)
+                .into_iter()
+                .collect();
+            // Brute force: blocks with a vertex within R of a particle.
+            let mut reached = 0;
+            for p in &positions {
+                let lo = (*p - influence).floor().as_ivec3();
+                let hi = (*p + influence).ceil().as_ivec3();
+                for z in lo.z..=hi.z {
+                    for y in lo.y..=hi.y {
+                        for x in lo.x..=hi.x {
+                            let v = Vec3::new(x as f32, y as f32, z as f32);
+                            if (v - *p).length() < influence {
+                                let key = [x, y, z].map(|c| c.div_euclid(BLOCK_EDGE));
+                                assert!(candidates.contains(&key), "R = {influence}: {key:?}");
+                                reached += 1;
+                            }
+                        }
+                    }
+                }
+            }
+            assert!(reached > 0);
         }
     }
 }
