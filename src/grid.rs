@@ -255,13 +255,8 @@ mod tests {
 
     #[test]
     fn packed_sort_orders_like_the_key_tuples() {
-        let mut seed = 3u64;
-        let mut next = |m: i32| {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 33) as i32).rem_euclid(2 * m) - m
-        };
+        let mut rng = crate::test_rng::TestRng::new(3);
+        let mut next = |m: i32| ((rng.next_u64() >> 33) as i32).rem_euclid(2 * m) - m;
         for spread in [3, 1 << 19, 1 << 22] {
             let keys: Vec<[i32; 3]> = (0..5000)
                 .map(|_| [next(spread), next(3), next(spread)])

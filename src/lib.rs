@@ -49,6 +49,8 @@ pub mod neighbors;
 pub mod pipeline;
 pub mod sequence;
 pub mod subdivision;
+#[cfg(test)]
+mod test_rng;
 pub mod tiles;
 
 pub use error::{Error, Result};

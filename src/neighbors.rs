@@ -158,19 +158,13 @@ fn isolated_in(hash: &CellHash, positions: &[Vec3], radius: f32, wanted: &[bool]
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn lcg(seed: &mut u64) -> f32 {
-        *seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((*seed >> 40) as f32) / ((1u64 << 24) as f32)
-    }
+    use crate::test_rng::TestRng;
 
     #[test]
     fn isolation_matches_brute_force() {
-        let mut seed = 7;
+        let mut rng = TestRng::new(7);
         let pts: Vec<Vec3> = (0..600)
-            .map(|_| Vec3::new(lcg(&mut seed), lcg(&mut seed), lcg(&mut seed)) * 4.0 - 2.0)
+            .map(|_| Vec3::new(rng.unit_f32(), rng.unit_f32(), rng.unit_f32()) * 4.0 - 2.0)
             .collect();
         let radius = 0.3;
         let fast = find_isolated(&pts, radius);
@@ -187,9 +181,9 @@ mod tests {
     #[test]
     fn isolation_from_grouped_cells_matches_the_binned_search() {
         // Clusters and strays, binned by cubes smaller and larger than the radius.
-        let mut seed = 11;
+        let mut rng = TestRng::new(11);
         let mut pts: Vec<Vec3> = (0..800)
-            .map(|_| Vec3::new(lcg(&mut seed), lcg(&mut seed), lcg(&mut seed)) * 6.0 - 3.0)
+            .map(|_| Vec3::new(rng.unit_f32(), rng.unit_f32(), rng.unit_f32()) * 6.0 - 3.0)
             .collect();
         pts.extend((0..200).map(|k| Vec3::splat(0.7) + Vec3::new(k as f32 * 0.01, 0.0, 0.0)));
         let radius = 0.35;

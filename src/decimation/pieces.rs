@@ -378,13 +378,8 @@ mod tests {
 
     #[test]
     fn regions_are_runs_of_the_morton_order() {
-        let mut seed = 5u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rng = crate::test_rng::TestRng::new(5);
+        let mut next = || rng.unit_f32();
         // A cloud, and a flat sheet whose codes crowd into few buckets; duplicated
         // positions share a code and are ranked by index.
         let cloud: Vec<Vec3> = (0..30_000)

@@ -402,34 +402,32 @@ mod lanes {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_rng::TestRng;
 
     /// A deterministic stream of numbers in [-1, 1).
-    fn next(seed: &mut u64) -> f64 {
-        *seed = seed
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (*seed >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+    fn next(rng: &mut TestRng) -> f64 {
+        rng.unit_f64() * 2.0 - 1.0
     }
 
     #[test]
     fn lanes_cost_every_candidate_exactly_as_the_scalar_placement() {
-        let mut seed = 7;
+        let mut rng = TestRng::new(7);
         let mut pos = Vec::new();
         let mut quadric = Vec::new();
         for k in 0..400 {
-            let p = DVec3::new(next(&mut seed), next(&mut seed), next(&mut seed));
+            let p = DVec3::new(next(&mut rng), next(&mut rng), next(&mut rng));
             pos.push(p);
             // Quadrics of 0 to 3 planes through points near `p` (rank 0 to 3: no optimum,
             // a segment minimum, or a well-conditioned optimum), some nearly parallel.
             let mut q = Quadric::default();
             for plane in 0..k % 4 {
                 let tilt = if k % 7 == 0 { 1e-4 } else { 1.0 };
-                let a = p + DVec3::new(next(&mut seed), next(&mut seed), next(&mut seed)) * 0.01;
-                let u = DVec3::new(1.0, tilt * next(&mut seed), tilt * next(&mut seed));
+                let a = p + DVec3::new(next(&mut rng), next(&mut rng), next(&mut rng)) * 0.01;
+                let u = DVec3::new(1.0, tilt * next(&mut rng), tilt * next(&mut rng));
                 let v = if plane == 1 {
-                    DVec3::new(tilt * next(&mut seed), 1.0, tilt * next(&mut seed))
+                    DVec3::new(tilt * next(&mut rng), 1.0, tilt * next(&mut rng))
                 } else {
-                    DVec3::new(tilt * next(&mut seed), tilt * next(&mut seed), 1.0)
+                    DVec3::new(tilt * next(&mut rng), tilt * next(&mut rng), 1.0)
                 };
                 q += Quadric::from_triangle(a, a + u * 0.02, a + v * 0.02);
             }

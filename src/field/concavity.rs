@@ -187,13 +187,9 @@ mod tests {
     }
 
     /// Pseudo-random numbers uniform in [−2, 2) (a 64-bit LCG seeded with `seed`).
-    fn uniform(mut seed: u64) -> impl FnMut() -> f64 {
-        move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 4.0 - 2.0
-        }
+    fn uniform(seed: u64) -> impl FnMut() -> f64 {
+        let mut rng = crate::test_rng::TestRng::new(seed);
+        move || rng.unit_f64() * 4.0 - 2.0
     }
 
     #[test]

@@ -675,13 +675,8 @@ mod tests {
         // A jittered block of particles with a loose film and a few strays: every branch
         // of the eigenvalue (one or three real roots, flat and sharp neighbourhoods).
         let r = 0.01f32;
-        let mut seed = 5u64;
-        let mut jitter = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 40) as f32 / (1u64 << 24) as f32 - 0.5) * r
-        };
+        let mut rng = crate::test_rng::TestRng::new(5);
+        let mut jitter = || (rng.unit_f32() - 0.5) * r;
         let mut positions = Vec::new();
         for z in 0..10 {
             for y in 0..14 {
@@ -710,13 +705,8 @@ mod tests {
 
     #[test]
     fn every_block_a_particle_reaches_is_a_candidate() {
-        let mut seed = 9u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rng = crate::test_rng::TestRng::new(9);
+        let mut next = || rng.unit_f32();
         // Particles around the origin (negative keys too), in cells of h = 1.
         let positions: Vec<Vec3> = (0..60)
             .map(|_| Vec3::new(next(), next(), next()) * 40.0 - 20.0)

@@ -139,12 +139,10 @@ mod tests {
 
     #[test]
     fn bit_matrices_transpose() {
-        let mut seed = 11u64;
+        let mut rng = crate::test_rng::TestRng::new(11);
         let mut m = [0u64; 64];
         for row in &mut m {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            let seed = rng.next_u64();
             *row = seed ^ (seed >> 29);
         }
         let original = m;
