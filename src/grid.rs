@@ -145,6 +145,20 @@ impl SparseField {
         self.index.get(key).map(|&i| &mut self.values[i as usize])
     }
 
+    /// The keys of the blocks holding a value `< 0`, in no particular order; the blocks
+    /// are scanned in parallel.
+    pub fn keys_of_negative_blocks(&self) -> Vec<BlockKey> {
+        let mut key_of = vec![None; self.values.len()];
+        for (key, &slot) in &self.index {
+            key_of[slot as usize] = Some(*key);
+        }
+        self.values
+            .par_iter()
+            .zip(key_of)
+            .filter_map(|(values, key)| key.filter(|_| values.iter().any(|&v| v < 0.0)))
+            .collect()
+    }
+
     /// Every stored block, in no particular order.
     pub fn blocks(&self) -> impl Iterator<Item = (&BlockKey, &BlockValues)> {
         self.index
@@ -269,6 +283,28 @@ mod tests {
             assert_eq!(sort_by_key_zyx(&keys), expected, "spread {spread}");
         }
         assert!(sort_by_key_zyx(&[]).is_empty());
+    }
+
+    #[test]
+    fn negative_blocks_are_those_with_a_value_below_zero() {
+        let block = |v: f32, at: usize| {
+            let mut values = [1.0f32; BLOCK_VOLUME];
+            values[at] = v;
+            values
+        };
+        let field = SparseField::from_blocks(
+            1.0,
+            1.0,
+            [
+                ([0, 0, 0], block(0.0, 5)),
+                ([-1, 2, 0], block(-0.5, BLOCK_VOLUME - 1)),
+                ([3, 0, -4], block(2.0, 0)),
+                ([7, 7, 7], block(-1e-30, 0)),
+            ],
+        );
+        let mut negative = field.keys_of_negative_blocks();
+        negative.sort();
+        assert_eq!(negative, vec![[-1, 2, 0], [7, 7, 7]]);
     }
 
     #[test]

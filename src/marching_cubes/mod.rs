@@ -24,7 +24,7 @@ use crate::field::BlockRange;
 use crate::grid::{local_index, BlockKey, BlockValues, SparseField, BLOCK_EDGE};
 use crate::mesh::TriMesh;
 use glam::{DVec3, Vec3};
-use hashbrown::{HashMap, HashSet};
+use hashbrown::HashMap;
 use rayon::prelude::*;
 
 /// What marching cubes produced.
@@ -87,23 +87,24 @@ pub fn extract_surface(field: &SparseField) -> (TriMesh, MarchingCubesStats) {
 pub fn march_blocks(field: &SparseField, range: Option<BlockRange>) -> Vec<BlockSurface> {
     // Blocks to visit: the block itself or one of its +x/+y/+z neighbours holds a negative
     // value.
-    let mut visit: HashSet<BlockKey> = HashSet::new();
-    for (key, values) in field.blocks() {
-        if values.iter().any(|&v| v < 0.0) {
-            for o in 0..8 {
-                let k = [
+    // (Found in parallel, then sorted and deduplicated.)
+    let mut keys: Vec<BlockKey> = field
+        .keys_of_negative_blocks()
+        .into_par_iter()
+        .flat_map_iter(|key| {
+            (0..8).map(move |o| {
+                [
                     key[0] - (o & 1),
                     key[1] - ((o >> 1) & 1),
                     key[2] - ((o >> 2) & 1),
-                ];
-                if range.is_none_or(|r| r.contains(k)) {
-                    visit.insert(k);
-                }
-            }
-        }
-    }
-    let mut keys: Vec<BlockKey> = visit.into_iter().collect();
-    keys.sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
+                ]
+            })
+        })
+        .filter(|&k| range.is_none_or(|r| r.contains(k)))
+        .collect();
+    keys.par_sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
+    keys.dedup();
+    keys.shrink_to_fit();
     keys.par_iter()
         .map_init(
             || (vec![0.0f32; CUBE], vec![0u16; VERTEX_IDS]),
