@@ -28,7 +28,7 @@
 use crate::error::{Error, Result};
 use crate::grid::{zeroed_blocks, BlockKey, BlockValues, SparseField, BLOCK_EDGE, BLOCK_VOLUME};
 use glam::Vec3;
-use hashbrown::{HashMap, HashSet};
+use hashbrown::HashMap;
 use rayon::prelude::*;
 
 mod concavity;
@@ -396,38 +396,43 @@ fn candidate_blocks(
         let bit = half[0].rem_euclid(2) | half[1].rem_euclid(2) << 1 | half[2].rem_euclid(2) << 2;
         *homes.entry(half.map(|h| h.div_euclid(2))).or_default() |= 1 << bit;
     }
-    // Per half offset (0 or 1 along an axis), the block offsets within reach of it:
-    // blocks b with [2b, 2b + 1] within half_reach of half 2B + o.
+    // Per block offset `d` within `reach`, the halves (bits) within reach of it: along an
+    // axis, half offset `o` (0 or 1) reaches the blocks b with [2b, 2b + 1] within
+    // half_reach of half 2B + o.
     let span = |o: i32| {
         ((o - 1 - half_reach).div_euclid(2) + ((o - 1 - half_reach).rem_euclid(2) != 0) as i32)
             ..=(o + half_reach).div_euclid(2)
     };
-    let side = (2 * reach + 1) as usize;
-    let mut candidates: HashSet<BlockKey> = HashSet::new();
-    let mut near = vec![false; side * side * side];
-    for (key, &halves) in &homes {
-        near.fill(false);
-        for bit in (0..8).filter(|b| halves & (1 << b) != 0) {
-            let o = [bit & 1, (bit >> 1) & 1, (bit >> 2) & 1];
-            for dz in span(o[2]) {
-                for dy in span(o[1]) {
-                    for dx in span(o[0]) {
-                        let at = [dx, dy, dz].map(|d| (d + reach) as usize);
-                        near[(at[2] * side + at[1]) * side + at[0]] = true;
-                    }
-                }
-            }
-        }
-        for (n, _) in near.iter().enumerate().filter(|(_, &is)| is) {
-            let d = [n % side, (n / side) % side, n / (side * side)].map(|d| d as i32 - reach);
-            let c = [0, 1, 2].map(|a| key[a] + d[a]);
-            if range.is_none_or(|r| r.contains(c)) {
-                candidates.insert(c);
-            }
-        }
-    }
-    let mut candidates: Vec<BlockKey> = candidates.into_iter().collect();
-    candidates.sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
+    let offsets: Vec<([i32; 3], u8)> = (-reach..=reach)
+        .flat_map(|dz| {
+            (-reach..=reach).flat_map(move |dy| (-reach..=reach).map(move |dx| [dx, dy, dz]))
+        })
+        .map(|d| {
+            let reached = (0..8u8)
+                .filter(|&bit| (0..3).all(|a| span(((bit >> a) & 1) as i32).contains(&d[a])))
+                .fold(0u8, |mask, bit| mask | 1 << bit);
+            (d, reached)
+        })
+        .filter(|&(_, reached)| reached != 0)
+        .collect();
+    // Every home block is a candidate (its own halves reach it); the others are the
+    // blocks around the homes, found in parallel, most of them many times over.
+    let home_list: Vec<(BlockKey, u8)> = homes.iter().map(|(k, &m)| (*k, m)).collect();
+    let mut candidates: Vec<BlockKey> = home_list
+        .par_iter()
+        .flat_map_iter(|&(key, mask)| {
+            offsets
+                .iter()
+                .filter(move |&&(_, reached)| reached & mask != 0)
+                .map(move |(d, _)| [0, 1, 2].map(|a| key[a] + d[a]))
+                .filter(|c| !homes.contains_key(c))
+        })
+        .collect();
+    candidates.extend(home_list.iter().map(|(k, _)| *k));
+    candidates.retain(|&c| range.is_none_or(|r| r.contains(c)));
+    candidates.par_sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
+    candidates.dedup();
+    candidates.shrink_to_fit();
     candidates
 }
 
@@ -669,6 +674,7 @@ fn accumulate_row(sums: &mut [[f32; ROW]; SUMS], x: f32, ry: f32, rz: f32, inv_r
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hashbrown::HashSet;
 
     #[test]
     fn the_vector_kernel_gives_the_portable_kernel_values_bit_for_bit() {
