@@ -310,7 +310,6 @@ fn compute_blocks_with(
 ) -> (SparseField, FieldStats) {
     let h = options.cell_size_world();
     let inv_h = 1.0 / h;
-    let reach = block_reach(options);
     let radius_cells = options.influence_radius / options.cell_size;
 
     // Particles sorted by (home half-block, index) in (z, y, x) order, copied into that
@@ -328,7 +327,7 @@ fn compute_blocks_with(
     let sorted: Vec<Vec3> = order.par_iter().map(|&i| positions[i as usize]).collect();
     drop(order);
     let half_reach = (radius_cells / HALF as f32).ceil() as i32;
-    let candidates = candidate_blocks(runs.iter().map(|r| r.0), half_reach, reach, range);
+    let candidates = candidate_blocks(runs.iter().map(|r| r.0), half_reach, range);
     let index = HalfRowIndex::new(&runs);
     drop(runs);
 
@@ -383,11 +382,10 @@ fn compute_blocks_with(
 /// ⌈R / 4h⌉`), so every block in the band is a candidate; a candidate no particle
 /// reaches is dropped after its evaluation. Half-blocks, not whole home blocks: the
 /// outer shell of candidates is half as thick, and a third of the candidates of whole
-/// blocks were empty (4M scene). The candidates lie within `reach` blocks of a home.
+/// blocks were empty (4M scene).
 fn candidate_blocks(
     halves: impl IntoIterator<Item = BlockKey>,
     half_reach: i32,
-    reach: i32,
     range: Option<BlockRange>,
 ) -> Vec<BlockKey> {
     // The populated halves of every home block, as a mask (bit x + 2y + 4z).
@@ -396,13 +394,12 @@ fn candidate_blocks(
         let bit = half[0].rem_euclid(2) | half[1].rem_euclid(2) << 1 | half[2].rem_euclid(2) << 2;
         *homes.entry(half.map(|h| h.div_euclid(2))).or_default() |= 1 << bit;
     }
-    // Per block offset `d` within `reach`, the halves (bits) within reach of it: along an
-    // axis, half offset `o` (0 or 1) reaches the blocks b with [2b, 2b + 1] within
-    // half_reach of half 2B + o.
-    let span = |o: i32| {
-        ((o - 1 - half_reach).div_euclid(2) + ((o - 1 - half_reach).rem_euclid(2) != 0) as i32)
-            ..=(o + half_reach).div_euclid(2)
-    };
+    // Per block offset `d`, the halves (bits) within reach of it: along an axis, half
+    // offset `o` (0 or 1) reaches the blocks b with [2b, 2b + 1] within half_reach of half
+    // 2B + o, i.e. ⌈(o − 1 − half_reach) / 2⌉ ≤ b − B ≤ ⌊(o + half_reach) / 2⌋, so no
+    // offset exceeds ⌊(1 + half_reach) / 2⌋.
+    let span = |o: i32| -(1 + half_reach - o).div_euclid(2)..=(o + half_reach).div_euclid(2);
+    let reach = (1 + half_reach).div_euclid(2);
     let offsets: Vec<([i32; 3], u8)> = (-reach..=reach)
         .flat_map(|dz| {
             (-reach..=reach).flat_map(move |dy| (-reach..=reach).map(move |dx| [dx, dy, dz]))
@@ -718,12 +715,9 @@ mod tests {
             .map(|_| Vec3::new(next(), next(), next()) * 40.0 - 20.0)
             .collect();
         for influence in [1.5f32, 4.0, 7.0, 16.0] {
-            let mut options = FieldOptions::new(1.0);
-            options.influence_radius = influence;
-            let reach = block_reach(&options);
             let half_reach = (influence / HALF as f32).ceil() as i32;
             let halves = positions.iter().map(|p| home_half_block(*p, 1.0));
-            let candidates: HashSet<BlockKey> = candidate_blocks(halves, half_reach, reach, None)
+            let candidates: HashSet<BlockKey> = candidate_blocks(halves, half_reach, None)
                 .into_iter()
                 .collect();
             // Brute force: blocks with a vertex within R of a particle.
