@@ -519,15 +519,3 @@ impl State {
         });
     }
 }
-
-/// Interleaves the bits of three 10-bit coordinates.
-fn morton3(x: u32, y: u32, z: u32) -> u32 {
-    fn spread(mut v: u32) -> u32 {
-        v &= 0x3ff;
-        v = (v | (v << 16)) & 0x0300_00ff;
-        v = (v | (v << 8)) & 0x0300_f00f;
-        v = (v | (v << 4)) & 0x030c_30c3;
-        (v | (v << 2)) & 0x0924_9249
-    }
-    spread(x) | (spread(y) << 1) | (spread(z) << 2)
-}

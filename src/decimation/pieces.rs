@@ -7,9 +7,7 @@
 //! locked, and put back ([`place_survivors`]): a locked survivor keeps its identity, the
 //! piece's other survivors are new vertices.
 
-use super::{
-    bounds, decimate_locked, decimate_locked_walk, morton3, DecimateOptions, DecimateStats, Walk,
-};
+use super::{bounds, decimate_locked, decimate_locked_walk, DecimateOptions, DecimateStats, Walk};
 use crate::mesh::TriMesh;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -224,6 +222,18 @@ pub(super) fn decimate_by_regions(
     stats.add_work(&last);
     stats.triangles_after = last.triangles_after;
     stats
+}
+
+/// Interleaves the bits of three 10-bit coordinates.
+fn morton3(x: u32, y: u32, z: u32) -> u32 {
+    fn spread(mut v: u32) -> u32 {
+        v &= 0x3ff;
+        v = (v | (v << 16)) & 0x0300_00ff;
+        v = (v | (v << 8)) & 0x0300_f00f;
+        v = (v | (v << 4)) & 0x030c_30c3;
+        (v | (v << 2)) & 0x0924_9249
+    }
+    spread(x) | (spread(y) << 1) | (spread(z) << 2)
 }
 
 /// The Morton code of `p` on a 1024³ lattice over the cube of edge `extent` at `lo`.
