@@ -23,6 +23,7 @@ pub(super) struct Candidate {
 }
 
 const MIN_NORMAL_DOT: f64 = 0.5;
+const MIN_NORMAL_DOT_2: f64 = MIN_NORMAL_DOT * MIN_NORMAL_DOT;
 /// Triangles of a vertex whose corners the link test gathers on the stack.
 const LINK_TRIANGLES: usize = 16;
 const MIN_QUALITY: f64 = 0.02;
@@ -231,24 +232,30 @@ impl View {
                 }
                 let old = tri.map(|w| self.pos(w));
                 let new = tri.map(|w| if w == u || w == v { p } else { self.pos(w) });
+                // Squared lengths throughout: `a·b < k·|a|·|b|` (k > 0) is
+                // `a·b < 0 or (a·b)² < k²·|a|²·|b|²`, with no square root.
                 let n0 = (old[1] - old[0]).cross(old[2] - old[0]);
                 let n1 = (new[1] - new[0]).cross(new[2] - new[0]);
-                let (l0, l1) = (n0.length(), n1.length());
-                if l1 == 0.0 {
+                let (s0, s1) = (n0.length_squared(), n1.length_squared());
+                if s1 == 0.0 {
                     return false;
                 }
-                if l0 > 0.0 && n0.dot(n1) < MIN_NORMAL_DOT * l0 * l1 {
+                let turn = n0.dot(n1);
+                if s0 > 0.0 && (turn < 0.0 || turn * turn < MIN_NORMAL_DOT_2 * s0 * s1) {
                     return false;
                 }
+                // The reference normal is a unit vector (or zero: then always refused).
                 let reference = (*self.reference_normal.add(t as usize)).as_dvec3();
-                if n1.dot(reference) < MIN_NORMAL_DOT * l1 {
+                let drift = n1.dot(reference);
+                if drift < 0.0 || drift * drift < MIN_NORMAL_DOT_2 * s1 {
                     return false;
                 }
+                // Quality 4√3·area / Σl² = 2√3·|n1| / Σl², below MIN_QUALITY.
                 let edges2 = (new[1] - new[0]).length_squared()
                     + (new[2] - new[1]).length_squared()
                     + (new[0] - new[2]).length_squared();
-                let quality = 2.0 * 3f64.sqrt() * l1 / edges2;
-                if quality < MIN_QUALITY {
+                let bound = MIN_QUALITY / (2.0 * 3f64.sqrt()) * edges2;
+                if s1 < bound * bound {
                     return false;
                 }
             }
