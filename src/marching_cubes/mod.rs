@@ -107,8 +107,8 @@ pub fn march_blocks(field: &SparseField, range: Option<BlockRange>) -> Vec<Block
     keys.shrink_to_fit();
     keys.par_iter()
         .map_init(
-            || (vec![0.0f32; CUBE], vec![0u16; VERTEX_IDS]),
-            |(cube, slots), &key| march_block(field, key, cube, slots),
+            || (vec![0.0f32; CUBE], vec![0u16; VERTEX_IDS], Vec::new()),
+            |(cube, slots, owned_edges), &key| march_block(field, key, cube, slots, owned_edges),
         )
         .collect()
 }
@@ -314,13 +314,15 @@ fn cube_index(a: i32, b: i32, c: i32) -> usize {
     ((c * (E + 1) + b) * (E + 1) + a) as usize
 }
 
-/// Marches the 8³ cells whose lower corner lies in block `key`; `cube` and `slots` are
-/// scratch ((E+1)³ values, one entry per vertex id).
+/// Marches the 8³ cells whose lower corner lies in block `key`; `cube`, `slots` and
+/// `owned_edges` are scratch ((E+1)³ values, one entry per vertex id, the ids of the
+/// block's own edge vertices).
 fn march_block(
     field: &SparseField,
     key: BlockKey,
     cube: &mut [f32],
     slots: &mut [u16],
+    owned_edges: &mut Vec<u16>,
 ) -> BlockSurface {
     // Gather the (E+1)³ values: this block plus the +x/+y/+z neighbours' first layers.
     let neighbours: [Option<&BlockValues>; 8] =
@@ -359,28 +361,36 @@ fn march_block(
             triangles: Vec::new(),
         };
     }
+    // Per row of cells (b, c): the four vertex rows around it, in corner order (y, then
+    // z), and its cells with a sign change. Cell `a` has an inside corner when bit a or
+    // a + 1 of their union is set, and only inside corners when both bits of their
+    // intersection are.
+    let row_signs = |b: i32, c: i32| signs[(c * (E + 1) + b) as usize];
+    let cell_rows: [([u16; 4], u16); (E * E) as usize] = std::array::from_fn(|n| {
+        let (b, c) = (n as i32 % E, n as i32 / E);
+        let rows = [
+            row_signs(b, c),
+            row_signs(b + 1, c),
+            row_signs(b, c + 1),
+            row_signs(b + 1, c + 1),
+        ];
+        let any = rows[0] | rows[1] | rows[2] | rows[3];
+        let all = rows[0] & rows[1] & rows[2] & rows[3];
+        (rows, (any | any >> 1) & !(all & all >> 1) & ((1 << E) - 1))
+    });
+    // Two triangles per cell with a sign change on average (4M scene: 2.00), reserved
+    // at once so that most blocks' lists are never grown by copying.
+    let mixed_cells: usize = cell_rows.iter().map(|r| r.1.count_ones() as usize).sum();
     let table = table::table();
     let edges = table::cube_edges();
-    let mut triangles = Vec::new();
-    let mut owned_edges: Vec<u16> = Vec::new();
+    let mut triangles = Vec::with_capacity(2 * mixed_cells);
+    owned_edges.clear();
     let mut centers: Vec<(u16, Vec3)> = Vec::new();
     let h = field.cell_size;
     let corner_offset = |k: u8| ((k & 1) as i32, ((k >> 1) & 1) as i32, ((k >> 2) & 1) as i32);
-    let row_signs = |b: i32, c: i32| signs[(c * (E + 1) + b) as usize];
     for c in 0..E {
         for b in 0..E {
-            // The four vertex rows around this row of cells, in corner order (y, then z).
-            let rows = [
-                row_signs(b, c),
-                row_signs(b + 1, c),
-                row_signs(b, c + 1),
-                row_signs(b + 1, c + 1),
-            ];
-            let any = rows[0] | rows[1] | rows[2] | rows[3];
-            let all = rows[0] & rows[1] & rows[2] & rows[3];
-            // Cell `a` has an inside corner when bit a or a + 1 of `any` is set, and only
-            // inside corners when both bits of `all` are.
-            let mut mixed = (any | any >> 1) & !(all & all >> 1) & ((1 << E) - 1);
+            let (rows, mut mixed) = cell_rows[(c * E + b) as usize];
             while mixed != 0 {
                 let a = mixed.trailing_zeros() as i32;
                 mixed &= mixed - 1;
@@ -443,17 +453,15 @@ fn march_block(
     owned_edges.sort_unstable();
     owned_edges.dedup();
     // Edge ids (< CENTER_ID_BASE) first, then centres in cell order: ascending ids.
-    let mut owned: Vec<(u16, Vec3)> = owned_edges
-        .into_iter()
-        .map(|id| {
-            let l = (id / 3) as i32;
-            let corner = [l % E, (l / E) % E, l / (E * E)];
-            (
-                id,
-                edge_position(cube, key, corner, (id % 3) as usize, h).as_vec3(),
-            )
-        })
-        .collect();
+    let mut owned: Vec<(u16, Vec3)> = Vec::with_capacity(owned_edges.len() + centers.len());
+    owned.extend(owned_edges.iter().map(|&id| {
+        let l = (id / 3) as i32;
+        let corner = [l % E, (l / E) % E, l / (E * E)];
+        (
+            id,
+            edge_position(cube, key, corner, (id % 3) as usize, h).as_vec3(),
+        )
+    }));
     owned.extend(centers);
     // References to the block's own vertices become their positions in `owned` (the
     // stitcher then looks up only the references into neighbour blocks).
