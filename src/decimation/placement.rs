@@ -3,8 +3,8 @@
 //! midpoint, otherwise the quadric minimum on the segment; the cost is `Q(p)` divided by
 //! the area the quadric stands for.
 //!
-//! [`place_candidates`] costs candidates four at a time, one per SIMD lane (AVX2 when the
-//! CPU has it, else two SSE2 halves): the same IEEE operations in the same order as the
+//! [`place_candidates`] costs candidates two at a time, one per lane of an SSE2 register
+//! (on x86-64; elsewhere one by one): the same IEEE operations in the same order as the
 //! scalar [`placement`], with both branches computed and the right one selected per lane,
 //! so its results are bit for bit those of the scalar code (a unit test checks it). Costing
 //! every live edge of every pass is about a quarter of the decimation; the optimum's
@@ -28,24 +28,14 @@ pub(super) fn placement(pos: &[DVec3], quadric: &[Quadric], u: u32, v: u32) -> (
     (target, q.evaluate(target))
 }
 
-/// The cost of a collapse ranked by its squared RMS distance: `Q(p) / area`, 0 for a
-/// quadric without area.
+/// The candidate of edge `(u, v)`, costed by [`placement`] and ranked by its squared RMS
+/// distance, `Q(p) / area` (0 for a quadric without area).
 #[cfg_attr(all(target_arch = "x86_64", not(test)), allow(dead_code))]
-fn normalised(cost: f64, weight: f64) -> f64 {
-    if weight > 0.0 {
-        cost / weight
-    } else {
-        0.0
-    }
-}
-
-/// The candidate of edge `(u, v)`, costed by [`placement`] and ranked by `Q(p) / area`.
-#[cfg(test)]
 pub(super) fn candidate(pos: &[DVec3], quadric: &[Quadric], u: u32, v: u32) -> Candidate {
     let (target, cost) = placement(pos, quadric, u, v);
-    let w = quadric[u as usize].weight + quadric[v as usize].weight;
+    let weight = quadric[u as usize].weight + quadric[v as usize].weight;
     Candidate {
-        cost: normalised(cost, w),
+        cost: if weight > 0.0 { cost / weight } else { 0.0 },
         target,
         u,
         v,
@@ -53,18 +43,13 @@ pub(super) fn candidate(pos: &[DVec3], quadric: &[Quadric], u: u32, v: u32) -> C
 }
 
 /// Fills in the target and cost of every candidate (its `u`, `v` set), exactly as
-/// [`placement`] and [`normalised`] would one by one.
+/// [`candidate`] would one by one.
 pub(super) fn place_candidates(pos: &[DVec3], quadric: &[Quadric], candidates: &mut [Candidate]) {
     #[cfg(target_arch = "x86_64")]
     lanes::place_candidates(pos, quadric, candidates);
     #[cfg(not(target_arch = "x86_64"))]
     for c in candidates {
-        let (target, cost) = placement(pos, quadric, c.u, c.v);
-        c.target = target;
-        c.cost = normalised(
-            cost,
-            quadric[c.u as usize].weight + quadric[c.v as usize].weight,
-        );
+        *c = candidate(pos, quadric, c.u, c.v);
     }
 }
 
@@ -132,23 +117,6 @@ mod lanes {
             low.gt(one).select(one, low)
         }
         #[inline(always)]
-        fn lt(self, o: F) -> M {
-            M(unsafe { _mm_cmplt_pd(self.0, o.0) })
-        }
-        #[inline(always)]
-        fn le(self, o: F) -> M {
-            M(unsafe { _mm_cmple_pd(self.0, o.0) })
-        }
-        #[inline(always)]
-        fn gt(self, o: F) -> M {
-            M(unsafe { _mm_cmpgt_pd(self.0, o.0) })
-        }
-        /// `!(self < o)`: also set where either is NaN.
-        #[inline(always)]
-        fn not_lt(self, o: F) -> M {
-            M(unsafe { _mm_cmpnlt_pd(self.0, o.0) })
-        }
-        #[inline(always)]
         fn is_finite(self) -> M {
             self.abs().lt(F::splat(f64::INFINITY))
         }
@@ -180,6 +148,26 @@ mod lanes {
     lane_op!(Sub, sub, _mm_sub_pd);
     lane_op!(Mul, mul, _mm_mul_pd);
     lane_op!(Div, div, _mm_div_pd);
+
+    macro_rules! lane_cmp {
+        ($(#[$doc:meta])* $method:ident, $intrinsic:ident) => {
+            impl F {
+                $(#[$doc])*
+                #[inline(always)]
+                fn $method(self, o: F) -> M {
+                    M(unsafe { $intrinsic(self.0, o.0) })
+                }
+            }
+        };
+    }
+    lane_cmp!(lt, _mm_cmplt_pd);
+    lane_cmp!(le, _mm_cmple_pd);
+    lane_cmp!(gt, _mm_cmpgt_pd);
+    lane_cmp!(
+        /// `!(self < o)`: also set where either is NaN.
+        not_lt,
+        _mm_cmpnlt_pd
+    );
 
     /// A vector per lane.
     #[derive(Clone, Copy)]
