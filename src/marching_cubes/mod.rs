@@ -314,6 +314,40 @@ fn cube_index(a: i32, b: i32, c: i32) -> usize {
     ((c * (E + 1) + b) * (E + 1) + a) as usize
 }
 
+/// Per row of cells `(b, c)` of the gathered `cube` (index `c·E + b`): the inside bits of
+/// the four vertex rows around it, in corner order (y, then z; bit `a` of a row is vertex
+/// `a`), and the bits of its cells with a sign change. `None` when every value has the
+/// same sign. A few bit operations per row of cells instead of eight loads per cell.
+#[inline(always)]
+fn cell_rows(cube: &[f32]) -> Option<[([u16; 4], u16); (E * E) as usize]> {
+    let mut signs = [0u16; (E as usize + 1) * (E as usize + 1)];
+    for (row, bits) in cube.chunks_exact(E as usize + 1).zip(signs.iter_mut()) {
+        *bits = row
+            .iter()
+            .enumerate()
+            .fold(0, |m, (a, &v)| m | ((v < 0.0) as u16) << a);
+    }
+    const FULL_ROW: u16 = (1 << (E + 1)) - 1;
+    if signs.iter().all(|&m| m == 0) || signs.iter().all(|&m| m == FULL_ROW) {
+        return None;
+    }
+    let row_signs = |b: i32, c: i32| signs[(c * (E + 1) + b) as usize];
+    Some(std::array::from_fn(|n| {
+        let (b, c) = (n as i32 % E, n as i32 / E);
+        let rows = [
+            row_signs(b, c),
+            row_signs(b + 1, c),
+            row_signs(b, c + 1),
+            row_signs(b + 1, c + 1),
+        ];
+        // Cell `a` has an inside corner when bit a or a + 1 of the rows' union is set, and
+        // only inside corners when both bits of their intersection are.
+        let any = rows[0] | rows[1] | rows[2] | rows[3];
+        let all = rows[0] & rows[1] & rows[2] & rows[3];
+        (rows, (any | any >> 1) & !(all & all >> 1) & ((1 << E) - 1))
+    }))
+}
+
 /// Marches the 8³ cells whose lower corner lies in block `key`; `cube`, `slots` and
 /// `owned_edges` are scratch ((E+1)³ values, one entry per vertex id, the ids of the
 /// block's own edge vertices).
@@ -342,42 +376,14 @@ fn march_block(
             row[E as usize] = neighbours[o | 1].map_or(outside, |block| block[src]);
         }
     }
-    // Inside bits of every row of the cube (bit `a` of row `(b, c)`: vertex `(a, b, c)`),
-    // so that the cells with a sign change are found by a few bit operations per row of
-    // cells instead of eight loads per cell.
-    let mut signs = [0u16; (E as usize + 1) * (E as usize + 1)];
-    for (row, bits) in cube.chunks_exact(E as usize + 1).zip(signs.iter_mut()) {
-        *bits = row
-            .iter()
-            .enumerate()
-            .fold(0, |m, (a, &v)| m | ((v < 0.0) as u16) << a);
-    }
-    const FULL_ROW: u16 = (1 << (E + 1)) - 1;
-    if signs.iter().all(|&m| m == 0) || signs.iter().all(|&m| m == FULL_ROW) {
+    let Some(cell_rows) = cell_rows(cube) else {
         // All outside or all inside (most blocks of the band): no cell changes sign.
         return BlockSurface {
             key,
             owned: Vec::new(),
             triangles: Vec::new(),
         };
-    }
-    // Per row of cells (b, c): the four vertex rows around it, in corner order (y, then
-    // z), and its cells with a sign change. Cell `a` has an inside corner when bit a or
-    // a + 1 of their union is set, and only inside corners when both bits of their
-    // intersection are.
-    let row_signs = |b: i32, c: i32| signs[(c * (E + 1) + b) as usize];
-    let cell_rows: [([u16; 4], u16); (E * E) as usize] = std::array::from_fn(|n| {
-        let (b, c) = (n as i32 % E, n as i32 / E);
-        let rows = [
-            row_signs(b, c),
-            row_signs(b + 1, c),
-            row_signs(b, c + 1),
-            row_signs(b + 1, c + 1),
-        ];
-        let any = rows[0] | rows[1] | rows[2] | rows[3];
-        let all = rows[0] & rows[1] & rows[2] & rows[3];
-        (rows, (any | any >> 1) & !(all & all >> 1) & ((1 << E) - 1))
-    });
+    };
     // Two triangles per cell with a sign change on average (4M scene: 2.00), reserved
     // at once so that most blocks' lists are never grown by copying.
     let mixed_cells: usize = cell_rows.iter().map(|r| r.1.count_ones() as usize).sum();
