@@ -1,9 +1,8 @@
-//! Neighbour search with a cell hash: particles binned into cubic cells of edge equal to
-//! the search radius, cells kept in a hashbrown map (no dense grid), so a query visits the
-//! 27 cells around a point. Particles that are already grouped by a cubic cell of another
-//! edge (the tiles sort theirs by home block) make a cell hash as they are
-//! ([`CellHash::from_grouped`]), with no second binning; a query then visits the cells
-//! within reach of the radius.
+//! Neighbour search for the isolation test. Particles in any order are binned into cubic
+//! cells of edge equal to the search radius, cells kept in a hashbrown map (no dense
+//! grid), so a query visits the 27 cells around a point ([`CellHash`]). Particles already
+//! sorted by a cubic cell of another edge (a tile's, by home half-block) are searched as
+//! they lie ([`find_isolated_sorted`]): the cells of one row are one run of them.
 
 use glam::Vec3;
 use hashbrown::HashMap;
@@ -16,8 +15,6 @@ pub struct CellHash {
     order: Vec<u32>,
     /// Cell key → range in `order`.
     cells: HashMap<[i32; 3], (u32, u32)>,
-    /// Cells searched around a point's own, per axis.
-    reach: i32,
 }
 
 impl CellHash {
@@ -30,34 +27,11 @@ impl CellHash {
             cell_size,
             order,
             cells,
-            reach: 1,
         }
     }
 
-    /// A cell hash of particles already grouped by cell: `cells` yields the cell of every
-    /// particle in index order (`floor(p / cell_size)`, in any rounding that keeps a point
-    /// within one cell edge of its cell), equal cells contiguous. Queries search every
-    /// cell that can hold a particle closer than `radius` (world units).
-    pub fn from_grouped(
-        cells: impl IntoIterator<Item = [i32; 3]>,
-        cell_size: f32,
-        radius: f32,
-    ) -> Self {
-        let cells = crate::grid::group_runs(cells);
-        let count = cells.values().map(|&(_, e)| e).max().unwrap_or(0);
-        // Two points closer than d lie at most ⌊d / edge⌋ + 1 cells apart on every axis
-        // (a hair more for d, against the rounding of their cells).
-        let reach = (radius as f64 / cell_size as f64 * (1.0 + 1e-6)).floor() as i32 + 1;
-        CellHash {
-            cell_size,
-            order: (0..count).collect(),
-            cells,
-            reach,
-        }
-    }
-
-    /// True when `stop(j)` holds for some particle `j` in the cells around `p` (27 for a
-    /// hash made by [`CellHash::new`]); the point's own cell is searched first and the
+    /// True when `stop(j)` holds for some particle `j` in the 27 cells around `p`; the
+    /// point's own cell is searched first and the
     /// search ends at the first hit.
     pub fn any_candidate(&self, p: Vec3, mut stop: impl FnMut(u32) -> bool) -> bool {
         let c = cell_of(p, 1.0 / self.cell_size);
@@ -67,10 +41,9 @@ impl CellHash {
                 return true;
             }
         }
-        let reach = self.reach;
-        for dz in -reach..=reach {
-            for dy in -reach..=reach {
-                for dx in -reach..=reach {
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
                     if (dx, dy, dz) == (0, 0, 0) {
                         continue;
                     }
@@ -85,15 +58,14 @@ impl CellHash {
         false
     }
 
-    /// Calls `visit(j)` for every particle `j` within the cells around `p` (27 for a hash
-    /// made by [`CellHash::new`]: a superset of the particles within one cell size of
-    /// `p`), cells in (z, y, x) order, particles of a cell in ascending index.
+    /// Calls `visit(j)` for every particle `j` within the 27 cells around `p` (a superset
+    /// of the particles within one cell size of `p`), cells in (z, y, x) order, particles
+    /// of a cell in ascending index.
     pub fn for_each_candidate(&self, p: Vec3, mut visit: impl FnMut(u32)) {
         let c = cell_of(p, 1.0 / self.cell_size);
-        let reach = self.reach;
-        for dz in -reach..=reach {
-            for dy in -reach..=reach {
-                for dx in -reach..=reach {
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
                     if let Some(&(s, e)) = self.cells.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
                         for &j in &self.order[s as usize..e as usize] {
                             visit(j);
@@ -124,18 +96,70 @@ pub fn find_isolated_where(positions: &[Vec3], radius: f32, wanted: &[bool]) -> 
     isolated_in(&CellHash::new(positions, radius), positions, radius, wanted)
 }
 
-/// [`find_isolated_where`] for positions already grouped by a cubic cell of edge
-/// `cell_size` (world units; see [`CellHash::from_grouped`] for `cells`): no second
-/// binning, the same test on the same pairs, so the same flags.
-pub fn find_isolated_grouped(
+/// Particles on either side of a particle in the sorted order that
+/// [`find_isolated_sorted`] tries before any lookup.
+const NEXT_IN_ORDER: usize = 4;
+
+/// [`find_isolated_where`] for positions sorted by a cubic cell of edge `cell_size`
+/// (world units): `cells[i]` is the cell of particle `i` (`floor(p / cell_size)`, in any
+/// rounding that keeps a point within one cell edge of its cell), in (z, y, x) order. No
+/// second binning and no hash of cells: the cells of one (y, z) row are one run of the
+/// particles, found by one lookup and two binary searches. The same test on the same
+/// pairs, so the same flags.
+pub fn find_isolated_sorted(
     positions: &[Vec3],
-    cells: impl IntoIterator<Item = [i32; 3]>,
+    cells: &[[i32; 3]],
     cell_size: f32,
     radius: f32,
     wanted: &[bool],
 ) -> Vec<bool> {
-    let hash = CellHash::from_grouped(cells, cell_size, radius);
-    isolated_in(&hash, positions, radius, wanted)
+    // The particles of every row of cells.
+    let mut rows: HashMap<[i32; 2], (u32, u32)> = HashMap::new();
+    let mut first = 0;
+    for row in cells.chunk_by(|a, b| a[1..] == b[1..]) {
+        let end = first + row.len();
+        let previous = rows.insert([row[0][1], row[0][2]], (first as u32, end as u32));
+        assert!(
+            previous.is_none(),
+            "cells must be sorted in (z, y, x) order"
+        );
+        first = end;
+    }
+    // Two points closer than d lie at most ⌊d / edge⌋ + 1 cells apart on every axis (a
+    // hair more for d, against the rounding of their cells).
+    let reach = (radius as f64 / cell_size as f64 * (1.0 + 1e-6)).floor() as i32 + 1;
+    let r2 = radius * radius;
+    positions
+        .par_iter()
+        .zip(cells)
+        .enumerate()
+        .map(|(i, (&p, c))| {
+            if !wanted[i] {
+                return false;
+            }
+            let close = |j: usize| j != i && (positions[j] - p).length_squared() < r2;
+            // The particles next to it in the sorted order first (mostly of its own cell),
+            // then its own row: most particles have a neighbour there.
+            let near = i.saturating_sub(NEXT_IN_ORDER)..(i + NEXT_IN_ORDER + 1).min(cells.len());
+            if near.into_iter().any(close) {
+                return false;
+            }
+            let offsets = std::iter::once((0, 0)).chain(
+                (-reach..=reach)
+                    .flat_map(|dz| (-reach..=reach).map(move |dy| (dy, dz)))
+                    .filter(|&d| d != (0, 0)),
+            );
+            !offsets.into_iter().any(|(dy, dz)| {
+                let Some(&(a, b)) = rows.get(&[c[1] + dy, c[2] + dz]) else {
+                    return false;
+                };
+                let row = &cells[a as usize..b as usize];
+                let lo = a as usize + row.partition_point(|k| k[0] < c[0] - reach);
+                let hi = a as usize + row.partition_point(|k| k[0] <= c[0] + reach);
+                (lo..hi).any(close)
+            })
+        })
+        .collect()
 }
 
 /// The isolation flags of `positions` with `hash` as the search structure.
@@ -179,7 +203,7 @@ mod tests {
     }
 
     #[test]
-    fn isolation_from_grouped_cells_matches_the_binned_search() {
+    fn isolation_from_sorted_cells_matches_the_binned_search() {
         // Clusters and strays, binned by cubes smaller and larger than the radius.
         let mut rng = TestRng::new(11);
         let mut pts: Vec<Vec3> = (0..800)
@@ -199,13 +223,8 @@ mod tests {
             });
             let sorted: Vec<Vec3> = order.iter().map(|&i| pts[i]).collect();
             let sorted_wanted: Vec<bool> = order.iter().map(|&i| wanted[i]).collect();
-            let flags = find_isolated_grouped(
-                &sorted,
-                sorted.iter().map(bin),
-                edge,
-                radius,
-                &sorted_wanted,
-            );
+            let cells: Vec<[i32; 3]> = sorted.iter().map(bin).collect();
+            let flags = find_isolated_sorted(&sorted, &cells, edge, radius, &sorted_wanted);
             for (k, &i) in order.iter().enumerate() {
                 assert_eq!(flags[k], expected[i], "particle {i}, bin edge {edge}");
             }

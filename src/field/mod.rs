@@ -30,6 +30,7 @@ use crate::grid::{zeroed_blocks, BlockKey, BlockValues, SparseField, BLOCK_EDGE,
 use glam::Vec3;
 use hashbrown::HashMap;
 use rayon::prelude::*;
+use std::borrow::Cow;
 
 mod concavity;
 mod coverage;
@@ -220,11 +221,15 @@ pub fn block_reach(options: &FieldOptions) -> i32 {
     (options.influence_radius / options.cell_size / BLOCK_EDGE as f32).ceil() as i32
 }
 
+/// Edge of a half-block, in cells.
+pub const HALF_BLOCK_EDGE: i32 = BLOCK_EDGE / 2;
+
 /// The home half-block of one position (the 4³ cells of its home block's eighth that
-/// contain it), `inv_h` = 1 / cell size (world units).
+/// contain it), `inv_h` = 1 / cell size (world units). Its home block is the half-block's
+/// key divided by 2 (rounded down).
 #[inline]
-fn home_half_block(p: Vec3, inv_h: f64) -> BlockKey {
-    home_cube(p, inv_h, HALF as i32)
+pub fn home_half_block(p: Vec3, inv_h: f64) -> BlockKey {
+    home_cube(p, inv_h, HALF_BLOCK_EDGE)
 }
 
 /// The home block of one position, `inv_h` = 1 / cell size (world units).
@@ -316,16 +321,23 @@ fn compute_blocks_with(
     // order: a block then scans the particles of the half-blocks within reach, not of whole
     // neighbour blocks (with R = 4 h, 512 particle slots instead of 1728, most of which
     // would be out of reach), and the half-blocks of one (y, z) half-row within reach are
-    // one contiguous run of the copy.
+    // one contiguous run of the copy. Particles already in that order (a tile's) are
+    // taken as they are: sorting them would not move any.
     let halves: Vec<BlockKey> = positions
         .par_iter()
         .map(|p| home_half_block(*p, inv_h))
         .collect();
-    let order = crate::grid::sort_by_key_zyx(&halves);
-    let runs = crate::grid::key_runs(order.iter().map(|&i| halves[i as usize]));
+    let zyx = |k: &BlockKey| [k[2], k[1], k[0]];
+    let (runs, sorted) = if halves.par_windows(2).all(|w| zyx(&w[0]) <= zyx(&w[1])) {
+        let runs = crate::grid::key_runs(halves.iter().copied());
+        (runs, Cow::Borrowed(positions))
+    } else {
+        let order = crate::grid::sort_by_key_zyx(&halves);
+        let runs = crate::grid::key_runs(order.iter().map(|&i| halves[i as usize]));
+        let sorted: Vec<Vec3> = order.par_iter().map(|&i| positions[i as usize]).collect();
+        (runs, Cow::Owned(sorted))
+    };
     drop(halves);
-    let sorted: Vec<Vec3> = order.par_iter().map(|&i| positions[i as usize]).collect();
-    drop(order);
     let half_reach = (radius_cells / HALF as f32).ceil() as i32;
     let candidates = candidate_blocks(runs.iter().map(|r| r.0), half_reach, range);
     let index = HalfRowIndex::new(&runs);
@@ -700,6 +712,36 @@ mod tests {
         assert_eq!(portable.blocks().count(), vector.blocks().count());
         for (key, values) in portable.blocks() {
             let other = vector.block(key).expect("same blocks");
+            for (a, b) in values.iter().zip(other.iter()) {
+                assert_eq!(a.to_bits(), b.to_bits(), "block {key:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn particles_already_in_half_block_order_give_the_sorted_values() {
+        // A shuffled cloud, and the same cloud sorted as the field sorts it (home
+        // half-block, then index): the second is taken as it is, the first is sorted
+        // into the second, and the values must agree bit for bit.
+        let r = 0.01f32;
+        let mut rng = crate::test_rng::TestRng::new(17);
+        let shuffled: Vec<Vec3> = (0..3000)
+            .map(|_| Vec3::new(rng.unit_f32(), rng.unit_f32(), rng.unit_f32()) * 0.3 - 0.1)
+            .collect();
+        let options = FieldOptions::new(r);
+        let inv_h = 1.0 / options.cell_size_world();
+        let mut order: Vec<usize> = (0..shuffled.len()).collect();
+        order.sort_by_key(|&i| {
+            let k = home_half_block(shuffled[i], inv_h);
+            (k[2], k[1], k[0], i)
+        });
+        let sorted: Vec<Vec3> = order.iter().map(|&i| shuffled[i]).collect();
+        let (from_shuffled, _) = compute_blocks(&shuffled, &options, None);
+        let (from_sorted, _) = compute_blocks(&sorted, &options, None);
+        assert!(from_sorted.blocks().count() > 10);
+        assert_eq!(from_shuffled.blocks().count(), from_sorted.blocks().count());
+        for (key, values) in from_shuffled.blocks() {
+            let other = from_sorted.block(key).expect("same blocks");
             for (a, b) in values.iter().zip(other.iter()) {
                 assert_eq!(a.to_bits(), b.to_bits(), "block {key:?}");
             }

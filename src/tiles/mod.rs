@@ -54,14 +54,14 @@ use crate::decimation::{
 use crate::error::{Error, Result};
 use crate::field::{
     apply_coverage, apply_iso_offset, block_reach, check_positions_from, compute_blocks,
-    home_block, BlockRange, FieldOptions, FieldStats,
+    home_block, home_half_block, BlockRange, FieldOptions, FieldStats, HALF_BLOCK_EDGE,
 };
-use crate::grid::{BlockKey, BLOCK_EDGE};
+use crate::grid::BlockKey;
 use crate::marching_cubes::{
     march_blocks, stitch, stitch_range, BlockSurface, MarchingCubesStats, VertexKey,
 };
 use crate::mesh::TriMesh;
-use crate::neighbors::find_isolated_grouped;
+use crate::neighbors::find_isolated_sorted;
 use budget::choose_tile_blocks;
 pub use budget::{default_memory_budget, output_bytes_per_particle, parse_memory_size};
 use glam::Vec3;
@@ -327,10 +327,12 @@ pub fn reconstruct_tiled<S: ParticleSource>(
         let zone1 = field_range.grown(reach, reach);
         let zone2 = zone1.grown(reach, reach);
 
-        // Load zone 2 in the canonical order (home block, input index): spatially
-        // coherent, and the same in every tiling. Home blocks are computed once here.
+        // Load zone 2 in the canonical order (home half-block, input index): spatially
+        // coherent, the same in every tiling, and the field's own summation order, so the
+        // field takes its particles as they come. Home half-blocks are computed once here.
         loaded.clear();
-        let homed = |(p, i): (Vec3, u32)| (home_block(p, inv_h), i, p);
+        let homed = |(p, i): (Vec3, u32)| (home_half_block(p, inv_h), i, p);
+        let home = |half: BlockKey| half.map(|c| c.div_euclid(2));
         match &spilled {
             Some(spill) => {
                 let mut records = Vec::new();
@@ -341,7 +343,7 @@ pub fn reconstruct_tiled<S: ParticleSource>(
                     records
                         .into_iter()
                         .map(homed)
-                        .filter(|(h, _, _)| zone2.contains(*h)),
+                        .filter(|(h, _, _)| zone2.contains(home(*h))),
                 );
             }
             None => loaded.par_extend(
@@ -355,20 +357,20 @@ pub fn reconstruct_tiled<S: ParticleSource>(
         let local: Vec<Vec3> = loaded.iter().map(|r| r.2).collect();
 
         // Flags are needed for zone 1 only; zone 2 is there to complete their neighbours.
-        let in_zone1: Vec<bool> = loaded.iter().map(|r| zone1.contains(r.0)).collect();
-        // `loaded` is sorted by home block: the blocks are the cells of the search.
+        let in_zone1: Vec<bool> = loaded.iter().map(|r| zone1.contains(home(r.0))).collect();
+        // `loaded` is sorted by home half-block: the half-blocks are the cells of the search.
         let lonely = match isolation_radius {
             Some(radius) => {
-                let block_edge = (field_options.cell_size_world() * BLOCK_EDGE as f64) as f32;
-                let homes = loaded.iter().map(|r| r.0);
-                find_isolated_grouped(&local, homes, block_edge, radius, &in_zone1)
+                let half_edge = (field_options.cell_size_world() * HALF_BLOCK_EDGE as f64) as f32;
+                let halves: Vec<BlockKey> = loaded.iter().map(|r| r.0).collect();
+                find_isolated_sorted(&local, &halves, half_edge, radius, &in_zone1)
             }
             None => vec![false; local.len()],
         };
         let mut field_particles = Vec::new();
         for (k, &(h, gi, p)) in loaded.iter().enumerate() {
             if lonely[k] {
-                if own.contains(h) {
+                if own.contains(home(h)) {
                     isolated.push((gi, p));
                 }
             } else if in_zone1[k] {
