@@ -257,9 +257,10 @@ pub fn check_positions_from(
     options: &FieldOptions,
 ) -> Result<()> {
     let inv_h = 1.0 / options.cell_size_world();
-    if let Some((i, p)) = positions.iter().enumerate().find(|(_, p)| {
+    if let Some(i) = positions.par_iter().position_first(|p| {
         !p.is_finite() || (p.as_dvec3() * inv_h).abs().max_element() > MAX_CELL_COORDINATE
     }) {
+        let p = positions[i];
         let i = first + i;
         return Err(Error::InvalidOption {
             option: "--cell-size",

@@ -184,19 +184,29 @@ pub fn reconstruct_tiled<S: ParticleSource>(
     let mut block_counts: HashMap<BlockKey, u64> = HashMap::new();
     source.visit_chunks(&mut |first, chunk| {
         check_positions_from(first, chunk, field_options)?;
-        let homes: Vec<BlockKey> = chunk.par_iter().map(|p| home_block(*p, inv_h)).collect();
-        let mut run = (homes.first().copied().unwrap_or_default(), 0u64);
-        for h in homes {
-            if h == run.0 {
-                run.1 += 1;
-            } else {
-                *block_counts.entry(run.0).or_default() += run.1;
-                run = (h, 1);
-            }
-        }
-        if run.1 > 0 {
-            *block_counts.entry(run.0).or_default() += run.1;
-        }
+        // Counted in parallel pieces (runs of equal home blocks, then one map per piece),
+        // the maps added up after: counts do not depend on the order of the additions.
+        let counts = chunk
+            .par_chunks(COUNT_PIECE)
+            .map(|piece| {
+                let mut counts: HashMap<BlockKey, u64> = HashMap::new();
+                let mut homes = piece.iter().map(|p| home_block(*p, inv_h));
+                let Some(mut run) = homes.next().map(|h| (h, 1u64)) else {
+                    return counts;
+                };
+                for h in homes {
+                    if h == run.0 {
+                        run.1 += 1;
+                    } else {
+                        *counts.entry(run.0).or_default() += run.1;
+                        run = (h, 1);
+                    }
+                }
+                *counts.entry(run.0).or_default() += run.1;
+                counts
+            })
+            .reduce(HashMap::new, add_counts);
+        block_counts = add_counts(std::mem::take(&mut block_counts), counts);
         Ok(())
     })?;
     let (tile_blocks, estimated_peak_bytes) = choose_tile_blocks(
@@ -459,6 +469,18 @@ pub fn reconstruct_tiled<S: ParticleSource>(
         decimation: decimation_stats,
         tiles: stats,
     })
+}
+
+/// Particles per piece of the parallel count of home blocks.
+const COUNT_PIECE: usize = 1 << 14;
+
+/// The sum of two maps of counts (the larger one is kept and the other added to it).
+fn add_counts(a: HashMap<BlockKey, u64>, b: HashMap<BlockKey, u64>) -> HashMap<BlockKey, u64> {
+    let (mut big, small) = if a.len() >= b.len() { (a, b) } else { (b, a) };
+    for (k, n) in small {
+        *big.entry(k).or_default() += n;
+    }
+    big
 }
 
 /// [`Error::Interrupted`] once [`INTERRUPTED`] is set (checked between tiles and stages).
