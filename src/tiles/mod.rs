@@ -13,10 +13,10 @@
 //!   blocks only (reading the field one block further up), and every mesh vertex is owned
 //!   by exactly one block;
 //! * a field block sums over particles whose home block is within `reach` blocks
-//!   ([`crate::field::block_reach`]), in (home half-block, global index) order (which
-//!   follows from (home block, global index) order) — the tile loads
-//!   every particle within `reach` of its field blocks ("zone 1") in that order, which is
-//!   also the order every neighbour search of the tile sees;
+//!   ([`crate::field::block_reach`]), in (home half-block, global index) order — the
+//!   tile loads every particle within `reach` of its field blocks ("zone 1") sorted in
+//!   that order, which is also the order the tile's isolation search sees, and the field
+//!   takes them without sorting again;
 //! * the isolation flag of a zone-1 particle depends on the particles within `R` of it, so
 //!   the tile also loads a second ghost ring of `reach` blocks ("zone 2");
 //! * coverage ([`crate::field::apply_coverage`]) reads the field around particles within
@@ -315,7 +315,7 @@ pub fn reconstruct_tiled<S: ParticleSource>(
     let mut field_stats = FieldStats::default();
     let mut mc_stats = MarchingCubesStats::default();
     let mut decimate_stats = DecimateStats::default();
-    // Particles of the current tile: (home block, input index, position).
+    // Particles of the current tile: (home half-block, input index, position).
     let mut loaded: Vec<(BlockKey, u32, Vec3)> = Vec::new();
     for (n, &tile) in tiles.iter().enumerate() {
         interrupted()?;
