@@ -709,12 +709,17 @@ mod tests {
         let options = FieldOptions::new(r);
         let (portable, _) = compute_blocks_with(&positions, &options, None, false);
         let (vector, _) = compute_blocks_with(&positions, &options, None, true);
-        assert!(portable.blocks().count() > 10);
-        assert_eq!(portable.blocks().count(), vector.blocks().count());
-        for (key, values) in portable.blocks() {
-            let other = vector.block(key).expect("same blocks");
-            for (a, b) in values.iter().zip(other.iter()) {
-                assert_eq!(a.to_bits(), b.to_bits(), "block {key:?}");
+        assert_same_blocks_bit_for_bit(&portable, &vector);
+    }
+
+    /// Both fields hold the same blocks (more than 10) with bit-identical values.
+    fn assert_same_blocks_bit_for_bit(a: &SparseField, b: &SparseField) {
+        assert!(a.blocks().count() > 10);
+        assert_eq!(a.blocks().count(), b.blocks().count());
+        for (key, values) in a.blocks() {
+            let other = b.block(key).expect("same blocks");
+            for (x, y) in values.iter().zip(other.iter()) {
+                assert_eq!(x.to_bits(), y.to_bits(), "block {key:?}");
             }
         }
     }
@@ -739,14 +744,7 @@ mod tests {
         let sorted: Vec<Vec3> = order.iter().map(|&i| shuffled[i]).collect();
         let (from_shuffled, _) = compute_blocks(&shuffled, &options, None);
         let (from_sorted, _) = compute_blocks(&sorted, &options, None);
-        assert!(from_sorted.blocks().count() > 10);
-        assert_eq!(from_shuffled.blocks().count(), from_sorted.blocks().count());
-        for (key, values) in from_shuffled.blocks() {
-            let other = from_sorted.block(key).expect("same blocks");
-            for (a, b) in values.iter().zip(other.iter()) {
-                assert_eq!(a.to_bits(), b.to_bits(), "block {key:?}");
-            }
-        }
+        assert_same_blocks_bit_for_bit(&from_shuffled, &from_sorted);
     }
 
     #[test]
