@@ -31,8 +31,7 @@ impl CellHash {
     }
 
     /// True when `stop(j)` holds for some particle `j` in the 27 cells around `p`; the
-    /// point's own cell is searched first and the
-    /// search ends at the first hit.
+    /// point's own cell is searched first and the search ends at the first hit.
     pub fn any_candidate(&self, p: Vec3, mut stop: impl FnMut(u32) -> bool) -> bool {
         let c = cell_of(p, 1.0 / self.cell_size);
         let own = self.cells.get(&c).copied();
@@ -128,6 +127,15 @@ pub fn find_isolated_sorted(
     // Two points closer than d lie at most ⌊d / edge⌋ + 1 cells apart on every axis (a
     // hair more for d, against the rounding of their cells).
     let reach = (radius as f64 / cell_size as f64 * (1.0 + 1e-6)).floor() as i32 + 1;
+    // The rows searched, (dy, dz) from the particle's: its own row first, where most
+    // particles have a neighbour.
+    let row_offsets: Vec<(i32, i32)> = std::iter::once((0, 0))
+        .chain(
+            (-reach..=reach)
+                .flat_map(|dz| (-reach..=reach).map(move |dy| (dy, dz)))
+                .filter(|&d| d != (0, 0)),
+        )
+        .collect();
     let r2 = radius * radius;
     positions
         .par_iter()
@@ -139,17 +147,13 @@ pub fn find_isolated_sorted(
             }
             let close = |j: usize| j != i && (positions[j] - p).length_squared() < r2;
             // The particles next to it in the sorted order first (mostly of its own cell),
-            // then its own row: most particles have a neighbour there.
-            let near = i.saturating_sub(NEXT_IN_ORDER)..(i + NEXT_IN_ORDER + 1).min(cells.len());
-            if near.into_iter().any(close) {
+            // then the rows.
+            let mut near =
+                i.saturating_sub(NEXT_IN_ORDER)..(i + NEXT_IN_ORDER + 1).min(cells.len());
+            if near.any(close) {
                 return false;
             }
-            let offsets = std::iter::once((0, 0)).chain(
-                (-reach..=reach)
-                    .flat_map(|dz| (-reach..=reach).map(move |dy| (dy, dz)))
-                    .filter(|&d| d != (0, 0)),
-            );
-            !offsets.into_iter().any(|(dy, dz)| {
+            !row_offsets.iter().any(|&(dy, dz)| {
                 let Some(&(a, b)) = rows.get(&[c[1] + dy, c[2] + dz]) else {
                     return false;
                 };
