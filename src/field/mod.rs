@@ -225,11 +225,17 @@ pub fn block_reach(options: &FieldOptions) -> i32 {
 pub const HALF_BLOCK_EDGE: i32 = BLOCK_EDGE / 2;
 
 /// The home half-block of one position (the 4³ cells of its home block's eighth that
-/// contain it), `inv_h` = 1 / cell size (world units). Its home block is the half-block's
-/// key divided by 2 (rounded down).
+/// contain it), `inv_h` = 1 / cell size (world units). Its home block is
+/// [`block_of_half`].
 #[inline]
 pub fn home_half_block(p: Vec3, inv_h: f64) -> BlockKey {
     home_cube(p, inv_h, HALF_BLOCK_EDGE)
+}
+
+/// The block a half-block lies in: its key divided by 2, rounded down.
+#[inline]
+pub fn block_of_half(half: BlockKey) -> BlockKey {
+    half.map(|c| c.div_euclid(2))
 }
 
 /// The home block of one position, `inv_h` = 1 / cell size (world units).
@@ -405,7 +411,7 @@ fn candidate_blocks(
     let mut homes: HashMap<BlockKey, u8> = HashMap::new();
     for half in halves {
         let bit = half[0].rem_euclid(2) | half[1].rem_euclid(2) << 1 | half[2].rem_euclid(2) << 2;
-        *homes.entry(half.map(|h| h.div_euclid(2))).or_default() |= 1 << bit;
+        *homes.entry(block_of_half(half)).or_default() |= 1 << bit;
     }
     // Per block offset `d`, the halves (bits) within reach of it: along an axis, half
     // offset `o` (0 or 1) reaches the blocks b with [2b, 2b + 1] within half_reach of half

@@ -53,8 +53,9 @@ use crate::decimation::{
 };
 use crate::error::{Error, Result};
 use crate::field::{
-    apply_coverage, apply_iso_offset, block_reach, check_positions_from, compute_blocks,
-    home_block, home_half_block, BlockRange, FieldOptions, FieldStats, HALF_BLOCK_EDGE,
+    apply_coverage, apply_iso_offset, block_of_half, block_reach, check_positions_from,
+    compute_blocks, home_block, home_half_block, BlockRange, FieldOptions, FieldStats,
+    HALF_BLOCK_EDGE,
 };
 use crate::grid::BlockKey;
 use crate::marching_cubes::{
@@ -342,7 +343,6 @@ pub fn reconstruct_tiled<S: ParticleSource>(
         // field takes its particles as they come. Home half-blocks are computed once here.
         loaded.clear();
         let homed = |(p, i): (Vec3, u32)| (home_half_block(p, inv_h), i, p);
-        let home = |half: BlockKey| half.map(|c| c.div_euclid(2));
         match &spilled {
             Some(spill) => {
                 let mut records = Vec::new();
@@ -353,7 +353,7 @@ pub fn reconstruct_tiled<S: ParticleSource>(
                     records
                         .into_iter()
                         .map(homed)
-                        .filter(|(h, _, _)| zone2.contains(home(*h))),
+                        .filter(|(h, _, _)| zone2.contains(block_of_half(*h))),
                 );
             }
             None => loaded.par_extend(
@@ -367,7 +367,10 @@ pub fn reconstruct_tiled<S: ParticleSource>(
         let local: Vec<Vec3> = loaded.iter().map(|r| r.2).collect();
 
         // Flags are needed for zone 1 only; zone 2 is there to complete their neighbours.
-        let in_zone1: Vec<bool> = loaded.iter().map(|r| zone1.contains(home(r.0))).collect();
+        let in_zone1: Vec<bool> = loaded
+            .iter()
+            .map(|r| zone1.contains(block_of_half(r.0)))
+            .collect();
         // `loaded` is sorted by home half-block: the half-blocks are the cells of the search.
         let lonely = match isolation_radius {
             Some(radius) => {
@@ -380,7 +383,7 @@ pub fn reconstruct_tiled<S: ParticleSource>(
         let mut field_particles = Vec::new();
         for (k, &(h, gi, p)) in loaded.iter().enumerate() {
             if lonely[k] {
-                if own.contains(home(h)) {
+                if own.contains(block_of_half(h)) {
                     isolated.push((gi, p));
                 }
             } else if in_zone1[k] {
