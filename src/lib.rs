@@ -35,6 +35,7 @@
 //! ```
 #![deny(missing_docs)]
 
+mod allocator;
 pub mod archive;
 pub mod decimation;
 pub mod error;
@@ -53,25 +54,6 @@ pub mod subdivision;
 mod test_rng;
 pub mod tiles;
 
+pub use allocator::tune_allocator;
 pub use error::{Error, Result};
 pub use mesh::TriMesh;
-
-/// Sets the C allocator up for frame-after-frame work; call it once at the start of a
-/// program, before other threads (the `meniscus` command does).
-///
-/// glibc by default maps every block over 128 KiB (a threshold it raises as such blocks
-/// are freed) and trims the free top of its heaps, so a program that decodes or
-/// reconstructs frame after frame gets fresh pages for its buffers each time; on the
-/// development VM page faults took a third of archive decoding. After this call blocks
-/// under 32 MiB (glibc's own largest dynamic threshold) come from the heap and up to
-/// 64 MiB of freed heap is kept for reuse; larger blocks (a big run's arrays) are still
-/// mapped and returned when freed. Peak memory of the pipeline is unchanged (measured on
-/// 1M- and 4M-particle scenes). Does nothing on other platforms.
-pub fn tune_allocator() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: mallopt only sets allocator parameters.
-    unsafe {
-        libc::mallopt(libc::M_MMAP_THRESHOLD, 32 << 20);
-        libc::mallopt(libc::M_TRIM_THRESHOLD, 64 << 20);
-    }
-}
