@@ -2,11 +2,12 @@
 //! Linux; elsewhere nothing here does anything).
 //!
 //! A program opts in with [`tune_allocator`]; a library user who did not keeps the
-//! allocator exactly as it was. After the opt-in, each frame whose memory plan leaves room
-//! under the budget keeps the buffers it frees for the next stage instead of returning
-//! them to the system ([`keep_freed_memory`]): the field's block array, then the raw
-//! surface, then the decimated and subdivided meshes would otherwise each come back as
-//! fresh pages that the kernel must zero on first touch.
+//! allocator exactly as it was. After the opt-in, each untiled frame whose memory plan
+//! leaves room under the budget ([`may_keep_freed_memory`]) keeps the buffers it frees for
+//! the next stage instead of returning them to the system ([`keep_freed_memory`]): the
+//! field's block array, then the raw surface, then the decimated and subdivided meshes
+//! would otherwise each come back as fresh pages that the kernel must zero on first
+//! touch.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -28,8 +29,9 @@ const DEFAULT_MMAP_MAX: i32 = 65536;
 /// development VM page faults took a third of archive decoding. After this call blocks
 /// under 32 MiB (glibc's own largest dynamic threshold) come from the heap and up to
 /// 64 MiB of freed heap is kept for reuse; larger blocks (a big run's arrays) are mapped
-/// and returned when freed, except in frames whose plan leaves room under the memory
-/// budget, which keep them ([`keep_freed_memory`]). Does nothing on other platforms.
+/// and returned when freed, except in untiled frames whose plan leaves room under the
+/// memory budget, which keep them (see `TileStats::kept_freed_memory`). Does nothing on
+/// other platforms.
 pub fn tune_allocator() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: mallopt only sets allocator parameters.
@@ -41,11 +43,18 @@ pub fn tune_allocator() {
 }
 
 /// Whether a run estimated to peak at `estimated_peak_bytes` may keep the buffers it
-/// frees under `budget_bytes` (`None`: no limit). Keeping them costs the memory that
-/// freed blocks fragment: on the 4M-particle scene the peak went from 753 to 835 MiB
-/// (+11 %), so the plan must leave a quarter of the estimate spare.
-pub(crate) fn may_keep_freed_memory(estimated_peak_bytes: u64, budget_bytes: Option<u64>) -> bool {
-    budget_bytes.is_none_or(|budget| estimated_peak_bytes <= budget / 5 * 4)
+/// frees under `budget_bytes` (`None`: no limit): only an untiled run (`tiled` false),
+/// with a quarter of the estimate spare. Keeping them costs the memory that freed blocks
+/// fragment: untiled, the peak grew by 9–11 % (4M scene 753 → 835 MiB, 16M 2999 → 3283,
+/// 32M 6010 → 6638); tiled, by 40 % (16M under 2 GiB: 1034 → 1447 MiB, against an
+/// estimate of 985 MiB), since each tile's buffers leave their own holes. A tiled run is
+/// one the budget constrains, so it returns what it frees.
+pub(crate) fn may_keep_freed_memory(
+    estimated_peak_bytes: u64,
+    budget_bytes: Option<u64>,
+    tiled: bool,
+) -> bool {
+    !tiled && budget_bytes.is_none_or(|budget| estimated_peak_bytes <= budget / 5 * 4)
 }
 
 /// Keeps freed buffers in the heap for reuse (`true`), or returns them to the system
@@ -88,12 +97,13 @@ mod tests {
     use super::*;
 
     #[test]
-    fn freed_memory_is_kept_only_with_a_quarter_of_the_estimate_spare() {
-        assert!(may_keep_freed_memory(800 << 20, None));
-        assert!(may_keep_freed_memory(800 << 20, Some(1000 << 20)));
-        assert!(!may_keep_freed_memory(800 << 20, Some(999 << 20)));
-        // The 32M scene under 2 GiB: planned close to the budget.
-        assert!(!may_keep_freed_memory(1906 << 20, Some(2 << 30)));
-        assert!(!may_keep_freed_memory(u64::MAX, Some(u64::MAX)));
+    fn freed_memory_is_kept_only_untiled_with_a_quarter_of_the_estimate_spare() {
+        assert!(may_keep_freed_memory(800 << 20, None, false));
+        assert!(may_keep_freed_memory(800 << 20, Some(1000 << 20), false));
+        assert!(!may_keep_freed_memory(800 << 20, Some(999 << 20), false));
+        assert!(!may_keep_freed_memory(u64::MAX, Some(u64::MAX), false));
+        // Tiled runs never keep: the 16M scene under 2 GiB is planned at 985 MiB.
+        assert!(!may_keep_freed_memory(985 << 20, Some(2 << 30), true));
+        assert!(!may_keep_freed_memory(800 << 20, None, true));
     }
 }

@@ -114,8 +114,8 @@ pub struct TileStats {
     pub estimated_peak_bytes: u64,
     /// Whether the run kept the big buffers it freed for reuse instead of returning them
     /// to the system: only in a program that opted in (`meniscus::tune_allocator`, as the
-    /// CLI does), and only when the estimate leaves a quarter of it spare under the
-    /// budget (faster: fewer fresh pages; costs about a tenth more peak memory).
+    /// CLI does), and only untiled with a quarter of the estimate spare under the budget
+    /// (faster: fewer fresh pages; costs about a tenth more peak memory).
     pub kept_freed_memory: bool,
     /// Bytes of particle records written to the spill file (0 when untiled).
     pub spill_bytes: u64,
@@ -227,6 +227,7 @@ pub fn reconstruct_tiled<S: ParticleSource>(
         crate::allocator::keep_freed_memory(crate::allocator::may_keep_freed_memory(
             estimated_peak_bytes,
             tile_options.memory_budget_bytes,
+            tile_blocks.is_some(),
         ));
     // Tiles are counted from the lowest block the field reaches, so a tile larger than
     // the scene is one tile wherever the scene lies.
