@@ -33,7 +33,10 @@
 //! **Memory budget.** [`TileOptions::memory_budget_bytes`] picks the tile size (the largest
 //! power-of-two number of blocks whose densest tile fits next to the expected output) or
 //! refuses, before any work, a run whose smallest tile cannot fit. The estimate is a
-//! per-particle model calibrated on real frames ([`budget`]).
+//! per-particle model calibrated on real frames ([`budget`]). An untiled run whose
+//! estimate leaves a quarter of it spare keeps the buffers it frees for reuse, in a
+//! program that allows it ([`TileStats::kept_freed_memory`]): 9–11 % more peak memory,
+//! fewer fresh pages.
 //!
 //! **Decimation in tiles.** With decimation requested and more than one tile, every tile
 //! decimates its own piece of the marching-cubes mesh as soon as it is meshed, the
