@@ -192,40 +192,163 @@ impl SparseField {
 }
 
 /// The indices of `keys` in ascending (z, y, x, index) order: the canonical order of
-/// particles binned by cell or block. Sorts packed 63-bit keys beside the indices (one
-/// contiguous array, no lookups while comparing) when every axis spans fewer than 2^21
-/// values, which it does for any block key; else compares the keys themselves.
+/// particles binned by cell or block.
 pub fn sort_by_key_zyx(keys: &[[i32; 3]]) -> Vec<u32> {
+    sort_indices_by_key_zyx(keys.len(), |i| keys[i])
+}
+
+/// The indices `0..count` in ascending (z, y, x, index) order of `key_of(index)`, which is
+/// called twice per index (keys that are cheap to compute need not be stored). Packs each
+/// key into one integer of just the bits its axes span (relative to the smallest key) and
+/// sorts those with a stable radix sort: beside the index in one `u64` when they fit in 32
+/// bits, in a pair when they fit in 63 (as any block key does); else compares the keys.
+pub fn sort_indices_by_key_zyx(
+    count: usize,
+    key_of: impl Fn(usize) -> [i32; 3] + Sync,
+) -> Vec<u32> {
     use rayon::prelude::*;
-    let (lo, hi) = keys.par_iter().map(|&k| (k, k)).reduce(
-        || ([i32::MAX; 3], [i32::MIN; 3]),
-        |(lo, hi), (l, h)| {
-            (
-                [0, 1, 2].map(|a| lo[a].min(l[a])),
-                [0, 1, 2].map(|a| hi[a].max(h[a])),
-            )
-        },
-    );
-    const BITS: u32 = 21;
-    let fits = keys.is_empty() || (0..3).all(|k| (hi[k] as i64 - lo[k] as i64) < (1 << BITS));
-    if !fits {
-        let mut order: Vec<u32> = (0..keys.len() as u32).collect();
+    if count == 0 {
+        return Vec::new();
+    }
+    let (lo, hi) = (0..count)
+        .into_par_iter()
+        .map(|i| (key_of(i), key_of(i)))
+        .reduce(
+            || ([i32::MAX; 3], [i32::MIN; 3]),
+            |(lo, hi), (l, h)| {
+                (
+                    [0, 1, 2].map(|a| lo[a].min(l[a])),
+                    [0, 1, 2].map(|a| hi[a].max(h[a])),
+                )
+            },
+        );
+    // Bits each axis spans: x lowest, z highest, so the packed order is (z, y, x).
+    let bits =
+        [0, 1, 2].map(|a| u64::BITS - ((hi[a] as i64 - lo[a] as i64) as u64).leading_zeros());
+    let key_bits = bits.iter().sum::<u32>();
+    let pack = |i: usize| {
+        let k = key_of(i);
+        let d = [0, 1, 2].map(|a| (k[a] as i64 - lo[a] as i64) as u64);
+        (d[2] << (bits[0] + bits[1])) | (d[1] << bits[0]) | d[0]
+    };
+    if key_bits <= 32 {
+        let packed: Vec<u64> = (0..count)
+            .into_par_iter()
+            .map(|i| (pack(i) << 32) | i as u64)
+            .collect();
+        radix_sort(packed, |&w| w >> 32, key_bits)
+            .into_par_iter()
+            .map(|w| w as u32)
+            .collect()
+    } else if key_bits <= 63 {
+        let packed: Vec<(u64, u32)> = (0..count)
+            .into_par_iter()
+            .map(|i| (pack(i), i as u32))
+            .collect();
+        radix_sort(packed, |&(key, _)| key, key_bits)
+            .into_par_iter()
+            .map(|(_, i)| i)
+            .collect()
+    } else {
+        let mut order: Vec<u32> = (0..count as u32).collect();
         order.par_sort_unstable_by_key(|&i| {
-            let k = keys[i as usize];
+            let k = key_of(i as usize);
             (k[2], k[1], k[0], i)
         });
-        return order;
+        order
     }
-    let mut packed: Vec<(u64, u32)> = keys
-        .par_iter()
-        .enumerate()
-        .map(|(i, k)| {
-            let d = [0, 1, 2].map(|a| (k[a] as i64 - lo[a] as i64) as u64);
-            ((d[2] << (2 * BITS)) | (d[1] << BITS) | d[0], i as u32)
-        })
-        .collect();
-    packed.par_sort_unstable();
-    packed.into_par_iter().map(|(_, i)| i).collect()
+}
+
+/// Items per chunk of the radix sort's counting and scattering (any size gives the same
+/// order: the sort is stable).
+const RADIX_CHUNK: usize = 1 << 16;
+/// Widest digit of the radix sort, bits (2048 buckets: the counts of a chunk stay in L1).
+const RADIX_DIGIT_BITS: u32 = 11;
+
+/// `items` sorted by the low `key_bits` bits of `key(item)`, stably (equal keys keep their
+/// order): least significant digit first, each pass counting digits per chunk in parallel
+/// and scattering every chunk to its own slots. Digits in which all keys agree are skipped.
+fn radix_sort<T: Copy + Send + Sync>(
+    mut items: Vec<T>,
+    key: impl Fn(&T) -> u64 + Sync,
+    key_bits: u32,
+) -> Vec<T> {
+    use rayon::prelude::*;
+    if items.len() < 2 || key_bits == 0 {
+        return items;
+    }
+    let passes = key_bits.div_ceil(RADIX_DIGIT_BITS);
+    let digit_bits = key_bits.div_ceil(passes);
+    let buckets = 1usize << digit_bits;
+    let mask = buckets as u64 - 1;
+    let mut scratch: Vec<T> = Vec::with_capacity(items.len());
+    for pass in 0..passes {
+        let shift = pass * digit_bits;
+        let digit = |item: &T| ((key(item) >> shift) & mask) as usize;
+        let mut counts: Vec<Vec<u32>> = items
+            .par_chunks(RADIX_CHUNK)
+            .map(|chunk| {
+                let mut count = vec![0u32; buckets];
+                for item in chunk {
+                    count[digit(item)] += 1;
+                }
+                count
+            })
+            .collect();
+        let total = |d: usize| counts.iter().map(|c| c[d] as usize).sum::<usize>();
+        if (0..buckets).any(|d| total(d) == items.len()) {
+            continue;
+        }
+        // Each chunk's first slot per digit: digits in order, chunks in order within one.
+        let mut next = 0u32;
+        for d in 0..buckets {
+            for count in counts.iter_mut() {
+                let n = count[d];
+                count[d] = next;
+                next += n;
+            }
+        }
+        let out = SharedSlots(scratch.as_mut_ptr());
+        items
+            .par_chunks(RADIX_CHUNK)
+            .zip(counts.par_iter_mut())
+            .for_each(|(chunk, slot)| {
+                for item in chunk {
+                    let s = &mut slot[digit(item)];
+                    // SAFETY: the chunks' slots are disjoint and cover `0..items.len()`,
+                    // within `scratch`'s capacity.
+                    unsafe { out.write(*s as usize, *item) };
+                    *s += 1;
+                }
+            });
+        // SAFETY: every slot in `0..items.len()` was written above.
+        unsafe { scratch.set_len(items.len()) };
+        std::mem::swap(&mut items, &mut scratch);
+        scratch.clear();
+    }
+    items
+}
+
+/// The radix sort's output buffer, written by every chunk at its own slots.
+struct SharedSlots<T>(*mut T);
+impl<T> Clone for SharedSlots<T> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<T> Copy for SharedSlots<T> {}
+// SAFETY: only used by `radix_sort`, whose chunks write disjoint slots.
+unsafe impl<T: Send> Send for SharedSlots<T> {}
+unsafe impl<T: Send> Sync for SharedSlots<T> {}
+
+impl<T> SharedSlots<T> {
+    /// Writes `item` at slot `at`.
+    ///
+    /// # Safety
+    /// `at` lies within the buffer's capacity and no other thread writes it.
+    unsafe fn write(self, at: usize, item: T) {
+        self.0.add(at).write(item);
+    }
 }
 
 /// Per key (cell or block), the range of a sorted index list holding its entries.
@@ -271,8 +394,15 @@ mod tests {
     fn packed_sort_orders_like_the_key_tuples() {
         let mut rng = crate::test_rng::TestRng::new(3);
         let mut next = |m: i32| ((rng.next_u64() >> 33) as i32).rem_euclid(2 * m) - m;
-        for spread in [3, 1 << 19, 1 << 22] {
-            let keys: Vec<[i32; 3]> = (0..5000)
+        // Narrow, wide and too wide to pack (the comparison sort); the long list spans
+        // several chunks of the radix sort, with many equal keys.
+        for (spread, count) in [
+            (3, 150_000),
+            (1 << 19, 5000),
+            (1 << 22, 5000),
+            (1 << 30, 5000),
+        ] {
+            let keys: Vec<[i32; 3]> = (0..count)
                 .map(|_| [next(spread), next(3), next(spread)])
                 .collect();
             let mut expected: Vec<u32> = (0..keys.len() as u32).collect();

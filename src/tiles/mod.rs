@@ -355,29 +355,16 @@ pub fn reconstruct_tiled<S: ParticleSource>(
 
         // Load zone 2 in the canonical order (home half-block, input index): spatially
         // coherent, the same in every tiling, and the field's own summation order, so the
-        // field takes its particles as they come. Home half-blocks are computed once here.
-        loaded.clear();
-        let homed = |(p, i): (Vec3, u32)| (home_half_block(p, inv_h), i, p);
+        // field takes its particles as they come, with their home half-blocks.
         match &spilled {
             Some(spill) => {
                 let mut records = Vec::new();
                 spill.read_cells(cell_of(zone2.lo), cell_of(zone2.hi), &mut records)?;
-                // Serially: a filtered parallel extend would hold a second copy of the
-                // tile's records, outside the memory model.
-                loaded.extend(
-                    records
-                        .into_iter()
-                        .map(homed)
-                        .filter(|(h, _, _)| zone2.contains(block_of_half(*h))),
-                );
+                records.retain(|(p, _)| zone2.contains(block_of_half(home_half_block(*p, inv_h))));
+                load_in_canonical_order(records.len(), |k| records[k], inv_h, &mut loaded);
             }
-            None => loaded.par_extend(
-                all.par_iter()
-                    .enumerate()
-                    .map(|(i, p)| homed((*p, i as u32))),
-            ),
+            None => load_in_canonical_order(all.len(), |i| (all[i], i as u32), inv_h, &mut loaded),
         }
-        loaded.par_sort_unstable_by_key(|&(h, i, _)| (h[2], h[1], h[0], i));
         stats.max_tile_particles = stats.max_tile_particles.max(loaded.len());
         let local: Vec<Vec3> = loaded.iter().map(|r| r.2).collect();
 
@@ -491,6 +478,30 @@ pub fn reconstruct_tiled<S: ParticleSource>(
 
 /// Particles per piece of the parallel count of home blocks.
 const COUNT_PIECE: usize = 1 << 14;
+
+/// Replaces `loaded` with the `count` particles that `particle(k)` gives (position, input
+/// index), each with its home half-block, in the canonical order (home half-block, input
+/// index). The home half-blocks are sorted by a stable radix sort; equal ones keep the
+/// order of `particle`, which is by input index except perhaps for spilled records, whose
+/// runs are then put in input order.
+fn load_in_canonical_order(
+    count: usize,
+    particle: impl Fn(usize) -> (Vec3, u32) + Sync,
+    inv_h: f64,
+    loaded: &mut Vec<(BlockKey, u32, Vec3)>,
+) {
+    let home = |k: usize| home_half_block(particle(k).0, inv_h);
+    let order = crate::grid::sort_indices_by_key_zyx(count, home);
+    loaded.clear();
+    loaded.par_extend(order.par_iter().map(|&k| {
+        let (p, i) = particle(k as usize);
+        (home_half_block(p, inv_h), i, p)
+    }));
+    loaded
+        .par_chunk_by_mut(|a, b| a.0 == b.0)
+        .filter(|run| !run.is_sorted_by_key(|r| r.1))
+        .for_each(|run| run.sort_unstable_by_key(|r| r.1));
+}
 
 /// The sum of two maps of counts (the larger one is kept and the other added to it).
 fn add_counts(a: HashMap<BlockKey, u64>, b: HashMap<BlockKey, u64>) -> HashMap<BlockKey, u64> {
