@@ -578,3 +578,34 @@ pub(crate) fn tile_origin(block_counts: &HashMap<BlockKey, u64>, reach: i32) -> 
         .fold([i32::MAX; 3], |o, b| [0, 1, 2].map(|a| o[a].min(b[a])))
         .map(|c| c.saturating_sub(reach + 1))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn particles_load_by_home_half_block_then_input_index_in_any_record_order() {
+        let mut rng = crate::test_rng::TestRng::new(11);
+        // Few half-blocks (edge 4 cells of 0.1), so that many particles share one.
+        let inv_h = 10.0;
+        let particles: Vec<(Vec3, u32)> = (0..20_000u32)
+            .map(|i| {
+                let p = Vec3::new(rng.unit_f32(), rng.unit_f32(), rng.unit_f32()) * 2.0 - 1.0;
+                (p, i * 3)
+            })
+            .collect();
+        let mut expected: Vec<(BlockKey, u32, Vec3)> = particles
+            .iter()
+            .map(|&(p, i)| (home_half_block(p, inv_h), i, p))
+            .collect();
+        expected.sort_by_key(|&(h, i, _)| (h[2], h[1], h[0], i));
+        // In input order (an unspilled tile) and reversed (records out of input order).
+        let mut reversed = particles.clone();
+        reversed.reverse();
+        for records in [particles, reversed] {
+            let mut loaded = vec![(BlockKey::default(), 0, Vec3::ZERO); 3];
+            load_in_canonical_order(records.len(), |k| records[k], inv_h, &mut loaded);
+            assert_eq!(loaded, expected);
+        }
+    }
+}
