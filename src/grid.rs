@@ -192,67 +192,56 @@ impl SparseField {
 }
 
 /// The indices of `keys` in ascending (z, y, x, index) order: the canonical order of
-/// particles binned by cell or block.
+/// particles binned by cell or block. Packs each key into one integer of just the bits its
+/// axes span (relative to the smallest key) and sorts those with a stable radix sort:
+/// beside the index in one `u64` when they fit in 32 bits, in a pair when they fit in 63
+/// (as any block key does); else compares the keys.
 pub fn sort_by_key_zyx(keys: &[[i32; 3]]) -> Vec<u32> {
-    sort_indices_by_key_zyx(keys.len(), |i| keys[i])
-}
-
-/// The indices `0..count` in ascending (z, y, x, index) order of `key_of(index)`, which is
-/// called twice per index (keys that are cheap to compute need not be stored). Packs each
-/// key into one integer of just the bits its axes span (relative to the smallest key) and
-/// sorts those with a stable radix sort: beside the index in one `u64` when they fit in 32
-/// bits, in a pair when they fit in 63 (as any block key does); else compares the keys.
-pub fn sort_indices_by_key_zyx(
-    count: usize,
-    key_of: impl Fn(usize) -> [i32; 3] + Sync,
-) -> Vec<u32> {
     use rayon::prelude::*;
-    if count == 0 {
+    if keys.is_empty() {
         return Vec::new();
     }
-    let (lo, hi) = (0..count)
-        .into_par_iter()
-        .map(|i| (key_of(i), key_of(i)))
-        .reduce(
-            || ([i32::MAX; 3], [i32::MIN; 3]),
-            |(lo, hi), (l, h)| {
-                (
-                    [0, 1, 2].map(|a| lo[a].min(l[a])),
-                    [0, 1, 2].map(|a| hi[a].max(h[a])),
-                )
-            },
-        );
+    let (lo, hi) = keys.par_iter().map(|&k| (k, k)).reduce(
+        || ([i32::MAX; 3], [i32::MIN; 3]),
+        |(lo, hi), (l, h)| {
+            (
+                [0, 1, 2].map(|a| lo[a].min(l[a])),
+                [0, 1, 2].map(|a| hi[a].max(h[a])),
+            )
+        },
+    );
     // Bits each axis spans: x lowest, z highest, so the packed order is (z, y, x).
     let bits =
         [0, 1, 2].map(|a| u64::BITS - ((hi[a] as i64 - lo[a] as i64) as u64).leading_zeros());
     let key_bits = bits.iter().sum::<u32>();
-    let pack = |i: usize| {
-        let k = key_of(i);
+    let pack = |k: &[i32; 3]| {
         let d = [0, 1, 2].map(|a| (k[a] as i64 - lo[a] as i64) as u64);
         (d[2] << (bits[0] + bits[1])) | (d[1] << bits[0]) | d[0]
     };
     if key_bits <= 32 {
-        let packed: Vec<u64> = (0..count)
-            .into_par_iter()
-            .map(|i| (pack(i) << 32) | i as u64)
+        let packed: Vec<u64> = keys
+            .par_iter()
+            .enumerate()
+            .map(|(i, k)| (pack(k) << 32) | i as u64)
             .collect();
         radix_sort(packed, |&w| w >> 32, key_bits)
             .into_par_iter()
             .map(|w| w as u32)
             .collect()
     } else if key_bits <= 63 {
-        let packed: Vec<(u64, u32)> = (0..count)
-            .into_par_iter()
-            .map(|i| (pack(i), i as u32))
+        let packed: Vec<(u64, u32)> = keys
+            .par_iter()
+            .enumerate()
+            .map(|(i, k)| (pack(k), i as u32))
             .collect();
         radix_sort(packed, |&(key, _)| key, key_bits)
             .into_par_iter()
             .map(|(_, i)| i)
             .collect()
     } else {
-        let mut order: Vec<u32> = (0..count as u32).collect();
+        let mut order: Vec<u32> = (0..keys.len() as u32).collect();
         order.par_sort_unstable_by_key(|&i| {
-            let k = key_of(i as usize);
+            let k = keys[i as usize];
             (k[2], k[1], k[0], i)
         });
         order

@@ -490,12 +490,15 @@ fn load_in_canonical_order(
     inv_h: f64,
     loaded: &mut Vec<(BlockKey, u32, Vec3)>,
 ) {
-    let home = |k: usize| home_half_block(particle(k).0, inv_h);
-    let order = crate::grid::sort_indices_by_key_zyx(count, home);
+    let homes: Vec<BlockKey> = (0..count)
+        .into_par_iter()
+        .map(|k| home_half_block(particle(k).0, inv_h))
+        .collect();
+    let order = crate::grid::sort_by_key_zyx(&homes);
     loaded.clear();
     loaded.par_extend(order.par_iter().map(|&k| {
         let (p, i) = particle(k as usize);
-        (home_half_block(p, inv_h), i, p)
+        (homes[k as usize], i, p)
     }));
     loaded
         .par_chunk_by_mut(|a, b| a.0 == b.0)
