@@ -356,14 +356,23 @@ pub fn reconstruct_tiled<S: ParticleSource>(
         // Load zone 2 in the canonical order (home half-block, input index): spatially
         // coherent, the same in every tiling, and the field's own summation order, so the
         // field takes its particles as they come, with their home half-blocks.
+        let home_of = |p: &Vec3| home_half_block(*p, inv_h);
         match &spilled {
             Some(spill) => {
                 let mut records = Vec::new();
                 spill.read_cells(cell_of(zone2.lo), cell_of(zone2.hi), &mut records)?;
-                records.retain(|(p, _)| zone2.contains(block_of_half(home_half_block(*p, inv_h))));
-                load_in_canonical_order(records.len(), |k| records[k], inv_h, &mut loaded);
+                let mut homes: Vec<BlockKey> = records.par_iter().map(|r| home_of(&r.0)).collect();
+                // The spill cells reach past zone 2: keep the records (and homes) inside it.
+                let in_zone2 = |h: &BlockKey| zone2.contains(block_of_half(*h));
+                let mut record_homes = homes.iter();
+                records.retain(|_| record_homes.next().is_some_and(in_zone2));
+                homes.retain(in_zone2);
+                load_in_canonical_order(&homes, |k| records[k], &mut loaded);
             }
-            None => load_in_canonical_order(all.len(), |i| (all[i], i as u32), inv_h, &mut loaded),
+            None => {
+                let homes: Vec<BlockKey> = all.par_iter().map(home_of).collect();
+                load_in_canonical_order(&homes, |i| (all[i], i as u32), &mut loaded);
+            }
         }
         stats.max_tile_particles = stats.max_tile_particles.max(loaded.len());
         let local: Vec<Vec3> = loaded.iter().map(|r| r.2).collect();
@@ -479,22 +488,17 @@ pub fn reconstruct_tiled<S: ParticleSource>(
 /// Particles per piece of the parallel count of home blocks.
 const COUNT_PIECE: usize = 1 << 14;
 
-/// Replaces `loaded` with the `count` particles that `particle(k)` gives (position, input
-/// index), each with its home half-block, in the canonical order (home half-block, input
-/// index). The home half-blocks are sorted by a stable radix sort; equal ones keep the
-/// order of `particle`, which is by input index except perhaps for spilled records, whose
-/// runs are then put in input order.
+/// Replaces `loaded` with the particles that `particle(k)` gives (position, input index),
+/// each with its home half-block `homes[k]`, in the canonical order (home half-block,
+/// input index). The home half-blocks are sorted by a stable radix sort; equal ones keep
+/// the order of `particle`, which is by input index except perhaps for spilled records,
+/// whose runs are then put in input order.
 fn load_in_canonical_order(
-    count: usize,
+    homes: &[BlockKey],
     particle: impl Fn(usize) -> (Vec3, u32) + Sync,
-    inv_h: f64,
     loaded: &mut Vec<(BlockKey, u32, Vec3)>,
 ) {
-    let homes: Vec<BlockKey> = (0..count)
-        .into_par_iter()
-        .map(|k| home_half_block(particle(k).0, inv_h))
-        .collect();
-    let order = crate::grid::sort_by_key_zyx(&homes);
+    let order = crate::grid::sort_by_key_zyx(homes);
     loaded.clear();
     loaded.par_extend(order.par_iter().map(|&k| {
         let (p, i) = particle(k as usize);
@@ -606,8 +610,12 @@ mod tests {
         let mut reversed = particles.clone();
         reversed.reverse();
         for records in [particles, reversed] {
+            let homes: Vec<BlockKey> = records
+                .iter()
+                .map(|&(p, _)| home_half_block(p, inv_h))
+                .collect();
             let mut loaded = vec![(BlockKey::default(), 0, Vec3::ZERO); 3];
-            load_in_canonical_order(records.len(), |k| records[k], inv_h, &mut loaded);
+            load_in_canonical_order(&homes, |k| records[k], &mut loaded);
             assert_eq!(loaded, expected);
         }
     }
