@@ -107,7 +107,7 @@ pub fn march_blocks(field: &SparseField, range: Option<BlockRange>) -> Vec<Block
     keys.shrink_to_fit();
     keys.par_iter()
         .map_init(
-            || (vec![0.0f32; CUBE], vec![0u16; VERTEX_IDS], Vec::new()),
+            || (vec![0.0f32; CUBE], vec![0u16; VERTEX_IDS], [0u64; EDGE_ID_WORDS]),
             |(cube, slots, owned_edges), &key| march_block(field, key, cube, slots, owned_edges),
         )
         .collect()
@@ -296,6 +296,8 @@ pub struct RangeMesh {
 /// First local id of cell-centre vertices (after the `8³ · 3` edge ids): cell `n`'s
 /// `k`-th centred loop has id `CENTER_ID_BASE + 4n + k`.
 const CENTER_ID_BASE: u32 = (E * E * E * 3) as u32;
+/// Words of the bit set of a block's own edge ids (`< CENTER_ID_BASE`).
+const EDGE_ID_WORDS: usize = (CENTER_ID_BASE as usize).div_ceil(64);
 
 /// World position of the vertex on the lattice edge from cube-local `corner` along `axis`.
 fn edge_position(cube: &[f32], key: BlockKey, corner: [i32; 3], axis: usize, h: f64) -> DVec3 {
@@ -349,14 +351,14 @@ fn cell_rows(cube: &[f32]) -> Option<[([u16; 4], u16); (E * E) as usize]> {
 }
 
 /// Marches the 8³ cells whose lower corner lies in block `key`; `cube`, `slots` and
-/// `owned_edges` are scratch ((E+1)³ values, one entry per vertex id, the ids of the
-/// block's own edge vertices).
+/// `owned_edges` are scratch ((E+1)³ values, one entry per vertex id, a bit per edge id
+/// of the block's own edge vertices).
 fn march_block(
     field: &SparseField,
     key: BlockKey,
     cube: &mut [f32],
     slots: &mut [u16],
-    owned_edges: &mut Vec<u16>,
+    owned_edges: &mut [u64; EDGE_ID_WORDS],
 ) -> BlockSurface {
     // Gather the (E+1)³ values: this block plus the +x/+y/+z neighbours' first layers.
     let neighbours: [Option<&BlockValues>; 8] =
@@ -390,7 +392,8 @@ fn march_block(
     let table = table::table();
     let edges = table::cube_edges();
     let mut triangles = Vec::with_capacity(2 * mixed_cells);
-    owned_edges.clear();
+    owned_edges.fill(0);
+    let mut owned_count = 0;
     let mut centers: Vec<(u16, Vec3)> = Vec::new();
     let h = field.cell_size;
     let corner_offset = |k: u8| ((k & 1) as i32, ((k >> 1) & 1) as i32, ((k >> 2) & 1) as i32);
@@ -448,7 +451,9 @@ fn march_block(
                         let owner = ((ga / E) | ((gb / E) << 1) | ((gc / E) << 2)) as u32;
                         let local = (local_index(ga % E, gb % E, gc % E) * 3 + axis) as u32;
                         if owner == 0 {
-                            owned_edges.push(local as u16);
+                            let (word, bit) = (local as usize / 64, local % 64);
+                            owned_count += (owned_edges[word] >> bit & 1 == 0) as usize;
+                            owned_edges[word] |= 1 << bit;
                         }
                         edge_ref(owner, local)
                     }));
@@ -456,11 +461,20 @@ fn march_block(
             }
         }
     }
-    owned_edges.sort_unstable();
-    owned_edges.dedup();
-    // Edge ids (< CENTER_ID_BASE) first, then centres in cell order: ascending ids.
-    let mut owned: Vec<(u16, Vec3)> = Vec::with_capacity(owned_edges.len() + centers.len());
-    owned.extend(owned_edges.iter().map(|&id| {
+    // Edge ids (< CENTER_ID_BASE) first, in ascending order from the bit set, then
+    // centres in cell order: ascending ids.
+    let mut owned: Vec<(u16, Vec3)> = Vec::with_capacity(owned_count + centers.len());
+    let ids = owned_edges.iter().enumerate().flat_map(|(word, &bits)| {
+        let mut bits = bits;
+        std::iter::from_fn(move || {
+            (bits != 0).then(|| {
+                let bit = bits.trailing_zeros();
+                bits &= bits - 1;
+                (word * 64) as u16 + bit as u16
+            })
+        })
+    });
+    owned.extend(ids.map(|id| {
         let l = (id / 3) as i32;
         let corner = [l % E, (l / E) % E, l / (E * E)];
         (
