@@ -107,7 +107,13 @@ pub fn march_blocks(field: &SparseField, range: Option<BlockRange>) -> Vec<Block
     keys.shrink_to_fit();
     keys.par_iter()
         .map_init(
-            || (vec![0.0f32; CUBE], vec![0u16; VERTEX_IDS], [0u64; EDGE_ID_WORDS]),
+            || {
+                (
+                    vec![0.0f32; CUBE],
+                    vec![0u16; VERTEX_IDS],
+                    [0u64; EDGE_ID_WORDS],
+                )
+            },
             |(cube, slots, owned_edges), &key| march_block(field, key, cube, slots, owned_edges),
         )
         .collect()
