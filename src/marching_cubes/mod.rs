@@ -399,7 +399,6 @@ fn march_block(
     let edges = table::cube_edges();
     let mut triangles = Vec::with_capacity(2 * mixed_cells);
     owned_edges.fill(0);
-    let mut owned_count = 0;
     let mut centers: Vec<(u16, Vec3)> = Vec::new();
     let h = field.cell_size;
     let corner_offset = |k: u8| ((k & 1) as i32, ((k >> 1) & 1) as i32, ((k >> 2) & 1) as i32);
@@ -457,9 +456,7 @@ fn march_block(
                         let owner = ((ga / E) | ((gb / E) << 1) | ((gc / E) << 2)) as u32;
                         let local = (local_index(ga % E, gb % E, gc % E) * 3 + axis) as u32;
                         if owner == 0 {
-                            let (word, bit) = (local as usize / 64, local % 64);
-                            owned_count += (owned_edges[word] >> bit & 1 == 0) as usize;
-                            owned_edges[word] |= 1 << bit;
+                            owned_edges[local as usize / 64] |= 1 << (local % 64);
                         }
                         edge_ref(owner, local)
                     }));
@@ -469,7 +466,8 @@ fn march_block(
     }
     // Edge ids (< CENTER_ID_BASE) first, in ascending order from the bit set, then
     // centres in cell order: ascending ids.
-    let mut owned: Vec<(u16, Vec3)> = Vec::with_capacity(owned_count + centers.len());
+    let owned_count: u32 = owned_edges.iter().map(|bits| bits.count_ones()).sum();
+    let mut owned: Vec<(u16, Vec3)> = Vec::with_capacity(owned_count as usize + centers.len());
     let ids = owned_edges.iter().enumerate().flat_map(|(word, &bits)| {
         let mut bits = bits;
         std::iter::from_fn(move || {
