@@ -375,6 +375,25 @@ pub fn key_runs(keys: impl IntoIterator<Item = [i32; 3]>) -> Vec<([i32; 3], u32,
     runs
 }
 
+/// Per row `[y, z]` of `keys`, a sequence in (z, y, x) order, the range of positions
+/// `start..end` holding that row's keys (panics when a row's keys are not contiguous).
+pub fn row_ranges(keys: impl IntoIterator<Item = [i32; 3]>) -> HashMap<[i32; 2], (u32, u32)> {
+    let mut rows: Vec<([i32; 2], u32, u32)> = Vec::new();
+    for (n, key) in (0u32..).zip(keys) {
+        let row = [key[1], key[2]];
+        match rows.last_mut() {
+            Some((r, _, end)) if *r == row => *end = n + 1,
+            _ => rows.push((row, n, n + 1)),
+        }
+    }
+    let mut ranges = HashMap::with_capacity(rows.len());
+    for (row, start, end) in rows {
+        let previous = ranges.insert(row, (start, end));
+        assert!(previous.is_none(), "keys must be in (z, y, x) order");
+    }
+    ranges
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

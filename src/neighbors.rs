@@ -113,17 +113,7 @@ pub fn find_isolated_sorted(
     wanted: &[bool],
 ) -> Vec<bool> {
     // The particles of every row of cells.
-    let mut rows: HashMap<[i32; 2], (u32, u32)> = HashMap::new();
-    let mut first = 0;
-    for row in cells.chunk_by(|a, b| a[1..] == b[1..]) {
-        let end = first + row.len();
-        let previous = rows.insert([row[0][1], row[0][2]], (first as u32, end as u32));
-        assert!(
-            previous.is_none(),
-            "cells must be sorted in (z, y, x) order"
-        );
-        first = end;
-    }
+    let rows = crate::grid::row_ranges(cells.iter().copied());
     // Two points closer than d lie at most ⌊d / edge⌋ + 1 cells apart on every axis (a
     // hair more for d, against the rounding of their cells).
     let reach = (radius as f64 / cell_size as f64 * (1.0 + 1e-6)).floor() as i32 + 1;

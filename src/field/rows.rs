@@ -78,13 +78,7 @@ impl HalfRowIndex {
                 end,
             })
             .collect();
-        let mut rows = HashMap::new();
-        let mut first = 0u32;
-        for row in runs.chunk_by(|a, b| a.0[1..] == b.0[1..]) {
-            let end = first + row.len() as u32;
-            rows.insert([row[0].0[1], row[0].0[2]], (first, end));
-            first = end;
-        }
+        let rows = crate::grid::row_ranges(runs.iter().map(|r| r.0));
         HalfRowIndex { rows, cells }
     }
 
