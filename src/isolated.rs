@@ -71,6 +71,7 @@ pub fn icosphere(level: u32, radius: f32) -> TriMesh {
         normals: positions.clone(),
         positions: positions.into_iter().map(|p| p * radius).collect(),
         triangles,
+        attributes: Vec::new(),
     }
 }
 

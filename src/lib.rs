@@ -18,6 +18,7 @@
 //! * [`neighbors`]: the cell hash behind isolation checks.
 //! * [`tiles`]: field and marching cubes tile by tile, stitched bit-identically.
 //! * [`decimation`], [`subdivision`], [`isolated`]: the post-processing stages.
+//! * [`attributes`]: particle attributes (velocity, ...) carried to the surface vertices.
 //! * [`pipeline`]: the whole reconstruction of one frame, stage by stage, with timings.
 //! * [`job`], [`sequence`]: files and `{}` frame sequences, as the CLI runs them.
 //! * [`archive`]: the `.mseq` container for whole mesh sequences.
@@ -37,6 +38,7 @@
 
 mod allocator;
 pub mod archive;
+pub mod attributes;
 pub mod decimation;
 pub mod error;
 pub mod field;

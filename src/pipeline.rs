@@ -276,6 +276,7 @@ pub fn reconstruct_source<S: ParticleSource>(
         Some(level) if !isolated_centers.is_empty() => SphereInstances {
             template: crate::isolated::icosphere(level, r),
             centers: isolated_centers,
+            attributes: Vec::new(),
         },
         _ => SphereInstances::default(),
     };

@@ -198,6 +198,7 @@ fn subdivide_once(mesh: TriMesh) -> TriMesh {
         positions,
         triangles,
         normals: Vec::new(),
+        attributes: Vec::new(),
     }
 }
 
@@ -270,6 +271,7 @@ mod tests {
             positions,
             triangles,
             normals: vec![],
+            attributes: Vec::new(),
         };
         subdivide(&mut m, &SubdivideOptions::default());
         assert!(

@@ -18,6 +18,7 @@ fn surface() -> Surface {
         spheres: SphereInstances {
             template: icosphere(1, 0.1),
             centers: vec![Vec3::new(3.0, 0.0, 0.0), Vec3::new(-3.0, 1.0, 0.5)],
+            attributes: Vec::new(),
         },
     }
 }

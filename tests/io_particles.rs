@@ -4,7 +4,7 @@
 use glam::Vec3;
 use meniscus::io::particles::{
     read_particles, stream_bgeo_positions, stream_ply_positions, stream_vtk_positions,
-    write_particles, ParticleFormat, Particles, PointAttribute,
+    write_particles, Attribute, ParticleFormat, Particles,
 };
 use meniscus::Error;
 use std::path::{Path, PathBuf};
@@ -111,12 +111,12 @@ fn sample() -> Particles {
         .collect();
     Particles {
         attributes: vec![
-            PointAttribute {
+            Attribute {
                 name: "velocity".into(),
                 components: 3,
                 values: (0..150).map(|i| i as f32 * 0.25 - 7.0).collect(),
             },
-            PointAttribute {
+            Attribute {
                 name: "density".into(),
                 components: 1,
                 values: (0..50).map(|i| 1000.0 + i as f32).collect(),

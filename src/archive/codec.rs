@@ -520,6 +520,7 @@ pub(crate) fn decode_streams(
         positions,
         triangles: tris,
         normals: Vec::new(),
+        attributes: Vec::new(),
     })
 }
 
@@ -562,6 +563,7 @@ mod tests {
             positions: positions.clone(),
             triangles: triangles.clone(),
             normals: vec![],
+            attributes: Vec::new(),
         };
         let (payload, nv, nt) = encode_v1(&mesh, 0.01, 3).unwrap();
         assert_eq!((nv, nt), (8, 6));

@@ -599,6 +599,7 @@ mod tests {
         let spheres = SphereInstances {
             template: icosphere(0, 0.1),
             centers: vec![glam::Vec3::new(5.0, 0.0, 0.0)],
+            attributes: Vec::new(),
         };
         let frame = ArchiveFrame {
             fluid: &control,

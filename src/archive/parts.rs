@@ -452,6 +452,7 @@ fn write_subdivision(
         positions,
         triangles: fine,
         normals: Vec::new(),
+        attributes: Vec::new(),
     }
 }
 

@@ -406,6 +406,7 @@ pub(crate) fn decimate_locked_walk(
         positions,
         triangles,
         normals: Vec::new(),
+        attributes: Vec::new(),
     };
     stats.triangles_after = mesh.triangle_count();
     (stats, remap)

@@ -152,6 +152,7 @@ pub(super) fn decimate_by_regions(
                         .collect(),
                     triangles,
                     normals: Vec::new(),
+                    attributes: Vec::new(),
                 },
                 global_of,
             };
@@ -212,6 +213,7 @@ pub(super) fn decimate_by_regions(
         positions,
         triangles,
         normals: Vec::new(),
+        attributes: Vec::new(),
     };
     let mut at_seam = vec![false; mesh.vertex_count()];
     for &i in seam_index.iter().filter(|&&i| i != u32::MAX) {
@@ -373,6 +375,7 @@ pub fn decimate_band(
         positions,
         triangles,
         normals: Vec::new(),
+        attributes: Vec::new(),
     };
     mesh.remove_unused_vertices();
     DecimateStats {

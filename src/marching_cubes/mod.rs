@@ -154,6 +154,7 @@ pub fn stitch(mut surfaces: Vec<BlockSurface>) -> (TriMesh, MarchingCubesStats) 
             positions,
             triangles,
             normals: Vec::new(),
+            attributes: Vec::new(),
         },
         stats,
     )
@@ -282,6 +283,7 @@ pub fn stitch_range(surfaces: &[BlockSurface], own: BlockRange) -> RangeMesh {
             positions,
             triangles,
             normals: Vec::new(),
+            attributes: Vec::new(),
         },
         seam_keys,
     }

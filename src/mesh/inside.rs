@@ -133,6 +133,7 @@ mod tests {
                 [0, 3, 5],
             ],
             normals: vec![],
+            attributes: Vec::new(),
         };
         let test = InsideTest::new(&mesh, 0.5);
         assert!(

@@ -14,6 +14,7 @@ pub use topology::triangle_components;
 pub use inside::InsideTest;
 pub use topology::{validate, TopologyReport};
 
+pub use crate::attributes::Attribute;
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -30,6 +31,9 @@ pub struct TriMesh {
     pub triangles: Vec<[u32; 3]>,
     /// Unit vertex normals, one per vertex, or empty when not computed.
     pub normals: Vec<Vec3>,
+    /// Per-vertex attributes carried from the particles ([`crate::attributes`]), one item
+    /// per vertex each; empty when none were selected.
+    pub attributes: Vec<Attribute>,
 }
 
 impl TriMesh {
@@ -135,12 +139,19 @@ impl TriMesh {
                 if has_normals {
                     self.normals[kept] = self.normals[v];
                 }
+                for a in &mut self.attributes {
+                    let k = a.components;
+                    a.values.copy_within(v * k..(v + 1) * k, kept * k);
+                }
                 kept += 1;
             }
         }
         self.positions.truncate(kept);
         if has_normals {
             self.normals.truncate(kept);
+        }
+        for a in &mut self.attributes {
+            a.values.truncate(kept * a.components);
         }
         for t in &mut self.triangles {
             for v in t.iter_mut() {
@@ -178,8 +189,24 @@ impl TriMesh {
     }
 
     /// Appends another mesh (its vertices and triangles, re-indexed). Normals are kept only
-    /// when both meshes have them.
+    /// when both meshes have them; attributes only when both have the same ones (names
+    /// and components, in the same order), or when this mesh is empty.
     pub fn append(&mut self, other: &TriMesh) {
+        let same_attributes = self.attributes.len() == other.attributes.len()
+            && self
+                .attributes
+                .iter()
+                .zip(&other.attributes)
+                .all(|(a, b)| a.name == b.name && a.components == b.components);
+        if self.positions.is_empty() {
+            self.attributes = other.attributes.clone();
+        } else if same_attributes {
+            for (a, b) in self.attributes.iter_mut().zip(&other.attributes) {
+                a.values.extend_from_slice(&b.values);
+            }
+        } else {
+            self.attributes.clear();
+        }
         let offset = self.positions.len() as u32;
         let keep_normals = self.normals.len() == self.positions.len()
             && other.normals.len() == other.positions.len();
@@ -201,17 +228,30 @@ pub struct SphereInstances {
     pub template: TriMesh,
     /// One centre per isolated particle, world units.
     pub centers: Vec<Vec3>,
+    /// Per-instance attributes (one item per centre: the value of its particle); empty
+    /// when none were selected.
+    pub attributes: Vec<Attribute>,
 }
 
 impl SphereInstances {
-    /// The instances merged into one mesh (template translated to every centre).
+    /// The instances merged into one mesh (template translated to every centre; every
+    /// vertex of a sphere takes its instance's attribute values).
     pub fn merged(&self) -> TriMesh {
         let mut out = TriMesh::default();
-        for c in &self.centers {
+        for (i, c) in self.centers.iter().enumerate() {
             let mut s = self.template.clone();
             for p in &mut s.positions {
                 *p += *c;
             }
+            s.attributes = self
+                .attributes
+                .iter()
+                .map(|a| Attribute {
+                    name: a.name.clone(),
+                    components: a.components,
+                    values: a.item(i).repeat(s.positions.len()),
+                })
+                .collect();
             out.append(&s);
         }
         out
@@ -257,6 +297,7 @@ mod tests {
             positions: vec![Vec3::ZERO; n as usize],
             triangles: mesh.triangles.iter().map(|t| t.map(perm)).collect(),
             normals: Vec::new(),
+            attributes: Vec::new(),
         };
         for v in 0..n {
             shuffled.positions[perm(v) as usize] = mesh.positions[v as usize];

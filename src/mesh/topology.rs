@@ -191,6 +191,7 @@ mod tests {
             ],
             triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
             normals: vec![],
+            attributes: Vec::new(),
         }
     }
 

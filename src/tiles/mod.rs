@@ -456,6 +456,7 @@ pub fn reconstruct_tiled<S: ParticleSource>(
                 positions: joined.positions,
                 triangles: joined.triangles,
                 normals: Vec::new(),
+                attributes: Vec::new(),
             };
             drop(joined.seam_index);
             let target = options.target_triangles(mc_stats.triangles);

@@ -8,7 +8,7 @@
 //! values), then per point `P[4]` (x, y, z, w) as f32 followed by every attribute's values.
 //! Attribute types kept: 0 float, 1 int (as f32), 5 vector. Others are rejected.
 
-use super::{Particles, PointAttribute};
+use super::{Attribute, Particles};
 use crate::error::{Error, Result};
 use glam::Vec3;
 use std::io::{BufRead, Read};
@@ -68,7 +68,7 @@ impl Stream<'_> {
 fn parse<'a, R: BufRead + 'a>(
     path: &'a Path,
     mut source: R,
-    mut attributes: Option<&mut Vec<PointAttribute>>,
+    mut attributes: Option<&mut Vec<Attribute>>,
     positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
 ) -> Result<usize> {
     let gzip = source
@@ -138,7 +138,7 @@ fn parse<'a, R: BufRead + 'a>(
         .checked_mul(stride)
         .ok_or_else(|| Error::parse(path, "header", "point count overflows"))?;
     if let Some(out) = attributes.as_deref_mut() {
-        out.extend(defs.iter().map(|(name, size, _)| PointAttribute {
+        out.extend(defs.iter().map(|(name, size, _)| Attribute {
             name: name.clone(),
             components: *size,
             values: Vec::with_capacity(npoints * size),

@@ -24,16 +24,7 @@ use crate::error::{Error, Result};
 use glam::Vec3;
 use std::path::Path;
 
-/// A per-particle attribute kept from the input (for example `velocity`).
-#[derive(Clone, Debug, PartialEq)]
-pub struct PointAttribute {
-    /// Attribute name as in the file (`velocity`, `id`, ...).
-    pub name: String,
-    /// Components per particle (1 for scalars, 3 for vectors).
-    pub components: usize,
-    /// `components * particle_count` values, particle-major.
-    pub values: Vec<f32>,
-}
+pub use crate::attributes::Attribute;
 
 /// The particles of one frame: positions in world units plus optional attributes.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -41,7 +32,7 @@ pub struct Particles {
     /// Particle centres, world units.
     pub positions: Vec<Vec3>,
     /// Other point attributes found in the file, in file order.
-    pub attributes: Vec<PointAttribute>,
+    pub attributes: Vec<Attribute>,
 }
 
 /// Particle file formats.

@@ -3,7 +3,7 @@
 //! property as a 1-component attribute (`vx, vy, vz` or `velocity_x/y/z` become one
 //! 3-component `velocity`). Other elements are skipped, list properties included.
 
-use super::{Particles, PointAttribute};
+use super::{Attribute, Particles};
 use crate::error::Result;
 use crate::io::atomic::write_atomically;
 use crate::io::ply_header;
@@ -17,7 +17,7 @@ pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
     let header = ply_header::parse(&mut c)?;
     let binary = header.binary;
     let mut positions = Vec::new();
-    let mut attributes: Vec<PointAttribute> = Vec::new();
+    let mut attributes: Vec<Attribute> = Vec::new();
     for element in &header.elements {
         if element.name != "vertex" {
             for _ in 0..element.count {
@@ -52,11 +52,7 @@ pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
 }
 
 /// Turns the non-position columns into attributes, grouping velocity components.
-fn group_attributes(
-    names: &[&str],
-    mut columns: Vec<Vec<f32>>,
-    xyz: [usize; 3],
-) -> Vec<PointAttribute> {
+fn group_attributes(names: &[&str], mut columns: Vec<Vec<f32>>, xyz: [usize; 3]) -> Vec<Attribute> {
     let mut used = vec![false; names.len()];
     for k in xyz {
         used[k] = true;
@@ -78,7 +74,7 @@ fn group_attributes(
             used[a] = true;
             used[b] = true;
             used[c] = true;
-            out.push(PointAttribute {
+            out.push(Attribute {
                 name: "velocity".into(),
                 components: 3,
                 values,
@@ -87,7 +83,7 @@ fn group_attributes(
     }
     for (k, name) in names.iter().enumerate() {
         if !used[k] {
-            out.push(PointAttribute {
+            out.push(Attribute {
                 name: name.to_string(),
                 components: 1,
                 values: std::mem::take(&mut columns[k]),

@@ -2,7 +2,7 @@
 //! whose points come in a `POINTS n type` section. Cell sections are skipped;
 //! `POINT_DATA` SCALARS, VECTORS, NORMALS and FIELD arrays become attributes.
 
-use super::{Particles, PointAttribute};
+use super::{Attribute, Particles};
 use crate::error::{Error, Result};
 use crate::io::atomic::write_atomically;
 use crate::io::text::{Cursor, Scalar};
@@ -179,7 +179,7 @@ pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
                 }
                 if point_data {
                     let values = c.values(npoints * components, scalar, binary)?;
-                    attributes.push(PointAttribute {
+                    attributes.push(Attribute {
                         name,
                         components,
                         values,
@@ -203,7 +203,7 @@ pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
                     }
                     let values = c.values(components * tuples, scalar, binary)?;
                     if point_data && tuples == npoints {
-                        attributes.push(PointAttribute {
+                        attributes.push(Attribute {
                             name,
                             components,
                             values,
