@@ -103,6 +103,7 @@ fn collapses_that_would_pinch_or_fold_are_refused() {
         positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z],
         triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
         normals: vec![],
+        attributes: Vec::new(),
     };
     let stats = decimate(
         &mut tet,
@@ -162,6 +163,7 @@ fn open_boundaries_are_neither_opened_nor_moved() {
         positions,
         triangles,
         normals: vec![],
+        attributes: Vec::new(),
     };
     let before = validate(&m).boundary_edges;
     decimate(&mut m, &DecimateOptions::default());
