@@ -21,6 +21,16 @@
 //! `a(x) = A·x + b`, comes out as `A·x̄ + b` with `x̄` the kernel-weighted mean position,
 //! which lies within `R` of the vertex: the error is at most `‖A‖·R`.
 
+use crate::cancel::CancelToken;
+use crate::error::Result;
+use crate::field::{home_block, HALF_BLOCK_EDGE};
+use crate::grid::BlockKey;
+use crate::tiles::store::{LoadedParticles, ParticleStore};
+use crate::tiles::TilePlan;
+use glam::Vec3;
+use hashbrown::HashMap;
+use rayon::prelude::*;
+
 /// Per-item values of one named attribute: per particle, per mesh vertex or per sphere
 /// instance, `components` floats each.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -47,5 +57,426 @@ impl Attribute {
     /// The values of item `i`.
     pub fn item(&self, i: usize) -> &[f32] {
         &self.values[i * self.components..(i + 1) * self.components]
+    }
+}
+
+/// Name and size of one attribute of a payload.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct AttributeLayout {
+    /// Name as in the input.
+    pub name: String,
+    /// Components per item.
+    pub components: usize,
+}
+
+impl AttributeLayout {
+    /// The layout of `attribute`.
+    pub fn of(attribute: &Attribute) -> Self {
+        AttributeLayout {
+            name: attribute.name.clone(),
+            components: attribute.components,
+        }
+    }
+}
+
+/// Floats per payload row of `layout`.
+pub fn payload_width(layout: &[AttributeLayout]) -> usize {
+    layout.iter().map(|a| a.components).sum()
+}
+
+/// Which point attributes of the input a run carries to the surface.
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum AttributeSelection {
+    /// The velocity, when the input has one (the first attribute named `v`, `vel` or
+    /// `velocity`, in any case), else none. The default.
+    #[default]
+    Velocity,
+    /// None: positions only.
+    None,
+    /// Every attribute the input holds.
+    All,
+    /// These, by name (exact, else the one name that matches ignoring case), in this order.
+    Names(Vec<String>),
+}
+
+impl std::str::FromStr for AttributeSelection {
+    type Err = String;
+    /// `none`, `all`, or a comma-separated list of names.
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s.trim() {
+            "none" => Ok(AttributeSelection::None),
+            "all" => Ok(AttributeSelection::All),
+            "" => Err("an empty list of attributes (use none)".into()),
+            list => {
+                let names: Vec<String> = list.split(',').map(|n| n.trim().to_string()).collect();
+                if names.iter().any(String::is_empty) {
+                    return Err(format!("an empty name in the list {list:?}"));
+                }
+                Ok(AttributeSelection::Names(names))
+            }
+        }
+    }
+}
+
+impl AttributeSelection {
+    /// True when no attribute can be selected, whatever the input holds.
+    pub fn is_none(&self) -> bool {
+        *self == AttributeSelection::None
+    }
+}
+
+/// Names the default selection takes as the velocity (compared ignoring case).
+pub const VELOCITY_NAMES: [&str; 3] = ["v", "vel", "velocity"];
+
+/// Keeps the attributes of `particles` that `selection` asks for, in its order, after
+/// checking each: `components × particles` values, all finite. `path` names the input in
+/// errors. A name the input lacks is an error listing the names it has.
+pub fn select_attributes(
+    path: &std::path::Path,
+    mut particles: crate::io::particles::Particles,
+    selection: &AttributeSelection,
+) -> crate::Result<crate::io::particles::Particles> {
+    let available: Vec<String> = particles
+        .attributes
+        .iter()
+        .map(|a| a.name.clone())
+        .collect();
+    let wanted: Vec<usize> = match selection {
+        AttributeSelection::None => Vec::new(),
+        AttributeSelection::All => (0..available.len()).collect(),
+        AttributeSelection::Velocity => available
+            .iter()
+            .position(|n| VELOCITY_NAMES.iter().any(|v| n.eq_ignore_ascii_case(v)))
+            .into_iter()
+            .collect(),
+        AttributeSelection::Names(names) => {
+            let mut wanted = Vec::with_capacity(names.len());
+            for name in names {
+                let exact = available.iter().position(|n| n == name);
+                let folded: Vec<usize> = (0..available.len())
+                    .filter(|&k| available[k].eq_ignore_ascii_case(name))
+                    .collect();
+                let k = match (exact, folded.as_slice()) {
+                    (Some(k), _) => k,
+                    (None, [k]) => *k,
+                    _ => {
+                        return Err(crate::Error::Attribute {
+                            path: path.to_path_buf(),
+                            attribute: name.clone(),
+                            message: if available.is_empty() {
+                                "the input holds no point attributes".into()
+                            } else {
+                                format!("not in the input, which has: {}", available.join(", "))
+                            },
+                        })
+                    }
+                };
+                if wanted.contains(&k) {
+                    return Err(crate::Error::Attribute {
+                        path: path.to_path_buf(),
+                        attribute: name.clone(),
+                        message: "selected twice".into(),
+                    });
+                }
+                wanted.push(k);
+            }
+            wanted
+        }
+    };
+    let count = particles.positions.len();
+    let mut columns: Vec<Option<Attribute>> = std::mem::take(&mut particles.attributes)
+        .into_iter()
+        .map(Some)
+        .collect();
+    for k in wanted {
+        let a = columns[k].take().expect("each selected once");
+        check_attribute(path, &a, count)?;
+        particles.attributes.push(a);
+    }
+    Ok(particles)
+}
+
+/// Checks that `a` holds `count` items of at least one component, all finite.
+pub fn check_attribute(path: &std::path::Path, a: &Attribute, count: usize) -> crate::Result<()> {
+    let fail = |message: String| crate::Error::Attribute {
+        path: path.to_path_buf(),
+        attribute: a.name.clone(),
+        message,
+    };
+    if a.components == 0 || a.values.len() != a.components * count {
+        return Err(fail(format!(
+            "{} values of {} components for {count} particles",
+            a.values.len(),
+            a.components
+        )));
+    }
+    if let Some(v) = a.values.iter().position(|v| !v.is_finite()) {
+        return Err(fail(format!(
+            "particle {} has a non-finite value {}",
+            v / a.components,
+            a.values[v]
+        )));
+    }
+    Ok(())
+}
+
+/// The attributes of `layout`, from the payload of the particles in `store`, at `points`
+/// (world units): the kernel-weighted mean of the particles within `radius` (world units)
+/// of each point, or its nearest particle's value when none is that close (see the module
+/// docs). Points are taken tile by tile as `plan` cuts the lattice; the result does not
+/// depend on the tiling or the thread count.
+pub(crate) fn transfer<S: crate::io::particles::ParticleSource>(
+    store: &ParticleStore<S>,
+    plan: &TilePlan,
+    layout: &[AttributeLayout],
+    points: &[Vec3],
+    radius: f64,
+    cancel: &CancelToken,
+) -> Result<Vec<Attribute>> {
+    let width = plan.payload_width;
+    let mut rows = vec![0f32; points.len() * width];
+    let mut resolved = vec![false; points.len()];
+    let search = Search::new(plan, radius);
+
+    // The points of each tile, tiles in plan order.
+    let tiles: Vec<BlockKey> = points
+        .par_iter()
+        .map(|p| plan.tile_of(home_block(*p, plan.inv_h)))
+        .collect();
+    let mut order: Vec<u32> = (0..points.len() as u32).collect();
+    order.par_sort_by_key(|&k| {
+        let t = tiles[k as usize];
+        ([t[2], t[1], t[0]], k)
+    });
+    let mut loaded = LoadedParticles::default();
+    for group in order.chunk_by(|&a, &b| tiles[a as usize] == tiles[b as usize]) {
+        cancel.check()?;
+        let own = plan.own_blocks(tiles[group[0] as usize]);
+        store.load_with_payload(plan, own.grown(plan.reach, plan.reach), &mut loaded)?;
+        if loaded.positions.is_empty() {
+            continue;
+        }
+        let rows_of_tile = crate::grid::row_ranges(loaded.halves.iter().copied());
+        // The tile's points, in group order: their rows and whether each was resolved.
+        let mut values = vec![0f32; group.len() * width];
+        let found: Vec<bool> = values
+            .par_chunks_mut(width.max(1))
+            .zip(group.par_iter())
+            .map_init(
+                || vec![0f64; width],
+                |sum, (out, &k)| {
+                    let p = points[k as usize];
+                    search.weighted_mean(p, &loaded, &rows_of_tile, sum, out)
+                        || search.nearest_in_window(p, &loaded, &rows_of_tile, out)
+                },
+            )
+            .collect();
+        for ((&k, value), found) in group
+            .iter()
+            .zip(values.chunks_exact(width.max(1)))
+            .zip(found)
+        {
+            if found {
+                let k = k as usize;
+                rows[k * width..(k + 1) * width].copy_from_slice(&value[..width]);
+                resolved[k] = true;
+            }
+        }
+    }
+    drop(loaded);
+
+    // Points far from every particle: the nearest one over the whole store.
+    let far: Vec<usize> = (0..points.len()).filter(|&k| !resolved[k]).collect();
+    if std::env::var_os("MENISCUS_DEBUG_ATTR").is_some() {
+        eprintln!("attr: {} points, {} far", points.len(), far.len());
+    }
+    if !far.is_empty() {
+        let mut best: Vec<(f64, u32, Vec<f32>)> =
+            vec![(f64::INFINITY, u32::MAX, Vec::new()); far.len()];
+        store.for_each_stored(&mut |positions, indices, payload| {
+            cancel.check()?;
+            best.par_iter_mut().zip(&far).for_each(|(b, &k)| {
+                let p = points[k].as_dvec3();
+                for (j, x) in positions.iter().enumerate() {
+                    let d2 = (x.as_dvec3() - p).length_squared();
+                    if (d2, indices[j]) < (b.0, b.1) {
+                        *b = (d2, indices[j], payload[j * width..(j + 1) * width].to_vec());
+                    }
+                }
+            });
+            Ok(())
+        })?;
+        for (&k, (_, _, value)) in far.iter().zip(best) {
+            if value.len() == width {
+                rows[k * width..(k + 1) * width].copy_from_slice(&value);
+            }
+        }
+    }
+
+    // Rows into one attribute per layout entry.
+    let mut out: Vec<Attribute> = layout
+        .iter()
+        .map(|l| Attribute {
+            name: l.name.clone(),
+            components: l.components,
+            values: Vec::with_capacity(points.len() * l.components),
+        })
+        .collect();
+    for row in rows.chunks_exact(width.max(1)).take(points.len()) {
+        let mut at = 0;
+        for a in &mut out {
+            a.values.extend_from_slice(&row[at..at + a.components]);
+            at += a.components;
+        }
+    }
+    Ok(out)
+}
+
+/// The neighbourhood search of [`transfer`] over a tile's particles, sorted in the
+/// canonical order with their home half-blocks as cells.
+struct Search {
+    radius: f64,
+    radius2: f64,
+    inv_radius2: f64,
+    /// Half-block edge, world units.
+    half_edge: f64,
+    /// 1 / cell size.
+    inv_h: f64,
+    /// Distance up to which a tile's zone holds every particle (tiled runs), world units.
+    zone_margin: f64,
+}
+
+impl Search {
+    fn new(plan: &TilePlan, radius: f64) -> Self {
+        let half_edge = HALF_BLOCK_EDGE as f64 / plan.inv_h;
+        Search {
+            radius,
+            radius2: radius * radius,
+            inv_radius2: 1.0 / (radius * radius),
+            half_edge,
+            inv_h: plan.inv_h,
+            zone_margin: if plan.is_tiled() {
+                plan.reach as f64 * 2.0 * half_edge
+            } else {
+                f64::INFINITY
+            },
+        }
+    }
+
+    /// Calls `visit(k)` for the particles whose home half-block may hold a point within
+    /// `extent` (world units) of `p`, in the canonical order: the half-blocks of the box
+    /// around `p`, less the rows and the ends of rows that lie farther than `extent`.
+    fn for_each_near(
+        &self,
+        p: Vec3,
+        extent: f64,
+        loaded: &LoadedParticles,
+        rows: &HashMap<[i32; 2], (u32, u32)>,
+        mut visit: impl FnMut(usize),
+    ) {
+        // A hair more than `extent`, against the rounding of the particles' half-blocks.
+        let e = extent * (1.0 + 1e-6) + 1e-6 * self.half_edge;
+        let x = p.as_dvec3();
+        let lo = self.half_block_of(x - e);
+        let hi = self.half_block_of(x + e);
+        // Distance from `c` to the half-block span `[k·edge, (k + 1)·edge)` on one axis.
+        let gap = |c: f64, k: i32| {
+            let (a, b) = (k as f64 * self.half_edge, (k + 1) as f64 * self.half_edge);
+            (a - c).max(c - b).max(0.0)
+        };
+        for z in lo[2]..=hi[2] {
+            let dz = gap(x.z, z);
+            for y in lo[1]..=hi[1] {
+                let dy = gap(x.y, y);
+                let left = e * e - dz * dz - dy * dy;
+                if left < 0.0 {
+                    continue;
+                }
+                let Some(&(a, b)) = rows.get(&[y, z]) else {
+                    continue;
+                };
+                let reach_x = left.sqrt();
+                let x_lo = self.half_block_of(glam::DVec3::splat(x.x - reach_x))[0];
+                let x_hi = self.half_block_of(glam::DVec3::splat(x.x + reach_x))[0];
+                let row = &loaded.halves[a as usize..b as usize];
+                let first = a as usize + row.partition_point(|k| k[0] < x_lo);
+                let end = a as usize + row.partition_point(|k| k[0] <= x_hi);
+                (first..end).for_each(&mut visit);
+            }
+        }
+    }
+
+    /// The half-block holding `x` (as [`home_half_block`] does for a particle).
+    fn half_block_of(&self, x: glam::DVec3) -> BlockKey {
+        let c = x * self.inv_h;
+        [c.x, c.y, c.z].map(|v| (v.floor() as i32).div_euclid(HALF_BLOCK_EDGE))
+    }
+
+    /// Writes to `out` the kernel-weighted mean of the payload of the particles within the
+    /// radius of `p`, summed in f64 (in `sum`) in the canonical order; false when there is
+    /// none.
+    fn weighted_mean(
+        &self,
+        p: Vec3,
+        loaded: &LoadedParticles,
+        rows: &HashMap<[i32; 2], (u32, u32)>,
+        sum: &mut [f64],
+        out: &mut [f32],
+    ) -> bool {
+        let width = sum.len();
+        let x = p.as_dvec3();
+        sum.fill(0.0);
+        let mut weights = 0f64;
+        self.for_each_near(p, self.radius, loaded, rows, |k| {
+            let d2 = (loaded.positions[k].as_dvec3() - x).length_squared();
+            if d2 < self.radius2 {
+                let q = 1.0 - d2 * self.inv_radius2;
+                let w = q * q * q;
+                weights += w;
+                for (s, v) in sum
+                    .iter_mut()
+                    .zip(&loaded.payload[k * width..(k + 1) * width])
+                {
+                    *s += w * *v as f64;
+                }
+            }
+        });
+        if weights > 0.0 {
+            for (o, s) in out.iter_mut().zip(sum.iter()) {
+                *o = (s / weights) as f32;
+            }
+        }
+        weights > 0.0
+    }
+
+    /// Writes to `out` the payload of the particle nearest to `p` (lowest input index on
+    /// a tie) when it lies within twice the radius and the tile's zone holds every
+    /// particle as close: then it is the nearest of all. False otherwise.
+    fn nearest_in_window(
+        &self,
+        p: Vec3,
+        loaded: &LoadedParticles,
+        rows: &HashMap<[i32; 2], (u32, u32)>,
+        out: &mut [f32],
+    ) -> bool {
+        let width = out.len();
+        let x = p.as_dvec3();
+        let window = (2.0 * self.radius).min(self.zone_margin);
+        let mut best: Option<(f64, u32, usize)> = None;
+        self.for_each_near(p, window, loaded, rows, |k| {
+            let d2 = (loaded.positions[k].as_dvec3() - x).length_squared();
+            let candidate = (d2, loaded.indices[k], k);
+            if best.is_none_or(|b| (candidate.0, candidate.1) < (b.0, b.1)) {
+                best = Some(candidate);
+            }
+        });
+        // Every particle within `window` of `p` was seen (and, tiled, is in the zone).
+        match best {
+            Some((d2, _, k)) if d2.sqrt() <= window => {
+                out.copy_from_slice(&loaded.payload[k * width..(k + 1) * width]);
+                true
+            }
+            _ => false,
+        }
     }
 }

@@ -63,6 +63,16 @@ pub enum Error {
     /// The run was interrupted (Ctrl-C); nothing was written.
     #[error("interrupted")]
     Interrupted,
+    /// A point attribute that is missing, malformed or not finite.
+    #[error("{path}: attribute {attribute:?}: {message}")]
+    Attribute {
+        /// The input.
+        path: PathBuf,
+        /// The attribute's name.
+        attribute: String,
+        /// What was wrong.
+        message: String,
+    },
     /// The input holds no particles.
     #[error("{path}: the file holds no particles")]
     EmptyInput {

@@ -2,13 +2,15 @@
 //! sequences of frames. The CLI is a thin layer over [`run_frames`].
 
 use crate::archive::{ArchiveFrame, ArchiveOptions, ArchiveWriter};
+use crate::attributes::{select_attributes, AttributeSelection};
+use crate::cancel::CancelToken;
 use crate::error::{Error, Result};
 use crate::io::mesh::{write_sequence_gltf, write_surface, MeshWriteOptions};
 use crate::io::particles::{read_particles, ParticleFormat};
+use crate::io::particles::{MappedXyz, Particles, SpooledXyz};
 use crate::mesh::TriMesh;
 use crate::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
 use crate::sequence::{self, Frame};
-use crate::tiles::{MappedXyz, SpooledXyz};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -16,18 +18,20 @@ use std::time::Instant;
 enum Input {
     Mapped(MappedXyz),
     Spooled(SpooledXyz),
-    Parsed(Vec<glam::Vec3>),
+    Parsed(Particles),
 }
 
-/// A particle file parsed into memory.
-fn parsed(input: &Path, format: ParticleFormat) -> Result<Input> {
+/// A particle file parsed into memory, with the attributes `selection` asks for.
+fn parsed(input: &Path, format: ParticleFormat, selection: &AttributeSelection) -> Result<Input> {
     let particles = read_particles(input, Some(format))?;
     if particles.positions.is_empty() {
         return Err(Error::EmptyInput {
             path: input.to_path_buf(),
         });
     }
-    Ok(Input::Parsed(particles.positions))
+    Ok(Input::Parsed(select_attributes(
+        input, particles, selection,
+    )?))
 }
 
 /// What to do with the files of a job.
@@ -44,6 +48,10 @@ pub struct JobOptions {
     pub archive_error_bound: f64,
     /// Playback rate of a sequence written into one glTF, frames per second.
     pub fps: f32,
+    /// The point attributes carried to the surface.
+    pub attributes: AttributeSelection,
+    /// Stops the job between tiles, stages and frames ([`crate::Error::Interrupted`]).
+    pub cancel: CancelToken,
 }
 
 /// Where a reconstructed frame goes.
@@ -100,11 +108,25 @@ pub fn reconstruct_file(
         Some(f) => f,
         None => ParticleFormat::from_path(input)?,
     };
+    let cancel = &job.cancel;
     let positions = match format {
-        ParticleFormat::Xyz => Input::Mapped(MappedXyz::open(input)?),
-        _ => match SpooledXyz::from_file(input, format, options.tiles.temp_dir.as_deref())? {
+        ParticleFormat::Xyz => {
+            if let AttributeSelection::Names(names) = &job.attributes {
+                // Raw positions hold no attributes: the same error as any missing name.
+                select_attributes(
+                    input,
+                    Particles::default(),
+                    &AttributeSelection::Names(names.clone()),
+                )?;
+            }
+            Input::Mapped(MappedXyz::open(input)?)
+        }
+        // Attributes come from the parsed file.
+        _ if !job.attributes.is_none() => parsed(input, format, &job.attributes)?,
+        _ => match SpooledXyz::from_file(input, format, options.tiles.temp_dir.as_deref(), cancel)?
+        {
             Some(spooled) => Input::Spooled(spooled),
-            None => parsed(input, format)?,
+            None => parsed(input, format, &job.attributes)?,
         },
     };
     let read_seconds = clock.elapsed().as_secs_f64();
@@ -128,12 +150,12 @@ pub fn reconstruct_file(
         let progress = std::cell::RefCell::new(&mut *on_stage);
         let progress = |stage: &str| (progress.borrow_mut())(stage);
         match positions {
-            Input::Mapped(file) => reconstruct_source(file, options, &progress)?,
-            Input::Spooled(file) => reconstruct_source(file, options, &progress)?,
-            Input::Parsed(positions) => reconstruct_source(positions, options, &progress)?,
+            Input::Mapped(file) => reconstruct_source(file, options, &progress, cancel)?,
+            Input::Spooled(file) => reconstruct_source(file, options, &progress, cancel)?,
+            Input::Parsed(particles) => reconstruct_source(particles, options, &progress, cancel)?,
         }
     };
-    crate::tiles::interrupted()?;
+    cancel.check()?;
     on_stage("write");
     let clock = Instant::now();
     let written = match sink {
@@ -259,9 +281,7 @@ pub fn run_frames(
     let mut collected: Vec<TriMesh> = Vec::new();
     let mut reports = Vec::with_capacity(plan.len());
     for (i, (frame, output)) in plan.iter().enumerate() {
-        if crate::tiles::INTERRUPTED.load(std::sync::atomic::Ordering::Relaxed) {
-            return Err(Error::Interrupted);
-        }
+        job.cancel.check()?;
         on_frame(i, frame);
         let exists = match &archive {
             Some(_) => archived.contains(&frame.number),

@@ -39,6 +39,7 @@
 mod allocator;
 pub mod archive;
 pub mod attributes;
+pub mod cancel;
 pub mod decimation;
 pub mod error;
 pub mod field;
@@ -57,5 +58,6 @@ mod test_rng;
 pub mod tiles;
 
 pub use allocator::tune_allocator;
+pub use cancel::CancelToken;
 pub use error::{Error, Result};
 pub use mesh::TriMesh;

@@ -168,6 +168,11 @@ struct ReconstructArgs {
     /// Playback rate of a sequence written into one .glb/.gltf, frames per second.
     #[arg(long, default_value_t = 24.0)]
     fps: f32,
+    /// Point attributes carried to the surface: a comma-separated list of names
+    /// (`velocity,density`), `all`, or `none`. Default: the velocity (`v`, `vel` or
+    /// `velocity`, any case) when the input has one.
+    #[arg(long, value_name = "LIST")]
+    attributes: Option<String>,
     /// Do not write vertex normals.
     #[arg(long)]
     no_normals: bool,
@@ -181,16 +186,23 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     // Ctrl-C: the first stops the run at the next tile or stage (temporary files are
     // removed, no partial output is left); a second one exits at once.
-    let _ = ctrlc::set_handler(|| {
-        if meniscus::tiles::INTERRUPTED.swap(true, std::sync::atomic::Ordering::SeqCst) {
+    let cancel = meniscus::CancelToken::new();
+    let handler = cancel.clone();
+    let _ = ctrlc::set_handler(move || {
+        if handler.cancel() {
             std::process::exit(130);
         }
         eprintln!("\ninterrupted: stopping at the next tile or stage (Ctrl-C again to quit now)");
     });
-    match cli.command {
-        Command::Reconstruct(args) => report(reconstruct(&args)),
-        Command::Archive(command) => report(archive(command)),
+    let result = match cli.command {
+        Command::Reconstruct(args) => reconstruct(&args, &cancel),
+        Command::Archive(command) => archive(command, &cancel),
+    };
+    if result.is_err() && cancel.is_cancelled() {
+        eprintln!("error: interrupted");
+        return ExitCode::from(130);
     }
+    report(result)
 }
 
 fn report(result: Result<(), String>) -> ExitCode {
@@ -203,7 +215,7 @@ fn report(result: Result<(), String>) -> ExitCode {
     }
 }
 
-fn archive(command: ArchiveCommand) -> Result<(), String> {
+fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<(), String> {
     let text = |e: meniscus::Error| e.to_string();
     match command {
         ArchiveCommand::Info { file } => {
@@ -288,7 +300,12 @@ fn archive(command: ArchiveCommand) -> Result<(), String> {
             let r = ArchiveReader::open(&file).map_err(text)?;
             let numbers = frame.map(|n| vec![n]);
             let written = r
-                .extract(numbers.as_deref(), &output, &MeshWriteOptions::default())
+                .extract(
+                    numbers.as_deref(),
+                    &output,
+                    &MeshWriteOptions::default(),
+                    cancel,
+                )
                 .map_err(text)?;
             if frame.is_none() {
                 eprintln!("{} frame(s) written", written.len());
@@ -382,7 +399,7 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, String> {
     Ok(options)
 }
 
-fn reconstruct(args: &ReconstructArgs) -> Result<(), String> {
+fn reconstruct(args: &ReconstructArgs, cancel: &meniscus::CancelToken) -> Result<(), String> {
     if let Some(threads) = args.threads {
         if threads == 0 {
             return Err("--threads must be at least 1".into());
@@ -404,6 +421,13 @@ fn reconstruct(args: &ReconstructArgs) -> Result<(), String> {
         skip_existing: args.skip_existing,
         archive_error_bound: args.error_bound * args.particle_radius as f64,
         fps: args.fps,
+        attributes: match &args.attributes {
+            Some(list) => list
+                .parse()
+                .map_err(|e| format!("invalid option --attributes: {e}"))?,
+            None => meniscus::attributes::AttributeSelection::default(),
+        },
+        cancel: cancel.clone(),
     };
     if !(args.fps.is_finite() && args.fps > 0.0) {
         return Err(format!("--fps must be > 0, got {}", args.fps));

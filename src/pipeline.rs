@@ -1,27 +1,34 @@
 //! The whole reconstruction of one frame, stage by stage (Akinci et al. 2013, Fig. 2):
 //!
-//! 1. split off isolated particles (no other particle within the influence radius `R`);
-//! 2. Solenthaler field on the sparse lattice ([`crate::field`]);
-//! 3. marching cubes ([`crate::marching_cubes`]);
-//!
-//! (1–3 run tile by tile and are stitched exactly, see [`crate::tiles`]; a tiled run
-//! also decimates each tile as it is meshed, then the seams)
-//! 4. quadric decimation ([`crate::decimation`]);
+//! 1. plan: one pass over the particles checks them and cuts the lattice into tiles under
+//!    the memory budget ([`crate::tiles::plan_tiles`]);
+//! 2. store: the particles held for the tiles, in memory or spilled to disk;
+//! 3. tiles: isolated particles split off, the Solenthaler field ([`crate::field`]) and
+//!    marching cubes ([`crate::marching_cubes`]), tile by tile, into a sink that
+//!    stitches the pieces exactly, or decimates each as it comes
+//!    ([`crate::decimation::TileDecimation`]);
+//! 4. quadric decimation ([`crate::decimation`]), unless the tiles did it;
 //! 5. Loop subdivision ([`crate::subdivision`]);
 //! 6. icospheres of radius `r` at the isolated particles ([`crate::isolated`]);
-//! 7. area-weighted vertex normals.
+//! 7. area-weighted vertex normals;
+//! 8. the particles' payload carried to the final vertices ([`crate::attributes`]).
 //!
 //! Every stage is timed; [`ReconstructionStats`] is the paper's Table 1 for one frame.
 
+use crate::attributes::transfer;
+use crate::cancel::CancelToken;
+use crate::decimation::TileDecimation;
 use crate::decimation::{decimate, DecimateOptions, DecimateStats};
 use crate::error::Result;
 use crate::field::{FieldOptions, FieldStats};
+use crate::io::particles::ParticleSource;
 use crate::marching_cubes::MarchingCubesStats;
 use crate::mesh::{SphereInstances, Surface};
 use crate::neighbors::find_isolated;
 use crate::subdivision::{subdivide, SubdivideOptions};
 use crate::tiles::{
-    output_bytes_per_particle, reconstruct_tiled, ParticleSource, TileOptions, TileStats,
+    output_bytes_per_particle, plan_tiles, run_tiles, ParticleStore, StitchSink, TileOptions,
+    TileSink, TileStats,
 };
 use glam::Vec3;
 use std::time::Instant;
@@ -152,25 +159,21 @@ pub fn reconstruct(
     positions: &[Vec3],
     options: &ReconstructOptions,
 ) -> Result<(Surface, ReconstructionStats)> {
-    reconstruct_with_progress(positions, options, &|_| {})
+    reconstruct_source(positions, options, &|_| {}, &CancelToken::new())
 }
 
-/// [`reconstruct`], telling `progress` what it is doing ("tile 3/8", "decimation", ...).
-pub fn reconstruct_with_progress(
-    positions: &[Vec3],
-    options: &ReconstructOptions,
-    progress: &dyn Fn(&str),
-) -> Result<(Surface, ReconstructionStats)> {
-    reconstruct_source(positions, options, progress)
-}
-
-/// [`reconstruct_with_progress`] from any [`ParticleSource`]: a tiled run reads it twice
-/// and drops it before the first tile, so a mapped `.xyz` file or an owned `Vec` is never
+/// [`reconstruct`] from any [`ParticleSource`], carrying its payload (the attributes it
+/// holds, e.g. [`crate::io::particles::Particles`] after
+/// [`crate::attributes::select_attributes`]) to the surface. `progress` is told what the
+/// run is doing ("tile 3/8", "decimation", ...); `cancel` stops it between tiles and
+/// stages with [`crate::Error::Interrupted`]. A tiled run reads the source twice and
+/// drops it before the first tile, so a mapped `.xyz` file or an owned `Vec` is never
 /// held during the field stage.
 pub fn reconstruct_source<S: ParticleSource>(
     source: S,
     options: &ReconstructOptions,
     progress: &dyn Fn(&str),
+    cancel: &CancelToken,
 ) -> Result<(Surface, ReconstructionStats)> {
     options.field.validate()?;
     let mut stats = ReconstructionStats {
@@ -178,51 +181,97 @@ pub fn reconstruct_source<S: ParticleSource>(
         ..Default::default()
     };
     let r = options.field.particle_radius;
+    let layout = source.attribute_layout();
 
-    // 1.–3. Isolated particles leave the field; field and marching cubes, tile by tile.
+    // 1.–2. Plan the tiles and hold the particles for them.
     let clock = Instant::now();
+    let decimating = options.decimate.as_ref();
+    let plan = plan_tiles(
+        &source,
+        &options.field,
+        &options.tiles,
+        output_bytes_per_particle(
+            decimating.map(|d| d.target_reduction.unwrap_or(0.8)),
+            options.subdivide.levels,
+        ),
+        decimating.is_some(),
+        cancel,
+    )?;
+    let store = ParticleStore::build(source, &plan, options.tiles.temp_dir.as_deref(), cancel)?;
+    stats.tiles = TileStats {
+        tile_blocks: plan.tile_blocks.unwrap_or(0) as u32,
+        memory_budget_bytes: options.tiles.memory_budget_bytes,
+        estimated_peak_bytes: plan.estimated_peak_bytes,
+        kept_freed_memory: plan.kept_freed_memory,
+        spill_bytes: store.spill_bytes(),
+        spill_seconds: clock.elapsed().as_secs_f64(),
+        tiles: plan.tile_count(),
+        ..TileStats::default()
+    };
+
+    // 3. Isolated particles leave the field; field and marching cubes, tile by tile, into
+    // a sink: decimated as they come when tiled, else stitched.
     let isolation_radius = options
         .isolated_sphere_level
         .map(|_| options.field.influence_radius_world() as f32);
-    let tiled = reconstruct_tiled(
-        source,
-        &options.field,
-        isolation_radius,
-        &options.tiles,
-        options.decimate.as_ref(),
-        output_bytes_per_particle(
-            options
-                .decimate
-                .as_ref()
-                .map(|d| d.target_reduction.unwrap_or(0.8)),
-            options.subdivide.levels,
-        ),
-        &|tile, tiles| {
-            if tiles > 1 {
-                progress(&format!(
-                    "field + marching cubes, tile {}/{tiles}",
-                    tile + 1
-                ))
-            } else {
-                progress("field + marching cubes")
-            }
-        },
-    )?;
-    let mut fluid = tiled.mesh;
-    let isolated_centers = tiled.isolated;
+    let on_tile = |tile: usize, tiles: usize| {
+        if tiles > 1 {
+            progress(&format!(
+                "field + marching cubes, tile {}/{tiles}",
+                tile + 1
+            ))
+        } else {
+            progress("field + marching cubes")
+        }
+    };
+    let run_into = |sink: &mut dyn TileSink, stats: &mut TileStats| {
+        run_tiles(
+            &store,
+            &plan,
+            &options.field,
+            isolation_radius,
+            sink,
+            stats,
+            cancel,
+            &on_tile,
+        )
+    };
+    let (mut fluid, tiles_run, tile_decimation) = match decimating.filter(|_| plan.is_tiled()) {
+        Some(decimate_options) => {
+            let mut sink = TileDecimation::new(decimate_options, r);
+            let run = run_into(&mut sink, &mut stats.tiles)?;
+            stats.marching_cubes.triangles = sink.marching_triangles();
+            stats.tiles.stitch_seconds = sink.stitch_seconds;
+            let (mesh, decimation, seconds) = sink.finish();
+            stats.tiles.decimation_seconds = seconds;
+            (mesh, run, Some(decimation))
+        }
+        None => {
+            let mut sink = StitchSink::default();
+            let run = run_into(&mut sink, &mut stats.tiles)?;
+            let clock = Instant::now();
+            let (mesh, marching_cubes, bytes) = sink.finish();
+            stats.marching_cubes = marching_cubes;
+            stats.tiles.surface_bytes = bytes;
+            stats.tiles.stitch_seconds = clock.elapsed().as_secs_f64();
+            (mesh, run, None)
+        }
+    };
+    // The particles are needed again only to carry their payload to the surface.
+    let store = (!layout.is_empty()).then_some(store);
+    let isolated_centers = tiles_run.isolated;
     stats.isolated_particles = isolated_centers.len();
-    stats.field = tiled.field;
-    stats.marching_cubes = tiled.marching_cubes;
-    stats.tiles = tiled.tiles;
+    stats.field = tiles_run.field;
     let t = &stats.tiles;
     let untimed = clock.elapsed().as_secs_f64()
-        - (t.neighbour_seconds
+        - (t.spill_seconds
+            + t.neighbour_seconds
             + t.field_seconds
             + t.marching_seconds
             + t.stitch_seconds
             + t.decimation_seconds);
     let (neighbours, field, marching, stitching) = (
-        t.neighbour_seconds + untimed,
+        t.spill_seconds + t.neighbour_seconds + untimed,
         t.field_seconds,
         t.marching_seconds,
         t.stitch_seconds,
@@ -236,17 +285,17 @@ pub fn reconstruct_source<S: ParticleSource>(
         stats.marching_cubes.triangles,
     );
 
-    crate::tiles::interrupted()?;
+    cancel.check()?;
     // 4. Decimation (already done tile by tile when the run was tiled).
     progress("decimation");
-    if let Some(tile_decimation) = tiled.decimation {
+    if let Some(tile_decimation) = tile_decimation {
         stats.decimation = Some(tile_decimation);
         stats.push_stage(
             "decimation",
             stats.tiles.decimation_seconds,
             fluid.triangle_count(),
         );
-    } else if let Some(decimate_options) = &options.decimate {
+    } else if let Some(decimate_options) = decimating {
         let clock = Instant::now();
         stats.decimation = Some(decimate(&mut fluid, decimate_options));
         stats.push_stage(
@@ -256,7 +305,7 @@ pub fn reconstruct_source<S: ParticleSource>(
         );
     }
 
-    crate::tiles::interrupted()?;
+    cancel.check()?;
     // 5. Subdivision.
     progress("subdivision");
     if options.subdivide.levels > 0 {
@@ -269,10 +318,10 @@ pub fn reconstruct_source<S: ParticleSource>(
         );
     }
 
-    crate::tiles::interrupted()?;
+    cancel.check()?;
     // 6. Spheres.
     let clock = Instant::now();
-    let spheres = match options.isolated_sphere_level {
+    let mut spheres = match options.isolated_sphere_level {
         Some(level) if !isolated_centers.is_empty() => SphereInstances {
             template: crate::isolated::icosphere(level, r),
             centers: isolated_centers,
@@ -296,6 +345,36 @@ pub fn reconstruct_source<S: ParticleSource>(
         clock.elapsed().as_secs_f64(),
         fluid.triangle_count(),
     );
+
+    // 8. Attributes at the final vertices and the sphere centres.
+    if let Some(store) = store {
+        cancel.check()?;
+        progress("attributes");
+        let clock = Instant::now();
+        let influence_radius = options.field.influence_radius_world();
+        fluid.attributes = transfer(
+            &store,
+            &plan,
+            &layout,
+            &fluid.positions,
+            influence_radius,
+            cancel,
+        )?;
+        spheres.attributes = transfer(
+            &store,
+            &plan,
+            &layout,
+            &spheres.centers,
+            influence_radius,
+            cancel,
+        )?;
+        drop(store);
+        stats.push_stage(
+            "attributes",
+            clock.elapsed().as_secs_f64(),
+            fluid.triangle_count(),
+        );
+    }
 
     Ok((Surface { fluid, spheres }, stats))
 }

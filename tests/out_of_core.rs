@@ -5,6 +5,7 @@
 use glam::Vec3;
 use meniscus::mesh::{validate, InsideTest};
 use meniscus::pipeline::{reconstruct_source, ReconstructOptions};
+use meniscus::CancelToken;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -58,12 +59,13 @@ fn decimation_in_tiles_keeps_the_surface_closed_on_target_and_thread_independent
         let whole = ReconstructOptions::new(r);
         let mut tiled = whole.clone();
         tiled.tiles.tile_size_cells = Some(tile);
-        let (reference, _) = reconstruct_source(&positions, &whole, &|_| {}).unwrap();
+        let (reference, _) =
+            reconstruct_source(&positions, &whole, &|_| {}, &CancelToken::new()).unwrap();
         let (one, stats) = in_pool(1, || {
-            reconstruct_source(&positions, &tiled, &|_| {}).unwrap()
+            reconstruct_source(&positions, &tiled, &|_| {}, &CancelToken::new()).unwrap()
         });
         let (two, _) = in_pool(2, || {
-            reconstruct_source(&positions, &tiled, &|_| {}).unwrap()
+            reconstruct_source(&positions, &tiled, &|_| {}, &CancelToken::new()).unwrap()
         });
 
         assert!(stats.tiles.tiles >= 3, "{rel}: {:?}", stats.tiles);

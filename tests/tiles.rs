@@ -4,7 +4,9 @@
 
 use glam::Vec3;
 use meniscus::field::FieldOptions;
-use meniscus::tiles::{reconstruct_tiled, TileOptions, TiledSurface};
+use meniscus::mesh::Surface;
+use meniscus::pipeline::{reconstruct, ReconstructOptions, ReconstructionStats};
+use meniscus::tiles::TileOptions;
 use std::path::PathBuf;
 
 fn xyz(rel: &str) -> Vec<Vec3> {
@@ -21,53 +23,55 @@ fn xyz(rel: &str) -> Vec<Vec3> {
         .collect()
 }
 
-fn run(
-    positions: &[Vec3],
-    options: &FieldOptions,
-    tile: Option<u32>,
-    threads: usize,
-) -> TiledSurface {
+/// Field, marching cubes and isolated particles only (no post-processing), tiled or not.
+struct Run {
+    surface: Surface,
+    stats: ReconstructionStats,
+}
+
+fn run(positions: &[Vec3], options: &FieldOptions, tile: Option<u32>, threads: usize) -> Run {
+    let options = ReconstructOptions {
+        field: options.clone(),
+        tiles: TileOptions {
+            tile_size_cells: tile,
+            ..TileOptions::default()
+        },
+        ..ReconstructOptions::raw(options.particle_radius)
+    };
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
         .unwrap()
         .install(|| {
-            reconstruct_tiled(
-                positions,
-                options,
-                Some(options.influence_radius_world() as f32),
-                &TileOptions {
-                    tile_size_cells: tile,
-                    ..TileOptions::default()
-                },
-                None,
-                0,
-                &|_, _| {},
-            )
-            .unwrap()
+            let (surface, stats) = reconstruct(positions, &options).unwrap();
+            Run { surface, stats }
         })
 }
 
-fn assert_same(a: &TiledSurface, b: &TiledSurface, what: &str) {
+fn assert_same(a: &Run, b: &Run, what: &str) {
+    let (a_mesh, b_mesh) = (&a.surface.fluid, &b.surface.fluid);
     assert_eq!(
-        a.mesh.triangles.len(),
-        b.mesh.triangles.len(),
+        a_mesh.triangles.len(),
+        b_mesh.triangles.len(),
         "{what}: triangle count"
     );
     assert!(
-        a.mesh.triangles == b.mesh.triangles,
+        a_mesh.triangles == b_mesh.triangles,
         "{what}: triangles differ"
     );
     assert!(
-        a.mesh.positions.len() == b.mesh.positions.len()
-            && a.mesh
+        a_mesh.positions.len() == b_mesh.positions.len()
+            && a_mesh
                 .positions
                 .iter()
-                .zip(&b.mesh.positions)
+                .zip(&b_mesh.positions)
                 .all(|(p, q)| p.to_array().map(f32::to_bits) == q.to_array().map(f32::to_bits)),
         "{what}: vertex positions differ"
     );
-    assert_eq!(a.isolated, b.isolated, "{what}: isolated particles");
+    assert_eq!(
+        a.surface.spheres.centers, b.surface.spheres.centers,
+        "{what}: isolated particles"
+    );
 }
 
 #[test]
@@ -90,7 +94,7 @@ fn tiled_runs_equal_the_untiled_run_on_every_frame() {
         let positions = xyz(&rel);
         let options = FieldOptions::new(r);
         let whole = run(&positions, &options, None, 2);
-        assert!(whole.mesh.triangles.len() > 1000, "{rel}");
+        assert!(whole.surface.fluid.triangles.len() > 1000, "{rel}");
         let sizes: &[u32] = if positions.len() < 10_000 {
             &[16, 40]
         } else {
@@ -116,9 +120,9 @@ fn tiles_smaller_than_the_influence_radius_and_any_thread_count() {
         ..FieldOptions::new(0.025)
     };
     let whole = run(&positions, &options, None, 1);
-    assert!(whole.tiles.tiles == 1);
+    assert!(whole.stats.tiles.tiles == 1);
     let small = run(&positions, &options, Some(8), 3);
-    assert!(small.tiles.tiles > 50, "{:?}", small.tiles);
+    assert!(small.stats.tiles.tiles > 50, "{:?}", small.stats.tiles);
     assert_same(&whole, &small, "tile 8 cells, R = 16 cells");
     assert_same(
         &whole,
@@ -151,7 +155,7 @@ fn particles_on_tile_boundaries_and_lattice_planes() {
     }
     let options = FieldOptions::new(r);
     let whole = run(&positions, &options, None, 2);
-    let report = meniscus::mesh::validate(&whole.mesh);
+    let report = meniscus::mesh::validate(&whole.surface.fluid);
     assert!(report.is_closed_manifold(), "{report:?}");
     for tile in [8, 16, 32] {
         assert_same(

@@ -355,12 +355,14 @@ impl ArchiveReader {
     /// names, its `{}` replaced by the frame number (one frame may also go to a plain
     /// path), in any format [`crate::io::mesh::write_surface`] writes; missing
     /// directories are made; frames are decoded and written in parallel, each file
-    /// complete or absent. Returns the files in frame order.
+    /// complete or absent; `cancel` stops it between frames. Returns the files in frame
+    /// order.
     pub fn extract(
         &self,
         numbers: Option<&[i64]>,
         output_pattern: &str,
         options: &crate::io::mesh::MeshWriteOptions,
+        cancel: &crate::CancelToken,
     ) -> Result<Vec<PathBuf>> {
         use rayon::prelude::*;
         let single = numbers.is_some_and(|n| n.len() == 1);
@@ -393,7 +395,7 @@ impl ArchiveReader {
             .par_iter()
             .zip(&paths)
             .try_for_each(|(&n, path)| -> Result<()> {
-                crate::tiles::interrupted()?;
+                cancel.check()?;
                 let surface = self.read_surface(n)?;
                 crate::io::mesh::write_surface(path, &surface, options)?;
                 Ok(())

@@ -74,6 +74,7 @@ mod collapse;
 mod pieces;
 mod placement;
 mod quadric;
+mod tiles;
 mod tri_list;
 
 use crate::mesh::TriMesh;
@@ -84,6 +85,7 @@ pub use pieces::{decimate_band, BAND_RINGS};
 use placement::place_candidates;
 use quadric::{Plane, Quadric};
 use rayon::prelude::*;
+pub use tiles::{TileDecimation, TILE_ERROR_CAP};
 use tri_list::TriList;
 
 /// Options of [`decimate`].

@@ -3,7 +3,7 @@
 //! `dambreak_small` frame 25 (1M to 32M particles, `benches/scale.sh`); within about 10 %
 //! there, and an underestimate for scenes with much more surface per particle.
 
-use super::tile_origin;
+use super::plan::tile_origin;
 use crate::error::{Error, Result};
 use crate::grid::{BlockKey, BLOCK_EDGE};
 use hashbrown::HashMap;
@@ -27,6 +27,10 @@ pub const MC_TRIANGLES_PER_PARTICLE: f64 = 2.7;
 pub const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 110.0;
 /// Memory of the process before any particle (code, thread stacks, allocator), bytes.
 pub const BASE_BYTES: u64 = 64 << 20;
+/// Bytes per particle of a tile's particles loaded with a payload of `w` floats for the
+/// attribute stage, on top of `4·w` (records and rows read back, positions and indices,
+/// home half-blocks, the sort order, the sorted copy).
+pub const ATTRIBUTE_TILE_BYTES_PER_PARTICLE: u64 = 76;
 /// Bytes per triangle of a finished mesh with normals (12 for indices, half a vertex of
 /// 24 for position and normal).
 pub const MESH_BYTES_PER_TRIANGLE: f64 = 24.0;
@@ -58,11 +62,17 @@ pub(super) fn choose_tile_blocks(
     particles: u64,
     reach: i32,
     output_bytes_per_particle: u64,
+    payload_width: usize,
     decimated_in_tiles: bool,
     options: &super::TileOptions,
 ) -> Result<(Option<i32>, u64)> {
     // After the tiles: the post-processing's peak. During the tiles: one tile plus what
     // the tiles have produced so far (decimated pieces, or the raw block surfaces).
+    // A payload costs, untiled, the particles kept in memory to the attribute stage (12
+    // bytes of position and 4 per float); tiled, the densest tile's particles loaded with
+    // their payload next to the finished surface.
+    let payload = 4 * payload_width as u64;
+    let kept = if payload > 0 { 12 + payload } else { 0 };
     let output = BASE_BYTES + particles * output_bytes_per_particle;
     let produced = BASE_BYTES
         + particles
@@ -71,13 +81,13 @@ pub(super) fn choose_tile_blocks(
             } else {
                 (MC_TRIANGLES_PER_PARTICLE * 20.0) as u64
             };
-    let untiled = BASE_BYTES + particles * UNTILED_BYTES_PER_PARTICLE;
+    let untiled = BASE_BYTES + particles * (UNTILED_BYTES_PER_PARTICLE + kept);
     // Zone 2 of a tile reaches 2·reach + 1 blocks below its own blocks and 2·reach + 2
     // above (see the module docs). Exact particle count of the fullest zone 2: every
     // populated block adds its count to each tile whose zone 2 holds it.
     let (below, above) = (2 * reach + 1, 2 * reach + 2);
     let origin = tile_origin(block_counts, reach);
-    let tile_estimate = |t: i32| -> u64 {
+    let densest_zone = |t: i32| -> u64 {
         let mut zone: HashMap<BlockKey, u64> = HashMap::new();
         for (b, n) in block_counts {
             let lo = [0, 1, 2].map(|a| (b[a] - origin[a] - above).div_euclid(t));
@@ -90,7 +100,18 @@ pub(super) fn choose_tile_blocks(
                 }
             }
         }
-        zone.values().copied().max().unwrap_or(0) * TILE_BYTES_PER_PARTICLE
+        zone.values().copied().max().unwrap_or(0)
+    };
+    let tile_estimate = |t: i32| densest_zone(t) * TILE_BYTES_PER_PARTICLE;
+    // The whole tiled run: tiles over what they produced, or the surface after them with
+    // the attribute stage's tile.
+    let tiled_estimate = |t: i32| -> u64 {
+        let attribute_tile = if payload > 0 {
+            densest_zone(t) * (ATTRIBUTE_TILE_BYTES_PER_PARTICLE + 2 * payload)
+        } else {
+            0
+        };
+        (tile_estimate(t) + produced).max(output + attribute_tile)
     };
     let mib = |b: u64| b.div_ceil(1 << 20);
     if let Some(budget) = options.memory_budget_bytes {
@@ -107,7 +128,7 @@ pub(super) fn choose_tile_blocks(
     match (options.tile_size_cells, options.memory_budget_bytes) {
         (Some(cells), budget) => {
             let t = (cells.max(1) as i32 + BLOCK_EDGE - 1) / BLOCK_EDGE;
-            let estimate = (tile_estimate(t) + produced).max(output);
+            let estimate = tiled_estimate(t);
             if let Some(budget) = budget {
                 if estimate > budget {
                     return Err(Error::MemoryBudget {
@@ -130,7 +151,7 @@ pub(super) fn choose_tile_blocks(
             }
             let mut smallest = 0;
             for t in [64, 32, 16, 8, 4, 2, 1] {
-                let estimate = (tile_estimate(t) + produced).max(output);
+                let estimate = tiled_estimate(t);
                 smallest = estimate;
                 if estimate <= budget {
                     return Ok((Some(t), estimate));

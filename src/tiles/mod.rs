@@ -24,11 +24,20 @@
 //!   round;
 //! * [`crate::marching_cubes::stitch`] numbers vertices in global block order.
 //!
-//! **Out of core.** A tiled run never holds the scene: a first pass over the
-//! [`ParticleSource`] checks the positions and counts particles per block; a second bins
-//! them into a spill file on disk ([`spill`]), after which the source is dropped; each
-//! tile then reads back the spill cells its zones overlap. Tiles run one after another,
-//! each parallel inside.
+//! **The engine: plan → store → run → sink.**
+//! * [`plan_tiles`] ([`plan`]): a first pass over the [`ParticleSource`] checks the
+//!   positions and counts particles per block; the memory budget picks the tile size.
+//! * [`store`]: where a tile's particles come from, in the canonical order: the source in
+//!   memory, or (tiled, out of core) a spill file on disk ([`spill`]) that a second pass
+//!   fills, after which the source is dropped; each tile reads back the spill cells its
+//!   zones overlap. The payload (selected attributes) travels with the positions in the
+//!   spill records and stays there until the attribute stage ([`crate::attributes`]).
+//! * [`run_tiles`]: the loop only: load → isolate → field → marching cubes → hand the
+//!   tile's block surfaces to a [`TileSink`]. Tiles run one after another, each parallel
+//!   inside.
+//! * sinks: [`StitchSink`] stitches the block surfaces into one mesh;
+//!   [`crate::decimation::TileDecimation`] decimates each tile's piece with its border
+//!   locked (the locked-seam contract is written down there).
 //!
 //! **Memory budget.** [`TileOptions::memory_budget_bytes`] picks the tile size (the largest
 //! power-of-two number of blocks whose densest tile fits next to the expected output) or
@@ -38,55 +47,34 @@
 //! program that allows it ([`TileStats::kept_freed_memory`]): 9–11 % more peak memory,
 //! fewer fresh pages.
 //!
-//! **Decimation in tiles.** With decimation requested and more than one tile, every tile
-//! decimates its own piece of the marching-cubes mesh as soon as it is meshed, the
-//! vertices on its border locked ([`crate::marching_cubes::stitch_range`]); the reduced
-//! pieces are joined by the global key of the border vertices and one pass over the band
-//! around the seams ([`crate::decimation::decimate_band`]) finishes the job. The raw
-//! surface is then never whole in memory: memory follows the output. The result is
-//! deterministic and independent of the thread count, but depends on the tile size;
-//! without decimation the stitched marching-cubes mesh is bit-identical for every tiling.
+//! **Decimation in tiles.** With decimation requested and more than one tile, the
+//! pipeline runs the tiles into [`crate::decimation::TileDecimation`]: the raw surface is
+//! then never whole in memory, memory follows the output. The result is deterministic
+//! and independent of the thread count, but depends on the tile size; without decimation
+//! the stitched marching-cubes mesh is bit-identical for every tiling.
 
 pub mod budget;
-pub mod source;
-pub mod spill;
+pub mod plan;
+pub(crate) mod spill;
+pub(crate) mod store;
 
-use crate::decimation::{
-    decimate_band, decimate_locked, place_survivors, DecimateOptions, DecimateStats,
-};
-use crate::error::{Error, Result};
+use crate::cancel::CancelToken;
+use crate::error::Result;
 use crate::field::{
-    apply_coverage, apply_iso_offset, block_of_half, block_reach, check_positions_from,
-    compute_blocks, home_block, home_half_block, BlockRange, FieldOptions, FieldStats,
-    HALF_BLOCK_EDGE,
+    apply_coverage, apply_iso_offset, block_of_half, compute_blocks, BlockRange, FieldOptions,
+    FieldStats, HALF_BLOCK_EDGE,
 };
 use crate::grid::BlockKey;
-use crate::marching_cubes::{
-    march_blocks, stitch, stitch_range, BlockSurface, MarchingCubesStats, VertexKey,
-};
+use crate::io::particles::ParticleSource;
+use crate::marching_cubes::{march_blocks, stitch, BlockSurface, MarchingCubesStats};
 use crate::mesh::TriMesh;
 use crate::neighbors::find_isolated_sorted;
-use budget::choose_tile_blocks;
 pub use budget::{default_memory_budget, output_bytes_per_particle, parse_memory_size};
 use glam::Vec3;
-use hashbrown::{HashMap, HashSet};
-use rayon::prelude::*;
-pub use source::{MappedXyz, ParticleSource, SpooledXyz};
-use spill::SpillFile;
+pub use plan::{plan_tiles, TilePlan};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
-
-/// Set (by the CLI's Ctrl-C handler) to stop a run between tiles with
-/// [`Error::Interrupted`]; temporary files are removed as the error unwinds.
-pub static INTERRUPTED: AtomicBool = AtomicBool::new(false);
-
-/// Error bound of collapses in tiles and in the seam pass when the decimation options set
-/// none, multiples of r. Measured on `dambreak_small` frame 25 in 64-cell tiles: without
-/// it 18 of 41 912 particles end up just outside the surface, with it none, at the same
-/// 80 % and a lower flat-region bumpiness (0.0092 r instead of 0.0097 r); 0.05 r misses
-/// the fraction on `double_dambreak`.
-pub const TILE_ERROR_CAP: f32 = 0.1;
+pub(crate) use store::ParticleStore;
 
 /// How the lattice is cut.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -142,211 +130,73 @@ pub struct TileStats {
     pub decimation_seconds: f64,
 }
 
-/// The result of the field and marching-cubes stages over all tiles.
-pub struct TiledSurface {
-    /// The stitched mesh: marching cubes, decimated when [`TiledSurface::decimation`] is
-    /// `Some`.
-    pub mesh: TriMesh,
+/// Where the tile loop hands each tile's marching-cubes output.
+pub trait TileSink {
+    /// The blocks to march for a tile owning the blocks `own`.
+    fn march_range(&self, own: BlockRange) -> BlockRange;
+    /// Takes the block surfaces of the tile owning `own`.
+    fn take(&mut self, own: BlockRange, surfaces: Vec<BlockSurface>) -> Result<()>;
+}
+
+/// The plain sink: gathers every tile's block surfaces and stitches them into one mesh,
+/// bit-identical for every tiling.
+#[derive(Default)]
+pub struct StitchSink {
+    surfaces: Vec<BlockSurface>,
+}
+
+impl StitchSink {
+    /// The stitched mesh, its figures, and the bytes the block surfaces took.
+    pub fn finish(self) -> (TriMesh, MarchingCubesStats, usize) {
+        let bytes = self.surfaces.iter().map(|s| s.memory_bytes()).sum();
+        let (mesh, stats) = stitch(self.surfaces);
+        (mesh, stats, bytes)
+    }
+}
+
+impl TileSink for StitchSink {
+    fn march_range(&self, own: BlockRange) -> BlockRange {
+        own
+    }
+    fn take(&mut self, _own: BlockRange, surfaces: Vec<BlockSurface>) -> Result<()> {
+        self.surfaces.extend(surfaces);
+        Ok(())
+    }
+}
+
+/// What the tile loop found besides the surfaces it handed to its sink.
+pub struct TileRun {
     /// Centres of isolated particles, in input order.
     pub isolated: Vec<Vec3>,
     /// Field figures summed over tiles (particles counts the field particles once).
     pub field: FieldStats,
-    /// Marching-cubes figures (summed over tiles when decimated in tiles).
-    pub marching_cubes: MarchingCubesStats,
-    /// Decimation figures when the tiles were decimated as they were meshed.
-    pub decimation: Option<DecimateStats>,
-    /// Tiling figures.
-    pub tiles: TileStats,
 }
 
-/// Spill cell edge, blocks: the granularity at which a tile reads back particles.
-const SPILL_CELL_BLOCKS: i32 = 4;
-
-/// Runs isolation, field and marching cubes tile by tile and stitches the result.
-/// `isolation_radius` (world units) is `None` to keep isolated particles in the field;
-/// `decimation` asks for decimation in tiles (used only when there is more than one
-/// tile: check [`TiledSurface::decimation`]). `output_bytes_per_particle` is what the
-/// surface will need after the tiles ([`output_bytes_per_particle`]), for the memory
-/// budget. `on_tile(n, tiles)` is told before each tile.
-pub fn reconstruct_tiled<S: ParticleSource>(
-    source: S,
+/// Runs isolation, field and marching cubes tile by tile over the particles of `store`,
+/// as `plan` cuts them, and hands every tile's block surfaces to `sink`.
+/// `isolation_radius` (world units) is `None` to keep isolated particles in the field.
+/// `on_tile(n, tiles)` is told before each tile; `stats` gets the loop's times.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn run_tiles<S: ParticleSource>(
+    store: &ParticleStore<S>,
+    plan: &TilePlan,
     field_options: &FieldOptions,
     isolation_radius: Option<f32>,
-    tile_options: &TileOptions,
-    decimation: Option<&DecimateOptions>,
-    output_bytes_per_particle: u64,
+    sink: &mut dyn TileSink,
+    stats: &mut TileStats,
+    cancel: &CancelToken,
     on_tile: &dyn Fn(usize, usize),
-) -> Result<TiledSurface> {
-    field_options.validate()?;
-    let reach = block_reach(field_options);
-    let inv_h = 1.0 / field_options.cell_size_world();
-    let clock = Instant::now();
-    let particle_count = source.particle_count();
-    if particle_count > u32::MAX as usize {
-        return Err(Error::InvalidOption {
-            option: "INPUT",
-            message: format!("{particle_count} particles: at most 2^32 − 1 per frame"),
-        });
-    }
-
-    // Pass 1: check every position, count particles per home block.
-    let mut block_counts: HashMap<BlockKey, u64> = HashMap::new();
-    source.visit_chunks(&mut |first, chunk| {
-        check_positions_from(first, chunk, field_options)?;
-        // Counted in parallel pieces (runs of equal home blocks, then one map per piece),
-        // the maps added up after: counts do not depend on the order of the additions.
-        let counts = chunk
-            .par_chunks(COUNT_PIECE)
-            .map(|piece| {
-                let mut counts: HashMap<BlockKey, u64> = HashMap::new();
-                let mut homes = piece.iter().map(|p| home_block(*p, inv_h));
-                let Some(mut run) = homes.next().map(|h| (h, 1u64)) else {
-                    return counts;
-                };
-                for h in homes {
-                    if h == run.0 {
-                        run.1 += 1;
-                    } else {
-                        *counts.entry(run.0).or_default() += run.1;
-                        run = (h, 1);
-                    }
-                }
-                *counts.entry(run.0).or_default() += run.1;
-                counts
-            })
-            .reduce(HashMap::new, add_counts);
-        block_counts = add_counts(std::mem::take(&mut block_counts), counts);
-        Ok(())
-    })?;
-    let (tile_blocks, estimated_peak_bytes) = choose_tile_blocks(
-        &block_counts,
-        particle_count as u64,
-        reach,
-        output_bytes_per_particle,
-        decimation.is_some(),
-        tile_options,
-    )?;
-    let kept_freed_memory =
-        crate::allocator::keep_freed_memory(crate::allocator::may_keep_freed_memory(
-            estimated_peak_bytes,
-            tile_options.memory_budget_bytes,
-            tile_blocks.is_some(),
-        ));
-    // Tiles are counted from the lowest block the field reaches, so a tile larger than
-    // the scene is one tile wherever the scene lies.
-    let origin = tile_origin(&block_counts, reach);
-    let tile_of = |b: BlockKey| -> BlockKey {
-        match tile_blocks {
-            Some(t) => [0, 1, 2].map(|a| (b[a] - origin[a]).div_euclid(t)),
-            None => [0, 0, 0],
-        }
-    };
-
-    // Pass 2 (tiled): bin into the spill file; the source is no longer needed after it.
-    // Untiled: the one tile is the whole scene, kept in memory.
-    let mut stats = TileStats {
-        tile_blocks: tile_blocks.unwrap_or(0) as u32,
-        memory_budget_bytes: tile_options.memory_budget_bytes,
-        estimated_peak_bytes,
-        kept_freed_memory,
-        ..TileStats::default()
-    };
-    let cell_of = |b: BlockKey| b.map(|c| c.div_euclid(SPILL_CELL_BLOCKS));
-    let spilled: Option<SpillFile> = match tile_blocks {
-        Some(_) => {
-            let mut cell_counts: HashMap<BlockKey, u64> = HashMap::new();
-            for (b, n) in &block_counts {
-                *cell_counts.entry(cell_of(*b)).or_default() += n;
-            }
-            let temp = tile_options
-                .temp_dir
-                .clone()
-                .unwrap_or_else(std::env::temp_dir);
-            let spill = SpillFile::create(&temp, &cell_counts)?;
-            let mut writer = spill.writer();
-            source.visit_chunks(&mut |first, chunk| {
-                for (k, p) in chunk.iter().enumerate() {
-                    writer.push(cell_of(home_block(*p, inv_h)), *p, (first + k) as u32)?;
-                }
-                interrupted()
-            })?;
-            writer.finish()?;
-            stats.spill_bytes = spill.bytes();
-            Some(spill)
-        }
-        None => None,
-    };
-    let mut copied: Vec<Vec3> = Vec::new();
-    let all: &[Vec3] = if spilled.is_some() {
-        drop(source);
-        &[]
-    } else if let Some(slice) = source.as_slice() {
-        slice
-    } else {
-        copied.reserve_exact(particle_count);
-        source.visit_chunks(&mut |_, chunk| {
-            copied.extend_from_slice(chunk);
-            Ok(())
-        })?;
-        &copied
-    };
-    stats.spill_seconds = clock.elapsed().as_secs_f64();
-
-    // Tiles to process: those holding a block within reach (+1 for the marching layer)
-    // of a populated home block.
-    let mut tiles: HashSet<BlockKey> = HashSet::new();
-    if tile_blocks.is_some() {
-        for b in block_counts.keys() {
-            for dz in -reach - 1..=reach {
-                for dy in -reach - 1..=reach {
-                    for dx in -reach - 1..=reach {
-                        tiles.insert(tile_of([b[0] + dx, b[1] + dy, b[2] + dz]));
-                    }
-                }
-            }
-        }
-    } else if particle_count > 0 {
-        tiles.insert([0, 0, 0]);
-    }
-    drop(block_counts);
-    let mut tiles: Vec<BlockKey> = tiles.into_iter().collect();
-    tiles.sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
-    stats.tiles = tiles.len();
-    let decimation = decimation.filter(|_| tile_blocks.is_some());
-
-    // Each tile must reach the fraction on its own; the error cap keeps a tile of mostly
-    // curved surface from forcing large collapses to get there (the seam pass, capped
-    // too, makes up the rest where it can).
-    let tile_decimation = decimation
-        .map(|d| DecimateOptions {
-            max_error: d
-                .max_error
-                .or(Some(TILE_ERROR_CAP * field_options.particle_radius)),
-            ..d.clone()
-        })
-        .unwrap_or_default();
-    let mut surfaces: Vec<BlockSurface> = Vec::new();
-    let mut joined = JoinedPieces::default();
+) -> Result<TileRun> {
+    let reach = plan.reach;
     let mut isolated: Vec<(u32, Vec3)> = Vec::new();
     let mut field_stats = FieldStats::default();
-    let mut mc_stats = MarchingCubesStats::default();
-    let mut decimate_stats = DecimateStats::default();
     // Particles of the current tile: (home half-block, input index, position).
     let mut loaded: Vec<(BlockKey, u32, Vec3)> = Vec::new();
-    for (n, &tile) in tiles.iter().enumerate() {
-        interrupted()?;
-        on_tile(n, tiles.len());
+    for (n, &tile) in plan.tiles.iter().enumerate() {
+        cancel.check()?;
+        on_tile(n, plan.tiles.len());
         let clock = Instant::now();
-        let own = match tile_blocks {
-            Some(t) => BlockRange {
-                lo: [0, 1, 2].map(|a| origin[a] + tile[a] * t),
-                hi: [0, 1, 2].map(|a| origin[a] + tile[a] * t + t - 1),
-            },
-            None => BlockRange {
-                lo: [i32::MIN / 4; 3],
-                hi: [i32::MAX / 4; 3],
-            },
-        };
+        let own = plan.own_blocks(tile);
         // Field blocks: the marching layer above, plus one block all round for coverage
         // (uncovered particles within c·r + 2h of the blocks whose values are used).
         let field_range = own.grown(1, 2);
@@ -356,24 +206,7 @@ pub fn reconstruct_tiled<S: ParticleSource>(
         // Load zone 2 in the canonical order (home half-block, input index): spatially
         // coherent, the same in every tiling, and the field's own summation order, so the
         // field takes its particles as they come, with their home half-blocks.
-        let home_of = |p: &Vec3| home_half_block(*p, inv_h);
-        match &spilled {
-            Some(spill) => {
-                let mut records = Vec::new();
-                spill.read_cells(cell_of(zone2.lo), cell_of(zone2.hi), &mut records)?;
-                let mut homes: Vec<BlockKey> = records.par_iter().map(|r| home_of(&r.0)).collect();
-                // The spill cells reach past zone 2: keep the records (and homes) inside it.
-                let in_zone2 = |h: &BlockKey| zone2.contains(block_of_half(*h));
-                let mut record_homes = homes.iter();
-                records.retain(|_| record_homes.next().is_some_and(in_zone2));
-                homes.retain(in_zone2);
-                load_in_canonical_order(&homes, |k| records[k], &mut loaded);
-            }
-            None => {
-                let homes: Vec<BlockKey> = all.par_iter().map(home_of).collect();
-                load_in_canonical_order(&homes, |i| (all[i], i as u32), &mut loaded);
-            }
-        }
+        store.load(plan, zone2, &mut loaded)?;
         stats.max_tile_particles = stats.max_tile_particles.max(loaded.len());
         let local: Vec<Vec3> = loaded.iter().map(|r| r.2).collect();
 
@@ -415,182 +248,25 @@ pub fn reconstruct_tiled<S: ParticleSource>(
         drop(field_particles);
         stats.field_seconds += clock.elapsed().as_secs_f64();
         let clock = Instant::now();
-        match decimation {
-            None => {
-                let tile_surfaces = march_blocks(&field, Some(own));
-                drop(field);
-                surfaces.extend(tile_surfaces);
-                stats.marching_seconds += clock.elapsed().as_secs_f64();
-            }
-            Some(_) => {
-                // The tile's own blocks and the layer above (owners of its upper border
-                // vertices), as one mesh whose border vertices are keyed.
-                let tile_surfaces = march_blocks(&field, Some(own.grown(0, 1)));
-                drop(field);
-                let piece = stitch_range(&tile_surfaces, own);
-                drop(tile_surfaces);
-                mc_stats.triangles += piece.mesh.triangle_count();
-                stats.marching_seconds += clock.elapsed().as_secs_f64();
-                let clock = Instant::now();
-                let tile_stats = decimate_piece(piece, &tile_decimation, &mut joined);
-                decimate_stats.add_work(&tile_stats);
-                decimate_stats.regions += 1;
-                stats.decimation_seconds += clock.elapsed().as_secs_f64();
-            }
-        }
+        let surfaces = march_blocks(&field, Some(sink.march_range(own)));
+        drop(field);
+        stats.marching_seconds += clock.elapsed().as_secs_f64();
+        sink.take(own, surfaces)?;
     }
-    drop(spilled);
     drop(loaded);
-
-    let clock = Instant::now();
-    let (mesh, decimation_stats) = match decimation {
-        None => {
-            stats.surface_bytes = surfaces.iter().map(|s| s.memory_bytes()).sum();
-            let (mesh, mcs) = stitch(surfaces);
-            mc_stats = mcs;
-            stats.stitch_seconds = clock.elapsed().as_secs_f64();
-            (mesh, None)
-        }
-        Some(options) => {
-            let mut mesh = TriMesh {
-                positions: joined.positions,
-                triangles: joined.triangles,
-                normals: Vec::new(),
-                attributes: Vec::new(),
-            };
-            drop(joined.seam_index);
-            let target = options.target_triangles(mc_stats.triangles);
-            let band = decimate_band(
-                &mut mesh,
-                &joined.was_seam,
-                target,
-                tile_decimation.max_error,
-            );
-            decimate_stats.add_work(&band);
-            decimate_stats.triangles_before = mc_stats.triangles;
-            decimate_stats.triangles_after = mesh.triangle_count();
-            stats.decimation_seconds += clock.elapsed().as_secs_f64();
-            (mesh, Some(decimate_stats))
-        }
-    };
-
     isolated.sort_unstable_by_key(|r| r.0);
-    field_stats.particles = particle_count - isolated.len();
-    Ok(TiledSurface {
-        mesh,
+    field_stats.particles = plan.particles - isolated.len();
+    Ok(TileRun {
         isolated: isolated.into_iter().map(|r| r.1).collect(),
         field: field_stats,
-        marching_cubes: mc_stats,
-        decimation: decimation_stats,
-        tiles: stats,
     })
-}
-
-/// Particles per piece of the parallel count of home blocks.
-const COUNT_PIECE: usize = 1 << 14;
-
-/// Replaces `loaded` with the particles that `particle(k)` gives (position, input index),
-/// each with its home half-block `homes[k]`, in the canonical order (home half-block,
-/// input index). The home half-blocks are sorted by a stable radix sort; equal ones keep
-/// the order of `particle`, which is by input index except perhaps for spilled records,
-/// whose runs are then put in input order.
-fn load_in_canonical_order(
-    homes: &[BlockKey],
-    particle: impl Fn(usize) -> (Vec3, u32) + Sync,
-    loaded: &mut Vec<(BlockKey, u32, Vec3)>,
-) {
-    let order = crate::grid::sort_by_key_zyx(homes);
-    loaded.clear();
-    loaded.par_extend(order.par_iter().map(|&k| {
-        let (p, i) = particle(k as usize);
-        (homes[k as usize], i, p)
-    }));
-    loaded
-        .par_chunk_by_mut(|a, b| a.0 == b.0)
-        .filter(|run| !run.is_sorted_by_key(|r| r.1))
-        .for_each(|run| run.sort_unstable_by_key(|r| r.1));
-}
-
-/// The sum of two maps of counts (the larger one is kept and the other added to it).
-fn add_counts(a: HashMap<BlockKey, u64>, b: HashMap<BlockKey, u64>) -> HashMap<BlockKey, u64> {
-    let (mut big, small) = if a.len() >= b.len() { (a, b) } else { (b, a) };
-    for (k, n) in small {
-        *big.entry(k).or_default() += n;
-    }
-    big
-}
-
-/// [`Error::Interrupted`] once [`INTERRUPTED`] is set (checked between tiles and stages).
-pub fn interrupted() -> Result<()> {
-    if INTERRUPTED.load(Ordering::Relaxed) {
-        Err(Error::Interrupted)
-    } else {
-        Ok(())
-    }
-}
-
-/// Decimated tile pieces joined so far.
-#[derive(Default)]
-struct JoinedPieces {
-    positions: Vec<Vec3>,
-    triangles: Vec<[u32; 3]>,
-    /// Per vertex: it lay on a tile border (it stayed locked in its tiles).
-    was_seam: Vec<bool>,
-    /// Border vertex → its index.
-    seam_index: HashMap<VertexKey, u32>,
-}
-
-/// Decimates one tile's piece with its border locked, to the options' fraction of its
-/// triangles, and joins the result.
-fn decimate_piece(
-    piece: crate::marching_cubes::RangeMesh,
-    options: &DecimateOptions,
-    joined: &mut JoinedPieces,
-) -> DecimateStats {
-    let mut mesh = piece.mesh;
-    let locked: Vec<bool> = piece.seam_keys.iter().map(Option::is_some).collect();
-    let target = options.target_triangles(mesh.triangle_count());
-    // Border vertices keep their exact input position (decimation rescales internally).
-    let original = mesh.positions.clone();
-    let (stats, remap) = decimate_locked(&mut mesh, target, options.max_error, &locked);
-    let (seam_index, was_seam) = (&mut joined.seam_index, &mut joined.was_seam);
-    let output_of = place_survivors(
-        &mesh,
-        &remap,
-        |old, positions| {
-            piece.seam_keys[old].map(|key| {
-                *seam_index.entry(key).or_insert_with(|| {
-                    positions.push(original[old]);
-                    was_seam.push(true);
-                    (positions.len() - 1) as u32
-                })
-            })
-        },
-        &mut joined.positions,
-    );
-    // The piece's own vertices, appended after its new border vertices.
-    joined.was_seam.resize(joined.positions.len(), false);
-    joined.triangles.extend(
-        mesh.triangles
-            .iter()
-            .map(|t| t.map(|v| output_of[v as usize])),
-    );
-    stats
-}
-
-/// The lowest block any tile processes: the lowest populated block, less the field's
-/// reach and the marching layer.
-pub(crate) fn tile_origin(block_counts: &HashMap<BlockKey, u64>, reach: i32) -> BlockKey {
-    block_counts
-        .keys()
-        .fold([i32::MAX; 3], |o, b| [0, 1, 2].map(|a| o[a].min(b[a])))
-        .map(|c| c.saturating_sub(reach + 1))
 }
 
 #[cfg(test)]
 mod tests {
+    use super::store::load_in_canonical_order;
     use super::*;
-
+    use crate::field::home_half_block;
     #[test]
     fn particles_load_by_home_half_block_then_input_index_in_any_record_order() {
         let mut rng = crate::test_rng::TestRng::new(11);

@@ -3,8 +3,8 @@
 //!
 //! One file in a private temporary directory (removed when the [`SpillFile`] is dropped:
 //! on success, on error, and on Ctrl-C, which the CLI turns into an error between
-//! tiles). Records are 16 bytes: `x, y, z` (f32, little-endian) and the particle's input
-//! index (u32). The first pass over the input counts particles per cell, so every cell
+//! tiles). Records are `16 + 4·w` bytes: `x, y, z` (f32, little-endian), the particle's
+//! input index (u32) and its `w` payload floats (the selected attributes, f32). The first pass over the input counts particles per cell, so every cell
 //! gets one contiguous region of the file; the second pass fills the regions through
 //! small per-cell buffers. Records are stored raw: zstd level 1 shrinks the records of
 //! `dambreak_small` frame 25 by 12 % only (670 592 → 588 016 bytes; the low bits of
@@ -19,7 +19,7 @@ use std::fs::File;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
-/// Bytes of one record.
+/// Bytes of a record without payload.
 pub const RECORD_BYTES: usize = 16;
 /// Memory all per-cell write buffers may take together.
 const BUFFER_BYTES: usize = 32 << 20;
@@ -31,13 +31,20 @@ pub struct SpillFile {
     path: PathBuf,
     /// Cell → (first record, record count).
     regions: HashMap<BlockKey, (u64, u64)>,
+    /// Bytes of one record (with its payload).
+    record_bytes: usize,
     _dir: tempfile::TempDir,
 }
 
 impl SpillFile {
     /// Creates the file in a new directory under `parent`, with one region per cell of
-    /// `counts` (cell → particles).
-    pub fn create(parent: &Path, counts: &HashMap<BlockKey, u64>) -> Result<Self> {
+    /// `counts` (cell → particles), for records with `payload_width` floats of payload.
+    pub fn create(
+        parent: &Path,
+        counts: &HashMap<BlockKey, u64>,
+        payload_width: usize,
+    ) -> Result<Self> {
+        let record_bytes = RECORD_BYTES + 4 * payload_width;
         let dir = tempfile::Builder::new()
             .prefix("meniscus-spill-")
             .tempdir_in(parent)
@@ -57,26 +64,34 @@ impl SpillFile {
             regions.insert(*key, (first, count));
             first += count;
         }
-        file.set_len(first * RECORD_BYTES as u64)
+        file.set_len(first * record_bytes as u64)
             .map_err(|e| spill_error(&path, e))?;
         Ok(SpillFile {
             file,
             path,
             regions,
+            record_bytes,
             _dir: dir,
         })
     }
 
+    /// The populated cells, in (z, y, x) order.
+    pub fn cells(&self) -> Vec<BlockKey> {
+        let mut cells: Vec<BlockKey> = self.regions.keys().copied().collect();
+        cells.sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
+        cells
+    }
+
     /// Bytes of particle records in the file.
     pub fn bytes(&self) -> u64 {
-        self.regions.values().map(|r| r.1).sum::<u64>() * RECORD_BYTES as u64
+        self.regions.values().map(|r| r.1).sum::<u64>() * self.record_bytes as u64
     }
 
     /// A writer that fills the regions; every particle counted at creation must be
     /// pushed exactly once.
     pub fn writer(&self) -> SpillWriter<'_> {
         let per_cell =
-            (BUFFER_BYTES / self.regions.len().max(1)).clamp(256, 64 << 10) / RECORD_BYTES;
+            (BUFFER_BYTES / self.regions.len().max(1)).clamp(256, 64 << 10) / self.record_bytes;
         SpillWriter {
             spill: self,
             pending: HashMap::new(),
@@ -84,10 +99,16 @@ impl SpillFile {
         }
     }
 
-    /// The records of every cell from `lo` to `hi` (inclusive, per axis), cell by cell.
-    /// Visits the box's cells, or the populated cells when those are fewer (a tile much
-    /// larger than the scene).
-    pub fn read_cells(&self, lo: BlockKey, hi: BlockKey, out: &mut Vec<(Vec3, u32)>) -> Result<()> {
+    /// The records of every cell from `lo` to `hi` (inclusive, per axis), cell by cell,
+    /// and their payload rows into `payload` when given. Visits the box's cells, or the
+    /// populated cells when those are fewer (a tile much larger than the scene).
+    pub fn read_cells(
+        &self,
+        lo: BlockKey,
+        hi: BlockKey,
+        out: &mut Vec<(Vec3, u32)>,
+        mut payload: Option<&mut Vec<f32>>,
+    ) -> Result<()> {
         let volume: u64 = (0..3).map(|a| (hi[a] - lo[a] + 1).max(0) as u64).product();
         let mut wanted: Vec<BlockKey> = Vec::new();
         if volume <= self.regions.len() as u64 {
@@ -106,27 +127,39 @@ impl SpillFile {
             );
         }
         for cell in wanted {
-            self.read_cell(cell, out)?;
+            self.read_cell(cell, out, payload.as_deref_mut())?;
         }
         Ok(())
     }
 
-    /// The records of one cell (empty when the cell holds no particle).
-    pub fn read_cell(&self, cell: BlockKey, out: &mut Vec<(Vec3, u32)>) -> Result<()> {
+    /// The records of one cell (empty when the cell holds no particle), and their payload
+    /// rows into `payload` when given.
+    pub fn read_cell(
+        &self,
+        cell: BlockKey,
+        out: &mut Vec<(Vec3, u32)>,
+        payload: Option<&mut Vec<f32>>,
+    ) -> Result<()> {
         let Some(&(first, count)) = self.regions.get(&cell) else {
             return Ok(());
         };
-        let mut bytes = vec![0u8; count as usize * RECORD_BYTES];
+        let stride = self.record_bytes;
+        let mut bytes = vec![0u8; count as usize * stride];
         self.file
-            .read_exact_at(&mut bytes, first * RECORD_BYTES as u64)
+            .read_exact_at(&mut bytes, first * stride as u64)
             .map_err(|e| spill_error(&self.path, e))?;
-        out.extend(bytes.chunks_exact(RECORD_BYTES).map(|c| {
-            let f = |k: usize| f32::from_le_bytes([c[k], c[k + 1], c[k + 2], c[k + 3]]);
+        let f = |c: &[u8], k: usize| f32::from_le_bytes([c[k], c[k + 1], c[k + 2], c[k + 3]]);
+        out.extend(bytes.chunks_exact(stride).map(|c| {
             (
-                Vec3::new(f(0), f(4), f(8)),
+                Vec3::new(f(c, 0), f(c, 4), f(c, 8)),
                 u32::from_le_bytes([c[12], c[13], c[14], c[15]]),
             )
         }));
+        if let Some(rows) = payload {
+            for c in bytes.chunks_exact(stride) {
+                rows.extend((RECORD_BYTES..stride).step_by(4).map(|k| f(c, k)));
+            }
+        }
         Ok(())
     }
 }
@@ -141,18 +174,29 @@ pub struct SpillWriter<'a> {
 }
 
 impl SpillWriter<'_> {
-    /// Appends one particle to its cell's region.
-    pub fn push(&mut self, cell: BlockKey, position: Vec3, index: u32) -> Result<()> {
+    /// Appends one particle, with its payload row, to its cell's region.
+    pub fn push(
+        &mut self,
+        cell: BlockKey,
+        position: Vec3,
+        index: u32,
+        payload: &[f32],
+    ) -> Result<()> {
         let (spill, per_cell) = (self.spill, self.per_cell);
+        let record_bytes = spill.record_bytes;
+        debug_assert_eq!(RECORD_BYTES + 4 * payload.len(), record_bytes);
         let (cursor, buffer) = self.pending.entry(cell).or_insert_with(|| {
             let first = spill.regions.get(&cell).map_or(0, |r| r.0);
-            (first, Vec::with_capacity(per_cell * RECORD_BYTES))
+            (first, Vec::with_capacity(per_cell * record_bytes))
         });
         for v in position.to_array() {
             buffer.extend_from_slice(&v.to_le_bytes());
         }
         buffer.extend_from_slice(&index.to_le_bytes());
-        if buffer.len() >= per_cell * RECORD_BYTES {
+        for v in payload {
+            buffer.extend_from_slice(&v.to_le_bytes());
+        }
+        if buffer.len() >= per_cell * record_bytes {
             spill.write_records(cell, cursor, buffer)?;
         }
         Ok(())
@@ -174,7 +218,7 @@ impl SpillFile {
     /// Writes the records in `buffer` at `cursor` of `cell`'s region, advances the cursor
     /// and empties the buffer.
     fn write_records(&self, cell: BlockKey, cursor: &mut u64, buffer: &mut Vec<u8>) -> Result<()> {
-        let records = (buffer.len() / RECORD_BYTES) as u64;
+        let records = (buffer.len() / self.record_bytes) as u64;
         let fits = self
             .regions
             .get(&cell)
@@ -188,7 +232,7 @@ impl SpillFile {
             });
         }
         self.file
-            .write_all_at(buffer, *cursor * RECORD_BYTES as u64)
+            .write_all_at(buffer, *cursor * self.record_bytes as u64)
             .map_err(|e| spill_error(&self.path, e))?;
         *cursor += records;
         buffer.clear();

@@ -13,8 +13,11 @@
 
 mod bgeo;
 mod ply;
+mod source;
 mod vtk;
 mod xyz;
+
+pub use source::{MappedXyz, ParticleChunk, ParticleSource, SpooledXyz};
 
 pub use bgeo::stream_positions as stream_bgeo_positions;
 pub use ply::stream_positions as stream_ply_positions;

@@ -1,17 +1,17 @@
 //! Raw `.xyz`: no header, `N` records of three little-endian f32 (12 bytes each).
 
+use super::ParticleSource;
 use super::Particles;
 use crate::error::Result;
 use crate::io::atomic::write_atomically;
-use crate::tiles::ParticleSource;
 use std::io::Write;
 use std::path::Path;
 
 pub(super) fn read(path: &Path) -> Result<Particles> {
-    let file = crate::tiles::MappedXyz::open(path)?;
+    let file = super::MappedXyz::open(path)?;
     let mut positions = Vec::with_capacity(file.particle_count());
-    file.visit_chunks(&mut |_, chunk| {
-        positions.extend_from_slice(chunk);
+    file.visit_chunks(&mut |chunk| {
+        positions.extend_from_slice(chunk.positions);
         Ok(())
     })?;
     Ok(Particles {

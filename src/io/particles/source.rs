@@ -1,40 +1,109 @@
-//! Where the tiled engine reads particles from: positions in memory, or a raw `.xyz` file
-//! mapped window by window, so that a scene larger than memory is never held whole.
+//! Where a run reads particles from: positions (and their payload: the selected
+//! attributes) in memory, or a raw `.xyz` file mapped window by window, so that a scene
+//! larger than memory is never held whole.
 //!
 //! A [`ParticleSource`] is visited front to back, in input order, a chunk at a time; the
-//! engine visits it at most twice (bounds and tile histogram, then binning into spill
-//! files, see [`super::spill`]).
+//! tile engine visits it at most twice (bounds and tile histogram, then binning into a
+//! spill file).
 
+use super::{Attribute, Particles};
+use crate::attributes::AttributeLayout;
+use crate::cancel::CancelToken;
 use crate::error::{Error, Result};
 use glam::Vec3;
 use std::path::{Path, PathBuf};
 
-/// Particles read in input order, a chunk at a time.
+/// Consecutive particles of a source: input index of the first, positions, and their
+/// payload, row-major (`width` floats per particle, the source's
+/// [`ParticleSource::attribute_layout`] in order).
+#[derive(Clone, Copy, Debug)]
+pub struct ParticleChunk<'a> {
+    /// Input index of the first particle.
+    pub first: usize,
+    /// Positions, world units.
+    pub positions: &'a [Vec3],
+    /// Payload rows, `width × positions.len()` floats (empty without attributes).
+    pub payload: &'a [f32],
+}
+
+/// Particles read in input order, a chunk at a time, with their payload.
 pub trait ParticleSource {
     /// Number of particles.
     fn particle_count(&self) -> usize;
-    /// Calls `visit(first_index, positions)` for consecutive chunks covering every
-    /// particle in input order; stops at the first error.
-    fn visit_chunks(&self, visit: &mut dyn FnMut(usize, &[Vec3]) -> Result<()>) -> Result<()>;
-    /// All positions when they already are in memory (lets the untiled run skip a copy).
-    fn as_slice(&self) -> Option<&[Vec3]> {
+    /// The attributes every particle carries as payload, in row order (empty: positions
+    /// only).
+    fn attribute_layout(&self) -> Vec<AttributeLayout> {
+        Vec::new()
+    }
+    /// Calls `visit` for consecutive chunks covering every particle in input order; stops
+    /// at the first error.
+    fn visit_chunks(&self, visit: &mut dyn FnMut(ParticleChunk<'_>) -> Result<()>) -> Result<()>;
+    /// All positions and payload rows when they already are in memory (lets an untiled
+    /// run skip a copy).
+    fn as_slices(&self) -> Option<(&[Vec3], &[f32])> {
         None
     }
 }
 
-/// Positions in memory (`&[Vec3]`, `Vec<Vec3>`, `&Vec<Vec3>`).
+/// Positions in memory (`&[Vec3]`, `Vec<Vec3>`, `&Vec<Vec3>`), no payload.
 impl<T: AsRef<[Vec3]>> ParticleSource for T {
     fn particle_count(&self) -> usize {
         self.as_ref().len()
     }
-    fn visit_chunks(&self, visit: &mut dyn FnMut(usize, &[Vec3]) -> Result<()>) -> Result<()> {
+    fn visit_chunks(&self, visit: &mut dyn FnMut(ParticleChunk<'_>) -> Result<()>) -> Result<()> {
         for (n, chunk) in self.as_ref().chunks(CHUNK_PARTICLES).enumerate() {
-            visit(n * CHUNK_PARTICLES, chunk)?;
+            visit(ParticleChunk {
+                first: n * CHUNK_PARTICLES,
+                positions: chunk,
+                payload: &[],
+            })?;
         }
         Ok(())
     }
-    fn as_slice(&self) -> Option<&[Vec3]> {
-        Some(self.as_ref())
+    fn as_slices(&self) -> Option<(&[Vec3], &[f32])> {
+        Some((self.as_ref(), &[]))
+    }
+}
+
+/// Positions with every attribute of the [`Particles`] as payload (select first with
+/// [`crate::attributes::select_attributes`] to carry fewer).
+impl ParticleSource for Particles {
+    fn particle_count(&self) -> usize {
+        self.positions.len()
+    }
+    fn attribute_layout(&self) -> Vec<AttributeLayout> {
+        self.attributes.iter().map(AttributeLayout::of).collect()
+    }
+    fn visit_chunks(&self, visit: &mut dyn FnMut(ParticleChunk<'_>) -> Result<()>) -> Result<()> {
+        let mut rows = Vec::new();
+        for (n, chunk) in self.positions.chunks(CHUNK_PARTICLES).enumerate() {
+            let first = n * CHUNK_PARTICLES;
+            rows.clear();
+            interleave(&self.attributes, first..first + chunk.len(), &mut rows);
+            visit(ParticleChunk {
+                first,
+                positions: chunk,
+                payload: &rows,
+            })?;
+        }
+        Ok(())
+    }
+    fn as_slices(&self) -> Option<(&[Vec3], &[f32])> {
+        self.attributes
+            .is_empty()
+            .then_some((self.positions.as_slice(), &[][..]))
+    }
+}
+
+/// Appends the rows of `items` of `columns` (item-major attributes) to `rows`.
+fn interleave(columns: &[Attribute], items: std::ops::Range<usize>, rows: &mut Vec<f32>) {
+    if columns.is_empty() {
+        return;
+    }
+    for i in items {
+        for a in columns {
+            rows.extend_from_slice(a.item(i));
+        }
     }
 }
 
@@ -81,7 +150,7 @@ impl ParticleSource for MappedXyz {
     fn particle_count(&self) -> usize {
         self.particles
     }
-    fn visit_chunks(&self, visit: &mut dyn FnMut(usize, &[Vec3]) -> Result<()>) -> Result<()> {
+    fn visit_chunks(&self, visit: &mut dyn FnMut(ParticleChunk<'_>) -> Result<()>) -> Result<()> {
         let mut decoded = Vec::with_capacity(CHUNK_PARTICLES.min(self.particles));
         let mut first = 0;
         while first < self.particles {
@@ -126,7 +195,11 @@ impl ParticleSource for MappedXyz {
                     format!("particle {} has a non-finite coordinate", first + k),
                 ));
             }
-            visit(first, &decoded)?;
+            visit(ParticleChunk {
+                first,
+                positions: &decoded,
+                payload: &[],
+            })?;
             first += count;
         }
         Ok(())
@@ -154,17 +227,18 @@ impl SpooledXyz {
         path: &Path,
         format: crate::io::particles::ParticleFormat,
         temp_dir: Option<&Path>,
+        cancel: &CancelToken,
     ) -> Result<Option<SpooledXyz>> {
         use crate::io::particles::{self as p, ParticleFormat};
         match format {
             ParticleFormat::Xyz => Ok(None),
-            ParticleFormat::Bgeo => Self::spool(path, temp_dir, &mut |sink| {
+            ParticleFormat::Bgeo => Self::spool(path, temp_dir, cancel, &mut |sink| {
                 p::stream_bgeo_positions(path, sink).map(Some)
             }),
-            ParticleFormat::Vtk => Self::spool(path, temp_dir, &mut |sink| {
+            ParticleFormat::Vtk => Self::spool(path, temp_dir, cancel, &mut |sink| {
                 p::stream_vtk_positions(path, sink)
             }),
-            ParticleFormat::Ply => Self::spool(path, temp_dir, &mut |sink| {
+            ParticleFormat::Ply => Self::spool(path, temp_dir, cancel, &mut |sink| {
                 p::stream_ply_positions(path, sink)
             }),
         }
@@ -175,6 +249,7 @@ impl SpooledXyz {
     fn spool(
         path: &Path,
         temp_dir: Option<&Path>,
+        cancel: &CancelToken,
         stream: &mut dyn FnMut(&mut dyn FnMut(&[Vec3]) -> Result<()>) -> Result<Option<usize>>,
     ) -> Result<Option<SpooledXyz>> {
         if std::fs::metadata(path)
@@ -198,7 +273,7 @@ impl SpooledXyz {
         let mut writer = std::io::BufWriter::with_capacity(1 << 20, file);
         let mut bytes = Vec::new();
         let count = stream(&mut |chunk| {
-            crate::tiles::interrupted()?;
+            cancel.check()?;
             bytes.clear();
             for p in chunk {
                 for c in p.to_array() {
@@ -231,7 +306,7 @@ impl ParticleSource for SpooledXyz {
     fn particle_count(&self) -> usize {
         self.mapped.particle_count()
     }
-    fn visit_chunks(&self, visit: &mut dyn FnMut(usize, &[Vec3]) -> Result<()>) -> Result<()> {
+    fn visit_chunks(&self, visit: &mut dyn FnMut(ParticleChunk<'_>) -> Result<()>) -> Result<()> {
         self.mapped.visit_chunks(visit)
     }
 }
