@@ -1,8 +1,10 @@
 //! Builds a large benchmark scene by tiling copies of a real frame side by side in x and z
 //! (never committed; write it to a temporary folder).
 //!
-//! `cargo run --release --example tile_scene -- INPUT COPIES OUTPUT.xyz`
-//! e.g. `... datasets/dambreak_small/ParticleData_Fluid_25.xyz 96 /tmp/scene_4m.xyz`
+//! `cargo run --release --example tile_scene -- INPUT COPIES OUTPUT`
+//! e.g. `... datasets/dambreak_small/ParticleData_Fluid_25.xyz 96 /tmp/scene_4m.xyz`;
+//! an OUTPUT `.ply` or `.vtk` keeps the input's point attributes (a `.vtk` frame's
+//! velocity: `... ParticleData_Fluid_25.vtk 96 /tmp/scene_4m_velocity.ply`).
 
 use glam::Vec3;
 use meniscus::io::particles::{read_particles, write_particles, ParticleFormat, Particles};
@@ -11,7 +13,7 @@ use std::path::Path;
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if args.len() != 4 {
-        eprintln!("usage: tile_scene INPUT COPIES OUTPUT.xyz");
+        eprintln!("usage: tile_scene INPUT COPIES OUTPUT(.xyz|.ply|.vtk)");
         std::process::exit(2);
     }
     let frame = read_particles(Path::new(&args[1]), None).expect("readable input");
@@ -32,13 +34,19 @@ fn main() {
         positions.extend(frame.positions.iter().map(|p| *p + offset));
     }
     let count = positions.len();
+    let output = Path::new(&args[3]);
+    let format = ParticleFormat::from_path(output).expect("OUTPUT is .xyz, .ply or .vtk");
+    let mut attributes = frame.attributes;
+    for a in &mut attributes {
+        a.values = a.values.repeat(copies);
+    }
     write_particles(
-        Path::new(&args[3]),
+        output,
         &Particles {
             positions,
-            attributes: Vec::new(),
+            attributes,
         },
-        ParticleFormat::Xyz,
+        format,
     )
     .expect("writable output");
     println!("{count} particles written to {}", args[3]);

@@ -287,9 +287,6 @@ pub(crate) fn transfer<S: crate::io::particles::ParticleSource>(
 
     // Points far from every particle: the nearest one over the whole store.
     let far: Vec<usize> = (0..points.len()).filter(|&k| !resolved[k]).collect();
-    if std::env::var_os("MENISCUS_DEBUG_ATTR").is_some() {
-        eprintln!("attr: {} points, {} far", points.len(), far.len());
-    }
     if !far.is_empty() {
         let mut best: Vec<(f64, u32, Vec<f32>)> =
             vec![(f64::INFINITY, u32::MAX, Vec::new()); far.len()];
@@ -478,5 +475,92 @@ impl Search {
             }
             _ => false,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::field::FieldOptions;
+    use crate::io::particles::{ParticleSource, Particles};
+    use crate::tiles::{plan_tiles, TileOptions};
+
+    /// Values at `points` from `particles`, untiled or in tiles of `tile` cells.
+    fn values_at(particles: &Particles, points: &[Vec3], tile: Option<u32>) -> Vec<Attribute> {
+        let field = FieldOptions::new(0.025);
+        let options = TileOptions {
+            tile_size_cells: tile,
+            ..TileOptions::default()
+        };
+        let cancel = CancelToken::new();
+        let plan = plan_tiles(particles, &field, &options, 0, false, &cancel).unwrap();
+        assert_eq!(plan.is_tiled(), tile.is_some());
+        let layout = particles.attribute_layout();
+        let store = ParticleStore::build(particles.clone(), &plan, None, &cancel).unwrap();
+        transfer(
+            &store,
+            &plan,
+            &layout,
+            points,
+            field.influence_radius_world(),
+            &cancel,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn points_beyond_r_take_the_nearest_particle_lowest_index_on_a_tie() {
+        // A block of particles, each with its index as value, and two coincident ones.
+        let mut positions = Vec::new();
+        for k in 0..6 {
+            for j in 0..6 {
+                for i in 0..6 {
+                    positions.push(Vec3::new(i as f32, j as f32, k as f32) * 0.05);
+                }
+            }
+        }
+        positions.push(Vec3::new(2.0, 2.0, 2.0));
+        positions.push(Vec3::new(2.0, 2.0, 2.0));
+        let n = positions.len();
+        let particles = Particles {
+            positions: positions.clone(),
+            attributes: vec![Attribute {
+                name: "id".into(),
+                components: 1,
+                values: (0..n).map(|i| i as f32).collect(),
+            }],
+        };
+        // Points at 1.5 R to 40 R from every particle, and one inside.
+        let points = [
+            Vec3::new(-0.15, 0.1, 0.1),
+            Vec3::new(0.1, 0.45, 0.1),
+            Vec3::new(1.0, 1.0, 1.0),
+            Vec3::new(2.3, 2.0, 2.0),
+            Vec3::new(-4.0, 0.0, 0.0),
+            Vec3::new(0.12, 0.12, 0.12),
+        ];
+        let nearest = |x: Vec3| -> f32 {
+            let mut best = (f64::INFINITY, 0);
+            for (i, p) in positions.iter().enumerate() {
+                let d2 = (p.as_dvec3() - x.as_dvec3()).length_squared();
+                if d2 < best.0 {
+                    best = (d2, i);
+                }
+            }
+            best.1 as f32
+        };
+        let untiled = values_at(&particles, &points, None);
+        for tile in [8, 16] {
+            let tiled = values_at(&particles, &points, Some(tile));
+            assert_eq!(tiled, untiled, "tile {tile}");
+        }
+        let ids = &untiled[0];
+        for (k, x) in points.iter().enumerate().take(5) {
+            assert_eq!(ids.item(k)[0], nearest(*x), "point {x}");
+        }
+        // The coincident pair: the lower index.
+        assert_eq!(ids.item(3)[0], (n - 2) as f32);
+        // Inside: a weighted mean of several ids, not one of them.
+        assert!(ids.item(5)[0].fract() != 0.0);
     }
 }

@@ -31,7 +31,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Reconstruct the surface of one particle file or a `{}` sequence of them.
-    Reconstruct(ReconstructArgs),
+    Reconstruct(Box<ReconstructArgs>),
     /// Inspect, check, extract from or fill a `.mseq` mesh-sequence archive.
     #[command(subcommand)]
     Archive(ArchiveCommand),
