@@ -15,8 +15,13 @@
 //! Vertex order: the old vertices keep their indices, edge points follow in sorted
 //! (min, max) edge order; triangle `t` becomes triangles `4t .. 4t + 3`. The output keeps
 //! the orientation and does not depend on the thread count. Normals are the caller's job.
+//!
+//! Per-vertex attributes (one item per vertex) are subdivided with the same masks as the
+//! positions, so a constant attribute stays constant and a linear function of the
+//! positions stays the same linear function of the new positions (every mask is affine:
+//! its weights sum to 1). An attribute without one item per vertex is dropped.
 
-use crate::mesh::TriMesh;
+use crate::mesh::{Attribute, TriMesh};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -62,6 +67,7 @@ fn subdivide_once(mesh: TriMesh) -> TriMesh {
     let TriMesh {
         positions: old_positions,
         triangles: old_triangles,
+        attributes: old_attributes,
         ..
     } = mesh;
     let nv = old_positions.len();
@@ -170,6 +176,21 @@ fn subdivide_once(mesh: TriMesh) -> TriMesh {
         };
         moved.as_vec3()
     }));
+    let stencil = Stencil {
+        tris,
+        sides: &sides,
+        edge_start: &edge_start,
+        valence: &valence,
+        boundary_count: &boundary_count,
+        non_manifold: &non_manifold,
+        beta: &beta,
+    };
+    let attributes: Vec<Attribute> = old_attributes
+        .iter()
+        .filter(|a| a.components > 0 && a.values.len() == a.components * nv)
+        .map(|a| stencil.apply(a))
+        .collect();
+    drop(old_attributes);
     drop((valence, sum, boundary_count, boundary_sum, non_manifold));
     positions.par_extend((0..ne).into_par_iter().map(|e| {
         let group = &sides[edge_start[e] as usize..edge_start[e + 1] as usize];
@@ -198,8 +219,161 @@ fn subdivide_once(mesh: TriMesh) -> TriMesh {
         positions,
         triangles,
         normals: Vec::new(),
-        attributes: Vec::new(),
+        attributes,
     }
+}
+
+/// The masks of one step as [`subdivide_once`] found them, for per-vertex values.
+struct Stencil<'a> {
+    tris: &'a [[u32; 3]],
+    /// Every side, grouped by edge (edge `e` is `sides[edge_start[e]..edge_start[e + 1]]`).
+    sides: &'a [u32],
+    edge_start: &'a [u32],
+    valence: &'a [u32],
+    boundary_count: &'a [u32],
+    non_manifold: &'a [bool],
+    beta: &'a [f64],
+}
+
+impl Stencil<'_> {
+    /// `attribute` (one item per old vertex) through the masks of the positions: vertex
+    /// items, then edge items, in the order of the new vertices.
+    fn apply(&self, attribute: &Attribute) -> Attribute {
+        let k = attribute.components;
+        let nv = self.valence.len();
+        let ne = self.edge_start.len() - 1;
+        let value = |v: u32, c: usize| attribute.values[v as usize * k + c] as f64;
+        let ends = |s: u32| {
+            let t = &self.tris[s as usize / 3];
+            let j = s as usize % 3;
+            let (a, b) = (t[j], t[(j + 1) % 3]);
+            (a.min(b), a.max(b))
+        };
+        let opposite = |s: u32| self.tris[s as usize / 3][(s as usize % 3 + 2) % 3];
+        let group =
+            |e: usize| &self.sides[self.edge_start[e] as usize..self.edge_start[e + 1] as usize];
+        // Neighbour sums (all neighbours, and boundary neighbours), edge by edge as the
+        // positions gather them.
+        let mut sum = vec![0f64; nv * k];
+        let mut boundary_sum = vec![0f64; nv * k];
+        for e in 0..ne {
+            let g = group(e);
+            let (a, b) = ends(g[0]);
+            for c in 0..k {
+                let (va, vb) = (value(a, c), value(b, c));
+                sum[a as usize * k + c] += vb;
+                sum[b as usize * k + c] += va;
+                if g.len() == 1 {
+                    boundary_sum[a as usize * k + c] += vb;
+                    boundary_sum[b as usize * k + c] += va;
+                }
+            }
+        }
+        let mut values: Vec<f32> = Vec::with_capacity((nv + ne) * k);
+        values.par_extend((0..nv * k).into_par_iter().map(|i| {
+            let (v, c) = (i / k, i % k);
+            let p = value(v as u32, c);
+            let n = self.valence[v];
+            let moved = if self.non_manifold[v] || self.boundary_count[v] > 2 || n == 0 {
+                p
+            } else if self.boundary_count[v] == 2 {
+                0.75 * p + 0.125 * boundary_sum[i]
+            } else if self.boundary_count[v] == 0 {
+                let (nf, beta) = (n as f64, self.beta[n as usize]);
+                (1.0 - nf * beta) * p + beta * sum[i]
+            } else {
+                p
+            };
+            moved as f32
+        }));
+        values.par_extend((0..ne * k).into_par_iter().map(|i| {
+            let (e, c) = (i / k, i % k);
+            let g = group(e);
+            let (a, b) = ends(g[0]);
+            let (a, b) = (value(a, c), value(b, c));
+            let p = if g.len() == 2 {
+                0.375 * (a + b) + 0.125 * (value(opposite(g[0]), c) + value(opposite(g[1]), c))
+            } else {
+                0.5 * (a + b)
+            };
+            p as f32
+        }));
+        Attribute {
+            name: attribute.name.clone(),
+            components: k,
+            values,
+        }
+    }
+}
+
+/// One Loop step of per-vertex `values` (`components` per vertex) of a closed mesh whose
+/// step is already known as its result: `fine` holds the children of every control
+/// triangle as [`children`] writes them (control triangle `t` → `fine[4t .. 4t + 4]`),
+/// the `control` control vertices are numbered first and keep their numbers, and the
+/// edge points (numbers `control ..`) are what the values are written for after them.
+/// The masks are those of the positions (interior vertex and edge rules: every edge of a
+/// closed mesh has two sides). Returns the `fine_vertices × components` values, or
+/// `None` when `fine` is not such a layout (a damaged frame).
+pub(crate) fn loop_values_of_closed(
+    fine: &[[u32; 3]],
+    control: usize,
+    fine_vertices: usize,
+    values: &[f32],
+    components: usize,
+) -> Option<Vec<f32>> {
+    let k = components;
+    if fine.len() % 4 != 0 || fine_vertices < control || values.len() != control * k {
+        return None;
+    }
+    let edges = fine_vertices - control;
+    let mut valence = vec![0u32; control];
+    let mut sum = vec![0f64; control * k];
+    let mut edge = vec![0f64; edges * k];
+    let mut sides = vec![0u8; edges];
+    let value = |v: usize, c: usize| values[v * k + c] as f64;
+    for family in fine.chunks_exact(4) {
+        let tri = [family[0][0], family[1][0], family[2][0]].map(|v| v as usize);
+        let m = [family[0][1], family[1][1], family[2][1]].map(|v| v as usize);
+        if tri.iter().any(|&v| v >= control) || m.iter().any(|&e| e < control || e >= fine_vertices)
+        {
+            return None;
+        }
+        for j in 0..3 {
+            let (a, b, apex, e) = (tri[j], tri[(j + 1) % 3], tri[(j + 2) % 3], m[j] - control);
+            sides[e] = sides[e].saturating_add(1);
+            // Each of the edge's two sides adds half of 3/8 (a + b) and its apex's 1/8;
+            // each adds both ends to each other's neighbourhood (halved below).
+            valence[a] += 1;
+            valence[b] += 1;
+            for c in 0..k {
+                let (va, vb) = (value(a, c), value(b, c));
+                edge[e * k + c] += 0.1875 * (va + vb) + 0.125 * value(apex, c);
+                sum[a * k + c] += vb;
+                sum[b * k + c] += va;
+            }
+        }
+    }
+    if sides.iter().any(|&n| n != 2) {
+        return None;
+    }
+    let half_valence: Vec<u32> = valence.iter().map(|n| n / 2).collect();
+    let beta = loop_betas(&half_valence);
+    let mut out = Vec::with_capacity(fine_vertices * k);
+    for v in 0..control {
+        let n = half_valence[v];
+        for c in 0..k {
+            let p = value(v, c);
+            let moved = if n == 0 {
+                p
+            } else {
+                let (nf, b) = (n as f64, beta[n as usize]);
+                (1.0 - nf * b) * p + b * (0.5 * sum[v * k + c])
+            };
+            out.push(moved as f32);
+        }
+    }
+    out.extend(edge.iter().map(|&x| x as f32));
+    Some(out)
 }
 
 /// Loop's β for every valence up to the largest in `valence`, computed once:
@@ -286,6 +460,80 @@ mod tests {
         let report = validate(&m);
         assert_eq!(report.non_manifold_edges + report.inconsistent_edges, 0);
         assert_eq!(report.boundary_edges, 32);
+    }
+
+    #[test]
+    fn attributes_follow_the_masks_of_the_positions() {
+        // A closed sphere with uneven vertices, and an open patch (boundary and corner
+        // rules), each with a linear function of the positions and a constant.
+        let mut closed = icosphere(2, 1.0);
+        for (i, p) in closed.positions.iter_mut().enumerate() {
+            *p *= 1.0 + 0.05 * ((i * 37 % 11) as f32 / 11.0);
+        }
+        let mut open = closed.clone();
+        open.triangles.truncate(open.triangles.len() - 7);
+        let linear = |p: Vec3| [2.0 * p.x - p.y + 0.5, 0.25 * p.z - 3.0];
+        for mut mesh in [closed, open] {
+            mesh.attributes = vec![
+                Attribute {
+                    name: "linear".into(),
+                    components: 2,
+                    values: mesh.positions.iter().flat_map(|&p| linear(p)).collect(),
+                },
+                Attribute {
+                    name: "constant".into(),
+                    components: 1,
+                    values: vec![0.7; mesh.positions.len()],
+                },
+                // Not one item per vertex: dropped.
+                Attribute {
+                    name: "short".into(),
+                    components: 1,
+                    values: vec![1.0],
+                },
+            ];
+            subdivide(&mut mesh, &SubdivideOptions { levels: 2 });
+            assert_eq!(mesh.attributes.len(), 2);
+            assert_eq!(mesh.attributes[0].len(), mesh.vertex_count());
+            for (v, &p) in mesh.positions.iter().enumerate() {
+                let got = mesh.attributes[0].item(v);
+                let want = linear(p);
+                for c in 0..2 {
+                    assert!(
+                        (got[c] - want[c]).abs() < 1e-5,
+                        "vertex {v}: {got:?} vs {want:?}"
+                    );
+                }
+                assert_eq!(mesh.attributes[1].item(v), [0.7]);
+            }
+        }
+    }
+
+    #[test]
+    fn the_closed_step_of_values_is_the_general_one() {
+        let mut mesh = icosphere(1, 1.0);
+        mesh.positions[3] *= 1.3;
+        let nv = mesh.vertex_count();
+        let values: Vec<f32> = (0..nv)
+            .flat_map(|i| [(i * i % 7) as f32, i as f32])
+            .collect();
+        mesh.attributes = vec![Attribute {
+            name: "a".into(),
+            components: 2,
+            values: values.clone(),
+        }];
+        let mut general = mesh.clone();
+        subdivide(&mut general, &SubdivideOptions { levels: 1 });
+        let closed =
+            loop_values_of_closed(&general.triangles, nv, general.vertex_count(), &values, 2)
+                .unwrap();
+        for (a, b) in closed.iter().zip(&general.attributes[0].values) {
+            assert!((a - b).abs() < 1e-5, "{a} vs {b}");
+        }
+        // Not a layout of children.
+        let mut bad = general.triangles.clone();
+        bad[0][0] = (nv + 1) as u32;
+        assert!(loop_values_of_closed(&bad, nv, general.vertex_count(), &values, 2).is_none());
     }
 
     #[test]

@@ -23,7 +23,12 @@
 //! streams and the first Loop step runs while decoding ([`super::fused`]); 2 when it is
 //! also stored in parts that decode in parallel (version 3, [`super::parts`]); 0 for any
 //! other mesh, stored as its streams.
+//!
+//! Attributes ([`super::attributes`]) are stored beside this payload, for the control
+//! vertices: on decoding, each Loop step gives the new vertices the values of the same
+//! masks as their positions.
 
+use super::attributes::{self, Descriptor};
 use super::codec::{
     decode_streams, decompress, encode_streams, get_varint, put_varint, raw_capacity, read_count,
     unzigzag, zigzag, HalfEdges,
@@ -31,7 +36,7 @@ use super::codec::{
 use super::parts::decode_streams_subdivided;
 use super::parts::{decode_parts_subdivided, encode_parts, part_count};
 use crate::mesh::{SphereInstances, Surface, TriMesh};
-use crate::subdivision::{subdivide, SubdivideOptions};
+use crate::subdivision::{loop_values_of_closed, subdivide, SubdivideOptions};
 use glam::Vec3;
 
 /// `shape`: the fluid mesh is open (or not known closed and oriented) ...
@@ -65,14 +70,43 @@ fn loop_counts(coded: super::codec::CodedMesh, levels: u32) -> Option<(u64, u64)
     Some((v, t))
 }
 
-/// Encodes a frame; returns the payload and the vertex and triangle counts it decodes to.
-/// `in_parts`: a closed control mesh may be stored in parts (version 3 and later).
+/// The sphere instances a frame stores (none without a template).
+pub(crate) fn stored_instances(spheres: &SphereInstances) -> usize {
+    if spheres.template.triangles.is_empty() {
+        0
+    } else {
+        spheres.centers.len()
+    }
+}
+
+/// True when the frame stores attributes: the fluid's, or those of stored instances.
+pub(crate) fn has_attributes(frame: &ArchiveFrame) -> bool {
+    !frame.fluid.attributes.is_empty()
+        || (stored_instances(frame.spheres) > 0 && !frame.spheres.attributes.is_empty())
+}
+
+/// An encoded frame.
+pub(crate) struct EncodedFrame {
+    pub(crate) payload: Vec<u8>,
+    /// Vertices and triangles it decodes to.
+    pub(crate) vertices: u32,
+    pub(crate) triangles: u32,
+    /// Record flags ([`attributes::HAS_ATTRIBUTES`]).
+    pub(crate) flags: u32,
+}
+
+/// Encodes a frame: its payload and the vertex and triangle counts it decodes to.
+/// `in_parts`: a closed control mesh may be stored in parts (version 3 and later). A
+/// frame with attributes (checked with [`attributes::check`]) stores them with error
+/// bound `attribute_bound` ([`super::attributes`]); a frame without them is the geometry
+/// payload alone.
 pub(crate) fn encode_frame(
     frame: &ArchiveFrame,
     step: f64,
+    attribute_bound: f64,
     zstd_level: i32,
     in_parts: bool,
-) -> std::io::Result<(Vec<u8>, u32, u32)> {
+) -> std::io::Result<EncodedFrame> {
     let mut raw = Vec::new();
     let mut levels = frame.subdivision_levels;
     let mut fine = None;
@@ -104,19 +138,15 @@ pub(crate) fn encode_frame(
     raw.push(shape);
     put_varint(&mut raw, coded.vertices as u64);
     put_varint(&mut raw, coded.triangles as u64);
-    if shape == CLOSED_IN_PARTS {
+    // The control vertices in decoding order.
+    let order = if shape == CLOSED_IN_PARTS {
         drop(half_edges);
-        encode_parts(fluid, parts, step, &mut raw);
+        encode_parts(fluid, parts, step, &mut raw)
     } else {
-        half_edges.encode(fluid, step, &mut raw);
-    }
-    drop(fine);
-    let spheres = frame.spheres;
-    let count = if spheres.template.triangles.is_empty() {
-        0
-    } else {
-        spheres.centers.len()
+        half_edges.encode(fluid, step, &mut raw)
     };
+    let spheres = frame.spheres;
+    let count = stored_instances(spheres);
     put_varint(&mut raw, count as u64);
     if count > 0 {
         let half = step / 2.0;
@@ -136,21 +166,48 @@ pub(crate) fn encode_frame(
         vertices += count as u64 * template.vertices as u64;
         triangles += count as u64 * template.triangles as u64;
     }
-    match (u32::try_from(vertices), u32::try_from(triangles)) {
-        (Ok(v), Ok(t)) => Ok((zstd::bulk::compress(&raw, zstd_level)?, v, t)),
-        _ => Err(std::io::Error::other(
+    let (Ok(vertices), Ok(triangles)) = (u32::try_from(vertices), u32::try_from(triangles)) else {
+        return Err(std::io::Error::other(
             "frame too large for the archive (over 2^32 vertices or triangles)",
-        )),
-    }
+        ));
+    };
+    let geometry = zstd::bulk::compress(&raw, zstd_level)?;
+    drop(raw);
+    let (payload, flags) = if has_attributes(frame) {
+        let sphere_attributes = if count > 0 {
+            &spheres.attributes[..]
+        } else {
+            &[]
+        };
+        let payload = attributes::encode_payload(
+            attribute_bound,
+            &fluid.attributes,
+            &order,
+            sphere_attributes,
+            &geometry,
+            zstd_level,
+        )?;
+        (payload, attributes::HAS_ATTRIBUTES)
+    } else {
+        (geometry, 0)
+    };
+    Ok(EncodedFrame {
+        payload,
+        vertices,
+        triangles,
+        flags,
+    })
 }
 
-/// Decodes a payload that the record header says holds `vertices` vertices and
-/// `triangles` triangles (after subdivision, spheres included). No normals.
+/// Decodes a payload (the geometry) that the record header says holds `vertices`
+/// vertices and `triangles` triangles (after subdivision, spheres included), with the
+/// frame's attribute streams when it has them. No normals.
 pub(crate) fn decode_frame(
     payload: &[u8],
     vertices: usize,
     triangles: usize,
     step: f64,
+    attribute_streams: Option<(&Descriptor, &[u8])>,
 ) -> Result<Surface, String> {
     // The raw size is bounded by the stored (control) mesh, at most the final one.
     let raw = decompress(payload, raw_capacity(vertices, triangles))?;
@@ -162,25 +219,33 @@ pub(crate) fn decode_frame(
     let fluid_vertices = read_count(&raw, pos, "fluid vertex count", nv)?;
     let fluid_triangles = read_count(&raw, pos, "fluid triangle count", nt)?;
     let (v, t) = (fluid_vertices, fluid_triangles);
-    let (mut fluid, remaining_levels) = match (shape, levels) {
+    // `fused`: the first Loop step ran while decoding.
+    let (mut fluid, remaining_levels, fused) = match (shape, levels) {
         // The first Loop step while decoding, the parts in parallel ...
-        (CLOSED_IN_PARTS, 1..) => (decode_parts_subdivided(&raw, pos, v, t, step)?, levels - 1),
+        (CLOSED_IN_PARTS, 1..) => (
+            decode_parts_subdivided(&raw, pos, v, t, step)?,
+            levels - 1,
+            true,
+        ),
         (CLOSED_IN_PARTS, 0) => return Err("a mesh in parts must be subdivided".into()),
         // ... or the whole mesh ...
         (CLOSED, 1..) => (
             decode_streams_subdivided(&raw, pos, v, t, step)?,
             levels - 1,
+            true,
         ),
         // ... or the mesh as stored, subdivided after.
-        (OPEN | CLOSED, _) => (decode_streams(&raw, pos, v, t, step)?, levels),
+        (OPEN | CLOSED, _) => (decode_streams(&raw, pos, v, t, step)?, levels, false),
         _ => return Err(format!("unknown fluid shape {shape}")),
     };
-    subdivide(
-        &mut fluid,
-        &SubdivideOptions {
-            levels: remaining_levels,
-        },
-    );
+    if attribute_streams.is_none() {
+        subdivide(
+            &mut fluid,
+            &SubdivideOptions {
+                levels: remaining_levels,
+            },
+        );
+    }
     let count = read_count(&raw, pos, "sphere count", nt)?;
     let mut spheres = SphereInstances::default();
     if count > 0 {
@@ -201,6 +266,57 @@ pub(crate) fn decode_frame(
     }
     if *pos != raw.len() {
         return Err("trailing bytes after the frame".into());
+    }
+    drop(raw);
+    if let Some((descriptor, streams)) = attribute_streams {
+        // Values of the control vertices; the fused step's values by the same masks as
+        // its positions, then the remaining steps with the positions.
+        let (control, instances) = attributes::decode_streams(descriptor, streams, v, count)?;
+        fluid.attributes = if fused {
+            control
+                .into_iter()
+                .map(|a| {
+                    let values = loop_values_of_closed(
+                        &fluid.triangles,
+                        v,
+                        fluid.vertex_count(),
+                        &a.values,
+                        a.components,
+                    )
+                    .ok_or("the subdivided fluid mesh is not a Loop step of its control mesh")?;
+                    Ok(crate::mesh::Attribute { values, ..a })
+                })
+                .collect::<Result<_, String>>()?
+        } else {
+            control
+        };
+        subdivide(
+            &mut fluid,
+            &SubdivideOptions {
+                levels: remaining_levels,
+            },
+        );
+        spheres.attributes = instances;
+        for a in &fluid.attributes {
+            if a.len() != fluid.vertex_count() {
+                return Err(format!(
+                    "attribute {:?} decodes to {} items for {} fluid vertices",
+                    a.name,
+                    a.len(),
+                    fluid.vertex_count()
+                ));
+            }
+        }
+        for a in &spheres.attributes {
+            if a.len() != spheres.centers.len() {
+                return Err(format!(
+                    "attribute {:?} decodes to {} items for {} sphere instances",
+                    a.name,
+                    a.len(),
+                    spheres.centers.len()
+                ));
+            }
+        }
     }
     let got_vertices = fluid.vertex_count() + count * spheres.template.vertex_count();
     let got_triangles = fluid.triangle_count() + count * spheres.template.triangle_count();

@@ -19,12 +19,30 @@
 //! order), a rotation of each triangle's corners (orientation kept) and a renumbering of
 //! the vertices (order of first use; unreferenced vertices are dropped); every coordinate
 //! within the error bound; normals recomputed (area-weighted) on decoding.
+//!
+//! **Attributes** (velocity for motion blur, density, ...): the fluid's per-vertex
+//! attributes and the spheres' per-instance attributes are stored per frame, each value
+//! quantized with [`ArchiveOptions::attribute_error_bound`] (absolute, in the attribute's
+//! units; stored in the frame's record, so frames appended with another bound keep
+//! theirs: [`FrameInfo::attribute_error_bound`]). Without subdivision every decoded value
+//! is within that bound of the original. With `subdivision_levels > 0` the values are
+//! stored for the control vertices and each Loop step gives every new vertex the same
+//! linear combination of the control values as its position (vertex and edge masks,
+//! boundary rules included): the decoded values are the Loop subdivision of the stored
+//! control values, as the decoded positions are of the stored control positions, so they
+//! are within the bound of the subdivision of the exact control values (the masks are
+//! convex); a constant attribute stays constant and a linear function of the positions
+//! stays that function of the subdivided positions. Decoded items follow the decoded
+//! vertices (and instances) in order. A frame without attributes is stored exactly as
+//! before attributes existed; a frame with them makes the archive version 4.
 
+mod attributes;
 mod codec;
 mod frame;
 mod fused;
 mod parts;
 
+pub use attributes::{AttributeInfo, AttributeTarget};
 pub use frame::ArchiveFrame;
 
 use crate::error::{Error, Result};
@@ -37,6 +55,11 @@ const MAGIC: &[u8; 8] = b"MNSCMSEQ";
 /// The version new archives get. Versions 1 (one plain mesh per frame) and 2 (no parts)
 /// are still read and appended to in their own format.
 const VERSION: u32 = 3;
+/// The version of an archive with a frame that stores attributes (records flagged
+/// [`attributes::HAS_ATTRIBUTES`]): a version-2 or -3 archive becomes version 4 when such
+/// a frame is appended (its header's version field is rewritten, nothing else), so that
+/// readers that know no attributes refuse it instead of calling those frames damaged.
+const ATTRIBUTES_VERSION: u32 = 4;
 const HEADER_LEN: u64 = 16;
 const RECORD_MAGIC: &[u8; 4] = b"FRAM";
 const RECORD_HEADER_LEN: usize = 48;
@@ -49,17 +72,50 @@ pub struct ArchiveOptions {
     /// Largest error of any coordinate, world units (> 0). Positions are quantized with a
     /// step of twice this bound.
     pub error_bound: f64,
+    /// Largest error of any attribute value (> 0), absolute, in the attribute's own units
+    /// (m/s for a velocity). Values are quantized with a step of twice this bound. Default
+    /// 1e-3 ([`DEFAULT_ATTRIBUTE_ERROR_BOUND`]).
+    pub attribute_error_bound: f64,
     /// zstd level. Default 9.
     pub zstd_level: i32,
 }
 
+/// The default [`ArchiveOptions::attribute_error_bound`]: 1e-3 in the attribute's units.
+///
+/// For a velocity in m/s that is 1 mm/s: motion blur moves a vertex by the velocity
+/// times the shutter time (1/48 s for a 180° shutter at 24 frames per second), so the
+/// error in the blur is at most 2·10⁻⁵ m per component, well below the position bound
+/// of a typical archive (0.01 r = 1.2·10⁻⁴ m for r = 12 mm) and invisible next to the
+/// sub-frame motion (the `dambreak_small` fluid moves at up to about 3 m/s: 6 cm per
+/// frame). It is absolute: an attribute of large magnitude (a density of 1000 kg/m³)
+/// is stored far more finely than it needs (and larger) unless the bound is raised, one
+/// of magnitude about 1 (or smaller) less finely than it may need.
+pub const DEFAULT_ATTRIBUTE_ERROR_BOUND: f64 = 1e-3;
+
 impl ArchiveOptions {
-    /// Options with an error bound in world units and the default zstd level.
+    /// Options with an error bound in world units, the default attribute error bound and
+    /// the default zstd level.
     pub fn new(error_bound: f64) -> Self {
         ArchiveOptions {
             error_bound,
+            attribute_error_bound: DEFAULT_ATTRIBUTE_ERROR_BOUND,
             zstd_level: 9,
         }
+    }
+
+    fn check(&self) -> Result<()> {
+        for (option, value) in [
+            ("--error-bound", self.error_bound),
+            ("--attribute-error-bound", self.attribute_error_bound),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(Error::InvalidOption {
+                    option,
+                    message: format!("must be > 0, got {value}"),
+                });
+            }
+        }
+        Ok(())
     }
 }
 
@@ -78,6 +134,31 @@ pub struct FrameInfo {
     pub offset: u64,
     /// Bytes of the compressed payload.
     pub payload_bytes: u64,
+    /// The attributes the frame stores (empty when none, or when their descriptor is
+    /// damaged: decoding the frame says so).
+    pub attributes: Vec<AttributeInfo>,
+    /// Error bound of the frame's attribute values, in their own units (`None` without
+    /// attributes).
+    pub attribute_error_bound: Option<f64>,
+}
+
+impl FrameInfo {
+    fn of(h: &RecordHeader, offset: usize, bytes: &[u8]) -> FrameInfo {
+        let descriptor = (h.flags & attributes::HAS_ATTRIBUTES != 0)
+            .then(|| bytes.get(offset + RECORD_HEADER_LEN..))
+            .flatten()
+            .and_then(|payload| attributes::read_descriptor(payload, &mut 0).ok());
+        FrameInfo {
+            number: h.number,
+            vertices: h.vertices,
+            triangles: h.triangles,
+            step: h.step,
+            offset: offset as u64,
+            payload_bytes: h.payload_len,
+            attribute_error_bound: descriptor.as_ref().map(|d| d.error_bound),
+            attributes: descriptor.map(|d| d.attributes).unwrap_or_default(),
+        }
+    }
 }
 
 /// What [`ArchiveReader::verify`] found.
@@ -108,6 +189,8 @@ struct RecordHeader {
     step: f64,
     payload_len: u64,
     payload_crc: u32,
+    /// Bytes 40..44, zero before attributes: [`attributes::HAS_ATTRIBUTES`].
+    flags: u32,
 }
 
 impl RecordHeader {
@@ -120,6 +203,7 @@ impl RecordHeader {
         b[20..28].copy_from_slice(&self.step.to_le_bytes());
         b[28..36].copy_from_slice(&self.payload_len.to_le_bytes());
         b[36..40].copy_from_slice(&self.payload_crc.to_le_bytes());
+        b[40..44].copy_from_slice(&self.flags.to_le_bytes());
         let crc = crc32fast::hash(&b[0..44]);
         b[44..48].copy_from_slice(&crc.to_le_bytes());
         b
@@ -140,6 +224,7 @@ impl RecordHeader {
             step: f64::from_le_bytes(b[20..28].try_into().ok()?),
             payload_len: u64::from_le_bytes(b[28..36].try_into().ok()?),
             payload_crc: u32::from_le_bytes(b[36..40].try_into().ok()?),
+            flags: u32::from_le_bytes(b[40..44].try_into().ok()?),
         })
     }
 }
@@ -150,8 +235,9 @@ pub struct ArchiveReader {
     version: u32,
     bytes: Vec<u8>,
     frames: Vec<FrameInfo>,
-    /// Payload CRCs, parallel to `frames`.
+    /// Payload CRCs and record flags, parallel to `frames`.
     crcs: Vec<u32>,
+    flags: Vec<u32>,
     recovered_by_scan: bool,
     data_end: u64,
 }
@@ -172,11 +258,11 @@ impl ArchiveReader {
             ));
         }
         let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
-        if !(1..=VERSION).contains(&version) {
+        if !(1..=ATTRIBUTES_VERSION).contains(&version) {
             return Err(Error::UnsupportedFormat {
                 path: path.to_path_buf(),
                 message: format!(
-                    ".mseq version {version}; this build reads versions 1 to {VERSION}"
+                    ".mseq version {version}; this build reads versions 1 to {ATTRIBUTES_VERSION}"
                 ),
             });
         }
@@ -186,6 +272,7 @@ impl ArchiveReader {
             bytes,
             frames: Vec::new(),
             crcs: Vec::new(),
+            flags: Vec::new(),
             recovered_by_scan: false,
             data_end: HEADER_LEN,
         };
@@ -224,6 +311,7 @@ impl ArchiveReader {
         }
         let mut frames = Vec::with_capacity(count);
         let mut crcs = Vec::with_capacity(count);
+        let mut flags = Vec::with_capacity(count);
         for k in 0..count {
             let e = index_offset + 12 + 16 * k;
             let offset = u64::from_le_bytes(b[e + 8..e + 16].try_into().expect("8 bytes")) as usize;
@@ -233,18 +321,13 @@ impl ArchiveReader {
             else {
                 return false;
             };
-            frames.push(FrameInfo {
-                number: h.number,
-                vertices: h.vertices,
-                triangles: h.triangles,
-                step: h.step,
-                offset: offset as u64,
-                payload_bytes: h.payload_len,
-            });
+            frames.push(FrameInfo::of(&h, offset, b));
             crcs.push(h.payload_crc);
+            flags.push(h.flags);
         }
         self.frames = frames;
         self.crcs = crcs;
+        self.flags = flags;
         self.data_end = index_offset as u64;
         true
     }
@@ -263,15 +346,9 @@ impl ArchiveReader {
             if end > self.bytes.len() {
                 break;
             }
-            self.frames.push(FrameInfo {
-                number: h.number,
-                vertices: h.vertices,
-                triangles: h.triangles,
-                step: h.step,
-                offset: pos as u64,
-                payload_bytes: h.payload_len,
-            });
+            self.frames.push(FrameInfo::of(&h, pos, &self.bytes));
             self.crcs.push(h.payload_crc);
+            self.flags.push(h.flags);
             pos = end;
         }
         self.data_end = pos as u64;
@@ -287,7 +364,7 @@ impl ArchiveReader {
         self.recovered_by_scan
     }
 
-    /// Format version of the file (1, 2 or 3).
+    /// Format version of the file (1 to 4; 4 when a frame stores attributes).
     pub fn version(&self) -> u32 {
         self.version
     }
@@ -341,12 +418,25 @@ impl ArchiveReader {
             ));
         }
         let (vertices, triangles) = (f.vertices as usize, f.triangles as usize);
-        match self.version {
-            1 => codec::decode_v1(payload, vertices, triangles, f.step).map(|fluid| Surface {
+        let flags = self.flags[k];
+        match (self.version, flags) {
+            (1, 0) => codec::decode_v1(payload, vertices, triangles, f.step).map(|fluid| Surface {
                 fluid,
                 spheres: SphereInstances::default(),
             }),
-            _ => frame::decode_frame(payload, vertices, triangles, f.step),
+            (2.., 0) => frame::decode_frame(payload, vertices, triangles, f.step, None),
+            (2.., attributes::HAS_ATTRIBUTES) => attributes::split(payload).and_then(|s| {
+                frame::decode_frame(
+                    s.geometry,
+                    vertices,
+                    triangles,
+                    f.step,
+                    Some((&s.descriptor, s.streams)),
+                )
+            }),
+            (version, _) => Err(format!(
+                "record flags {flags:#x} unknown to this build in a version-{version} archive"
+            )),
         }
         .map_err(|m| archive_error(&self.path, Some(f.number), m))
     }
@@ -441,12 +531,7 @@ pub struct ArchiveWriter {
 impl ArchiveWriter {
     /// Creates a new archive (replacing any file at `path`).
     pub fn create(path: &Path, options: &ArchiveOptions) -> Result<ArchiveWriter> {
-        if !(options.error_bound.is_finite() && options.error_bound > 0.0) {
-            return Err(Error::InvalidOption {
-                option: "--error-bound",
-                message: format!("must be > 0, got {}", options.error_bound),
-            });
-        }
+        options.check()?;
         let mut file = File::create(path).map_err(|e| Error::io(path, e))?;
         let mut header = [0u8; HEADER_LEN as usize];
         header[0..8].copy_from_slice(MAGIC);
@@ -466,6 +551,7 @@ impl ArchiveWriter {
     /// incomplete last record left by an interrupted append is cut off (that frame was
     /// never complete). An archive with a damaged frame is refused.
     pub fn open_append(path: &Path, options: &ArchiveOptions) -> Result<ArchiveWriter> {
+        options.check()?;
         let reader = ArchiveReader::open(path)?;
         let report = reader.verify();
         if let Some((n, why)) = report.damaged.first() {
@@ -515,7 +601,13 @@ impl ArchiveWriter {
     }
 
     /// Appends one frame: a fluid surface (possibly as a Loop control mesh, subdivided
-    /// on decoding) and sphere instances. Returns its bytes in the archive.
+    /// on decoding) and sphere instances, with their attributes (the fluid's one item per
+    /// vertex, the spheres' one per centre; values within
+    /// [`ArchiveOptions::attribute_error_bound`]). Returns its bytes in the archive.
+    ///
+    /// The first frame with attributes makes a version-2 or -3 archive version 4 (the
+    /// header's version field is rewritten before the record is written); a version-1
+    /// archive cannot store attributes and refuses such a frame.
     pub fn append_frame(&mut self, number: i64, frame: &ArchiveFrame) -> Result<u64> {
         if self.index.iter().any(|e| e.0 == number) {
             return Err(archive_error(
@@ -526,7 +618,45 @@ impl ArchiveWriter {
         }
         let step = 2.0 * self.options.error_bound;
         let level = self.options.zstd_level;
-        let (payload, vertices, triangles) = if self.version == 1 {
+        let with_attributes = frame::has_attributes(frame);
+        if with_attributes {
+            let attribute_step = 2.0 * self.options.attribute_error_bound;
+            let instances = frame::stored_instances(frame.spheres);
+            attributes::check(
+                &frame.fluid.attributes,
+                frame.fluid.vertex_count(),
+                "fluid vertices",
+                attribute_step,
+            )
+            .and_then(|_| {
+                if instances == 0 {
+                    return Ok(());
+                }
+                attributes::check(
+                    &frame.spheres.attributes,
+                    instances,
+                    "sphere instances",
+                    attribute_step,
+                )
+            })
+            .map_err(|m| archive_error(&self.path, Some(number), m))?;
+            if self.version == 1 {
+                return Err(archive_error(
+                    &self.path,
+                    Some(number),
+                    "a version-1 archive cannot store attributes (write a new archive)",
+                ));
+            }
+            if self.version < ATTRIBUTES_VERSION {
+                self.file
+                    .seek(SeekFrom::Start(8))
+                    .and_then(|_| self.file.write_all(&ATTRIBUTES_VERSION.to_le_bytes()))
+                    .and_then(|_| self.file.seek(SeekFrom::Start(self.end)))
+                    .map_err(|e| Error::io(&self.path, e))?;
+                self.version = ATTRIBUTES_VERSION;
+            }
+        }
+        let encoded = if self.version == 1 {
             // An old archive keeps its format: one plain mesh per frame.
             let mut merged = frame.fluid.clone();
             crate::subdivision::subdivide(
@@ -538,18 +668,33 @@ impl ArchiveWriter {
             if !frame.spheres.centers.is_empty() {
                 merged.append(&frame.spheres.merged());
             }
-            codec::encode_v1(&merged, step, level)
+            codec::encode_v1(&merged, step, level).map(|(payload, vertices, triangles)| {
+                frame::EncodedFrame {
+                    payload,
+                    vertices,
+                    triangles,
+                    flags: 0,
+                }
+            })
         } else {
-            frame::encode_frame(frame, step, level, self.version >= 3)
+            frame::encode_frame(
+                frame,
+                step,
+                self.options.attribute_error_bound,
+                level,
+                self.version >= 3,
+            )
         }
         .map_err(|e| Error::io(&self.path, e))?;
+        let payload = encoded.payload;
         let header = RecordHeader {
             number,
-            vertices,
-            triangles,
+            vertices: encoded.vertices,
+            triangles: encoded.triangles,
             step,
             payload_len: payload.len() as u64,
             payload_crc: crc32fast::hash(&payload),
+            flags: encoded.flags,
         };
         self.file
             .write_all(&header.to_bytes())
@@ -630,6 +775,32 @@ mod tests {
         assert!(
             std::fs::metadata(&new_path).unwrap().len() < std::fs::metadata(&path).unwrap().len()
         );
+    }
+
+    #[test]
+    fn version_1_archives_refuse_attributes() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("old.mseq");
+        let mut header = [0u8; HEADER_LEN as usize];
+        header[0..8].copy_from_slice(MAGIC);
+        header[8..12].copy_from_slice(&1u32.to_le_bytes());
+        std::fs::write(&path, header).unwrap();
+        let mut w = ArchiveWriter::open_append(&path, &ArchiveOptions::new(1e-4)).unwrap();
+        let mut mesh = icosphere(1, 1.0);
+        mesh.attributes = vec![crate::mesh::Attribute {
+            name: "density".into(),
+            components: 1,
+            values: vec![1.0; mesh.vertex_count()],
+        }];
+        let err = w.append(5, &mesh).unwrap_err().to_string();
+        assert!(
+            err.contains("frame 5") && err.contains("version-1"),
+            "{err}"
+        );
+        mesh.attributes.clear();
+        w.append(5, &mesh).unwrap();
+        w.finish().unwrap();
+        assert_eq!(ArchiveReader::open(&path).unwrap().version(), 1);
     }
 
     #[test]

@@ -49,8 +49,9 @@ type SeamCopy = (u32, u32, u32);
 /// `varint(parts) (varint(V) varint(T) streams)×parts`, then for every part after the
 /// first `varint(copies)` and per copy, by increasing number, `varint(number − previous
 /// number) varint(part − 1 − earlier part) zigzag(number there − previous number
-/// there)`.
-pub(crate) fn encode_parts(mesh: &TriMesh, parts: usize, step: f64, out: &mut Vec<u8>) {
+/// there)`. Returns the vertex order of the decoded control mesh (each part's own
+/// vertices in part order): decoded vertex `i` is `mesh` vertex `order[i]`.
+pub(crate) fn encode_parts(mesh: &TriMesh, parts: usize, step: f64, out: &mut Vec<u8>) -> Vec<u32> {
     let n = mesh.triangles.len();
     let (lo, hi) = mesh.positions.iter().fold(
         (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
@@ -88,6 +89,7 @@ pub(crate) fn encode_parts(mesh: &TriMesh, parts: usize, step: f64, out: &mut Ve
     let mut copies: Vec<Vec<SeamCopy>> = vec![Vec::new(); parts];
     let mut local = vec![NONE; mesh.positions.len()];
     let mut streams = Vec::new();
+    let mut decoded_order = Vec::with_capacity(mesh.positions.len());
     for p in 0..parts {
         let mut tris: Vec<u32> = order[p * n / parts..(p + 1) * n / parts]
             .iter()
@@ -105,6 +107,7 @@ pub(crate) fn encode_parts(mesh: &TriMesh, parts: usize, step: f64, out: &mut Ve
             let v = original[v as usize] as usize;
             if first[v].0 == NONE {
                 first[v] = (p as u32, k as u32);
+                decoded_order.push(v as u32);
             } else {
                 copies[p].push((k as u32, first[v].0, first[v].1));
             }
@@ -120,6 +123,7 @@ pub(crate) fn encode_parts(mesh: &TriMesh, parts: usize, step: f64, out: &mut Ve
             (previous, previous_there) = (k, l);
         }
     }
+    decoded_order
 }
 
 /// Decodes the streams at `raw[*pos..]` of a closed, consistently oriented mesh of
