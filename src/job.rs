@@ -46,6 +46,8 @@ pub struct JobOptions {
     pub skip_existing: bool,
     /// Error bound of `.mseq` outputs, world units.
     pub archive_error_bound: f64,
+    /// Error bound of attributes in `.mseq` outputs, in each attribute's own units.
+    pub archive_attribute_error_bound: f64,
     /// Playback rate of a sequence written into one glTF, frames per second.
     pub fps: f32,
     /// The point attributes carried to the surface.
@@ -261,7 +263,10 @@ pub fn run_frames(
             if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
                 std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
             }
-            let archive_options = ArchiveOptions::new(job.archive_error_bound);
+            let archive_options = ArchiveOptions {
+                attribute_error_bound: job.archive_attribute_error_bound,
+                ..ArchiveOptions::new(job.archive_error_bound)
+            };
             Some(if out.exists() {
                 ArchiveWriter::open_append(out, &archive_options)?
             } else {

@@ -75,6 +75,9 @@ enum ArchiveCommand {
         /// Error bound, world units.
         #[arg(long)]
         error_bound_world: f64,
+        /// Error bound of the meshes' vertex attributes, in each attribute's own units.
+        #[arg(long, default_value_t = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND)]
+        attribute_error_bound: f64,
         /// First frame (inclusive).
         #[arg(long, allow_negative_numbers = true)]
         start: Option<i64>,
@@ -165,6 +168,10 @@ struct ReconstructArgs {
     /// Error bound of a `.mseq` output, multiples of r (each coordinate within it).
     #[arg(long, default_value_t = 0.01)]
     error_bound: f64,
+    /// Error bound of the attributes in a `.mseq` output, in each attribute's own units
+    /// (m/s for a velocity): every value within it.
+    #[arg(long, default_value_t = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND)]
+    attribute_error_bound: f64,
     /// Playback rate of a sequence written into one .glb/.gltf, frames per second.
     #[arg(long, default_value_t = 24.0)]
     fps: f32,
@@ -243,6 +250,19 @@ fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<()
                     first.step / 2.0
                 );
             }
+            for f in r.frames().iter().filter(|f| !f.attributes.is_empty()) {
+                let names: Vec<String> = f
+                    .attributes
+                    .iter()
+                    .map(|a| format!("{} ({} × {:?})", a.name, a.components, a.target))
+                    .collect();
+                println!(
+                    "frame {}: attributes {}, error bound {}",
+                    f.number,
+                    names.join(", "),
+                    f.attribute_error_bound.unwrap_or(0.0)
+                );
+            }
         }
         ArchiveCommand::List { file } => {
             let r = ArchiveReader::open(&file).map_err(text)?;
@@ -315,11 +335,15 @@ fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<()
             input,
             output,
             error_bound_world,
+            attribute_error_bound,
             start,
             end,
         } => {
             let frames = meniscus::sequence::frames(&input, start, end).map_err(text)?;
-            let options = ArchiveOptions::new(error_bound_world);
+            let options = ArchiveOptions {
+                attribute_error_bound,
+                ..ArchiveOptions::new(error_bound_world)
+            };
             let mut w = if output.exists() {
                 ArchiveWriter::open_append(&output, &options)
             } else {
@@ -420,6 +444,7 @@ fn reconstruct(args: &ReconstructArgs, cancel: &meniscus::CancelToken) -> Result
         },
         skip_existing: args.skip_existing,
         archive_error_bound: args.error_bound * args.particle_radius as f64,
+        archive_attribute_error_bound: args.attribute_error_bound,
         fps: args.fps,
         attributes: match &args.attributes {
             Some(list) => list
