@@ -41,9 +41,6 @@ fn every_format_round_trips() {
             std::fs::metadata(&path).unwrap().len(),
             "{ext}"
         );
-        if ext == "vtk" {
-            continue; // no VTK mesh reader: checked by its header below
-        }
         let back = read_mesh(&path).unwrap();
         assert_eq!(back.triangles, merged.triangles, "{ext}");
         if ext == "glb" || ext == "gltf" {
@@ -182,4 +179,323 @@ fn bad_meshes_are_rejected_with_their_location() {
     std::fs::write(&p, "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n").unwrap();
     let msg = read_mesh(&p).unwrap_err().to_string();
     assert!(msg.contains("face 0"), "{msg}");
+}
+
+// ---- attributes -------------------------------------------------------------------------
+
+use meniscus::io::mesh::write_sequence_gltf;
+use meniscus::mesh::Attribute;
+
+/// Values that differ from item to item, so that an order or grouping mistake shows.
+fn values(name: &str, components: usize, items: usize, seed: f32) -> Attribute {
+    Attribute {
+        name: name.into(),
+        components,
+        values: (0..components * items)
+            .map(|v| seed + v as f32 * 0.37 - (v % 7) as f32 * 1.5e-3)
+            .collect(),
+    }
+}
+
+/// The test surface with a velocity (3) and a density (1), on the fluid and per sphere.
+fn attributed() -> Surface {
+    let mut s = surface();
+    let (nv, ns) = (s.fluid.vertex_count(), s.spheres.centers.len());
+    s.fluid.attributes = vec![
+        values("velocity", 3, nv, 1.0),
+        values("density", 1, nv, 1000.0),
+    ];
+    s.spheres.attributes = vec![
+        values("velocity", 3, ns, -4.0),
+        values("density", 1, ns, 990.0),
+    ];
+    s
+}
+
+fn attr_bits(a: &Attribute) -> (String, usize, Vec<u32>) {
+    (
+        a.name.clone(),
+        a.components,
+        a.values.iter().map(|v| v.to_bits()).collect(),
+    )
+}
+
+/// Attributes as comparable tuples, sorted by name (glTF returns them sorted).
+fn sorted(list: &[Attribute]) -> Vec<(String, usize, Vec<u32>)> {
+    let mut out: Vec<_> = list.iter().map(attr_bits).collect();
+    out.sort();
+    out
+}
+
+#[test]
+fn attributes_round_trip_bit_for_bit_through_ply_vtk_and_gltf() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = attributed();
+    let merged = s.merged();
+    assert_eq!(merged.attributes.len(), 2);
+    for ext in ["glb", "gltf", "ply", "vtk"] {
+        let path = dir.path().join(format!("a.{ext}"));
+        let stats = write_surface(&path, &s, &MeshWriteOptions::default()).unwrap();
+        assert!(stats.dropped_attributes.is_empty(), "{ext}");
+        let back = read_mesh(&path).unwrap();
+        assert_eq!(back.triangles, merged.triangles, "{ext}");
+        if ext == "ply" || ext == "vtk" {
+            assert_eq!(back.attributes, merged.attributes, "{ext}: order kept too");
+            assert_eq!(bits(&back.positions), bits(&merged.positions), "{ext}");
+            assert_eq!(bits(&back.normals), bits(&merged.normals), "{ext}");
+        } else {
+            // Spheres with attributes are one merged mesh: positions as merged() has them.
+            assert_eq!(back.vertex_count(), merged.vertex_count(), "{ext}");
+            for (a, b) in back.positions.iter().zip(&merged.positions) {
+                assert!((*a - *b).length() < 1e-6, "{ext}");
+            }
+        }
+        assert_eq!(
+            sorted(&back.attributes),
+            sorted(&merged.attributes),
+            "{ext}"
+        );
+    }
+}
+
+#[test]
+fn attribute_columns_are_named_per_format() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = attributed();
+    let nv = s.merged().vertex_count();
+    let ply = dir.path().join("a.ply");
+    write_surface(&ply, &s, &MeshWriteOptions::default()).unwrap();
+    let bytes = std::fs::read(&ply).unwrap();
+    let head = String::from_utf8_lossy(&bytes[..600]);
+    assert!(
+        head.contains("property float nz\nproperty float velocity_x\nproperty float velocity_y\nproperty float velocity_z\nproperty float density\nelement face"),
+        "{head}"
+    );
+    let vtk = dir.path().join("a.vtk");
+    write_surface(&vtk, &s, &MeshWriteOptions::default()).unwrap();
+    let text = String::from_utf8_lossy(&std::fs::read(&vtk).unwrap()).into_owned();
+    assert_eq!(
+        text.matches("POINT_DATA").count(),
+        1,
+        "one point-data section"
+    );
+    let at = |needle: &str| text.find(needle).unwrap_or_else(|| panic!("{needle}"));
+    assert!(
+        at(&format!("POINT_DATA {nv}\nNORMALS normals float\n")) < at("VECTORS velocity float\n")
+    );
+    assert!(at("VECTORS velocity float\n") < at("SCALARS density float 1\nLOOKUP_TABLE default\n"));
+    let glb = dir.path().join("a.glb");
+    write_surface(&glb, &s, &MeshWriteOptions::default()).unwrap();
+    let gltf = gltf::Gltf::from_slice(&std::fs::read(&glb).unwrap()).unwrap();
+    // Fluid plus one merged sphere mesh, no per-instance nodes.
+    assert_eq!(gltf.meshes().count(), 2);
+    assert_eq!(gltf.nodes().count(), 2);
+    let sphere_vertices = s.spheres.template.vertex_count() * s.spheres.centers.len();
+    for (mesh, count) in gltf.meshes().zip([s.fluid.vertex_count(), sphere_vertices]) {
+        let prim = mesh.primitives().next().unwrap();
+        let get = |name: &str| prim.get(&gltf::Semantic::Extras(name.into())).unwrap();
+        let (v, d) = (get("VELOCITY"), get("DENSITY"));
+        assert_eq!(v.dimensions(), gltf::accessor::Dimensions::Vec3);
+        assert_eq!(d.dimensions(), gltf::accessor::Dimensions::Scalar);
+        assert_eq!(v.data_type(), gltf::accessor::DataType::F32);
+        assert_eq!((v.count(), d.count()), (count, count));
+    }
+}
+
+#[test]
+fn two_four_and_many_components_split_and_regroup() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut s = surface();
+    s.spheres = SphereInstances::default();
+    let nv = s.fluid.vertex_count();
+    s.fluid.attributes = vec![
+        values("uv", 2, nv, 0.5),
+        values("q", 4, nv, -2.0),
+        values("stress", 6, nv, 7.0),
+        values("temperature", 1, nv, 300.0),
+    ];
+    for ext in ["ply", "vtk", "glb"] {
+        let path = dir.path().join(format!("m.{ext}"));
+        write_surface(&path, &s, &MeshWriteOptions::default()).unwrap();
+        let back = read_mesh(&path).unwrap();
+        assert_eq!(
+            sorted(&back.attributes),
+            sorted(&s.fluid.attributes),
+            "{ext}"
+        );
+        let text = String::from_utf8_lossy(&std::fs::read(&path).unwrap()).into_owned();
+        let names: &[&str] = match ext {
+            "ply" => &[
+                "property float uv_y\n",
+                "property float q_w\n",
+                "property float stress_0\n",
+                "property float stress_5\n",
+            ],
+            "vtk" => &[
+                "FIELD FieldData 1\nuv 2 ",
+                "FIELD FieldData 1\nq 4 ",
+                "FIELD FieldData 1\nstress 6 ",
+                "SCALARS temperature float 1",
+            ],
+            _ => &[
+                "\"_UV\"",
+                "\"_Q\"",
+                "\"_STRESS_0\"",
+                "\"_STRESS_5\"",
+                "\"_TEMPERATURE\"",
+            ],
+        };
+        for n in names {
+            assert!(text.contains(n), "{ext}: {n}");
+        }
+    }
+}
+
+#[test]
+fn obj_writes_the_mesh_and_reports_the_dropped_attributes() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = attributed();
+    let path = dir.path().join("a.obj");
+    let stats = write_surface(&path, &s, &MeshWriteOptions::default()).unwrap();
+    assert_eq!(stats.dropped_attributes, ["velocity", "density"]);
+    let back = read_mesh(&path).unwrap();
+    assert_eq!(back.triangles, s.merged().triangles);
+    assert!(back.attributes.is_empty());
+    let plain = write_surface(&path, &surface(), &MeshWriteOptions::default()).unwrap();
+    assert!(plain.dropped_attributes.is_empty());
+}
+
+#[test]
+fn attributes_only_the_fluid_carries_are_kept_where_the_format_allows() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut s = attributed();
+    s.spheres.attributes.clear();
+    // One vertex table for fluid and spheres: PLY and VTK cannot hold them, and say so.
+    for ext in ["ply", "vtk"] {
+        let path = dir.path().join(format!("f.{ext}"));
+        let stats = write_surface(&path, &s, &MeshWriteOptions::default()).unwrap();
+        assert_eq!(stats.dropped_attributes, ["velocity", "density"], "{ext}");
+        assert!(read_mesh(&path).unwrap().attributes.is_empty(), "{ext}");
+    }
+    // glTF keeps them on the fluid; the spheres stay instanced by nodes.
+    let path = dir.path().join("f.glb");
+    let stats = write_surface(&path, &s, &MeshWriteOptions::default()).unwrap();
+    assert!(stats.dropped_attributes.is_empty());
+    let gltf = gltf::Gltf::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    assert_eq!(gltf.nodes().count(), 2 + s.spheres.centers.len());
+    let fluid = gltf.meshes().next().unwrap().primitives().next().unwrap();
+    assert!(fluid
+        .get(&gltf::Semantic::Extras("VELOCITY".into()))
+        .is_some());
+}
+
+#[test]
+fn a_sequence_carries_the_attributes_of_every_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames: Vec<TriMesh> = (0..3)
+        .map(|k| {
+            let mut m = attributed().merged();
+            m.attributes[0]
+                .values
+                .iter_mut()
+                .for_each(|v| *v += k as f32);
+            m
+        })
+        .collect();
+    let path = dir.path().join("seq.glb");
+    write_sequence_gltf(&path, &frames, 24.0, &MeshWriteOptions::default()).unwrap();
+    let back = read_mesh(&path).unwrap();
+    let mut all = frames[0].clone();
+    all.append(&frames[1]);
+    all.append(&frames[2]);
+    assert_eq!(sorted(&back.attributes), sorted(&all.attributes));
+}
+
+#[test]
+fn bad_attributes_are_refused_with_their_names() {
+    let dir = tempfile::tempdir().unwrap();
+    // A wrong value count: refused before anything is written.
+    let mut s = attributed();
+    s.fluid.attributes[1].values.pop();
+    for ext in ["glb", "ply", "vtk", "obj"] {
+        let path = dir.path().join(format!("bad.{ext}"));
+        let msg = write_surface(&path, &s, &MeshWriteOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains("density") && msg.contains("bad."),
+            "{ext}: {msg}"
+        );
+        assert!(!path.exists());
+    }
+    // Two attributes with one glTF name; an attribute named like a PLY coordinate.
+    let mut s = attributed();
+    s.fluid.attributes[1] = Attribute {
+        name: "Velocity".into(),
+        ..s.fluid.attributes[0].clone()
+    };
+    let msg = write_surface(&dir.path().join("c.glb"), &s, &MeshWriteOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("_VELOCITY"), "{msg}");
+    let mut s = attributed();
+    s.fluid.attributes[1].name = "x".into();
+    let msg = write_surface(&dir.path().join("c.ply"), &s, &MeshWriteOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("\"x\""), "{msg}");
+    // A VTK point array with fewer tuples than points.
+    let p = dir.path().join("short.vtk");
+    std::fs::write(&p, "# vtk DataFile Version 4.2\nt\nASCII\nDATASET POLYDATA\nPOINTS 3 float\n0 0 0 1 0 0 0 1 0\nPOLYGONS 1 4\n3 0 1 2\nPOINT_DATA 3\nFIELD FieldData 1\npressure 1 2 float\n1 2\n").unwrap();
+    let msg = read_mesh(&p).unwrap_err().to_string();
+    assert!(
+        msg.contains("short.vtk") && msg.contains("pressure"),
+        "{msg}"
+    );
+    // A glTF attribute accessor shorter than POSITION.
+    let p = dir.path().join("short.glb");
+    std::fs::write(&p, glb_with_short_attribute()).unwrap();
+    let msg = read_mesh(&p).unwrap_err().to_string();
+    assert!(
+        msg.contains("short.glb") && msg.contains("_DENSITY"),
+        "{msg}"
+    );
+}
+
+/// A GLB of one triangle whose `_DENSITY` accessor holds 2 values for 3 vertices.
+fn glb_with_short_attribute() -> Vec<u8> {
+    let mut bin = Vec::new();
+    for v in [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 5.0, 6.0] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    let json = serde_json::json!({
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "_DENSITY": 1}}]}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+             "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]},
+            {"bufferView": 1, "componentType": 5126, "count": 2, "type": "SCALAR"}
+        ],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 36},
+            {"buffer": 0, "byteOffset": 36, "byteLength": 8}
+        ],
+        "buffers": [{"byteLength": 44}]
+    });
+    let mut text = serde_json::to_vec(&json).unwrap();
+    while text.len() % 4 != 0 {
+        text.push(b' ');
+    }
+    let mut out = Vec::new();
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&((12 + 8 + text.len() + 8 + bin.len()) as u32).to_le_bytes());
+    out.extend_from_slice(&(text.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&text);
+    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(&bin);
+    out
 }

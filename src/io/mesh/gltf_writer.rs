@@ -5,9 +5,17 @@
 //! The binary buffer is never assembled in memory: the document records which mesh arrays
 //! go where, and writing streams them in chunks of [`CHUNK_BYTES`] (base64-encoded on the
 //! fly for `.gltf`), so a 70 M-triangle surface is written without a 1.7 GB copy.
+//!
+//! Attributes become application-specific vertex attributes (`_VELOCITY`, float
+//! accessors; names in [`super::columns`]). Spheres with attributes are written as one
+//! merged mesh (instances translated, each vertex with its particle's values) instead of
+//! one node per instance: glTF attributes belong to a mesh, and Blender's importer drops
+//! per-instance attributes of `EXT_mesh_gpu_instancing`.
 
+use super::columns;
 use super::simple::{write_chunked, CHUNK_BYTES};
-use crate::mesh::{Surface, TriMesh};
+use crate::attributes::Attribute;
+use crate::mesh::{SphereInstances, Surface, TriMesh};
 use glam::Vec3;
 use serde_json::{json, Value};
 use std::io::{Result, Write};
@@ -17,11 +25,20 @@ const UNSIGNED_INT: u32 = 5125;
 const ARRAY_BUFFER: u32 = 34962;
 const ELEMENT_ARRAY_BUFFER: u32 = 34963;
 
+/// Encodes item `i` of a generated buffer view into the buffer.
+type Encode<'a> = Box<dyn Fn(usize, &mut Vec<u8>) + 'a>;
+
 /// Data of one buffer view, borrowed from the meshes until it is written.
 enum Payload<'a> {
     Vectors(&'a [Vec3]),
     Triangles(&'a [[u32; 3]]),
     Bytes(Vec<u8>),
+    /// `items` items of `item_bytes` each, encoded on the fly by `encode(i, buf)`.
+    Generated {
+        items: usize,
+        item_bytes: usize,
+        encode: Encode<'a>,
+    },
 }
 
 impl Payload<'_> {
@@ -30,6 +47,9 @@ impl Payload<'_> {
             Payload::Vectors(v) => v.len() * 12,
             Payload::Triangles(t) => t.len() * 12,
             Payload::Bytes(b) => b.len(),
+            Payload::Generated {
+                items, item_bytes, ..
+            } => items * item_bytes,
         }
     }
 
@@ -47,6 +67,9 @@ impl Payload<'_> {
                 }
             }),
             Payload::Bytes(b) => w.write_all(b),
+            Payload::Generated { items, encode, .. } => {
+                write_chunked(w, 0..*items, |buf, i| encode(i, buf))
+            }
         }
     }
 }
@@ -127,6 +150,118 @@ impl<'a> Builder<'a> {
         json!({ "attributes": attributes, "indices": indices, "mode": 4 })
     }
 
+    /// Adds the accessors of `attributes` (one item per `repeat` vertices, `items` items)
+    /// to a primitive's `attributes` object.
+    fn attributes(
+        &mut self,
+        primitive: &mut Value,
+        attributes: &'a [Attribute],
+        repeat: usize,
+        items: usize,
+    ) {
+        for a in attributes {
+            let k = a.components;
+            let semantics = columns::gltf_semantics(a);
+            let split = semantics.len() > 1;
+            for (c, semantic) in semantics.into_iter().enumerate() {
+                let width = if split { 1 } else { k };
+                let encode = move |i: usize, buf: &mut Vec<u8>| {
+                    let item = a.item(i / repeat);
+                    let values = if split { &item[c..c + 1] } else { item };
+                    for v in values {
+                        buf.extend_from_slice(&v.to_le_bytes());
+                    }
+                };
+                let view = self.push_view(
+                    Payload::Generated {
+                        items: items * repeat,
+                        item_bytes: 4 * width,
+                        encode: Box::new(encode),
+                    },
+                    Some(ARRAY_BUFFER),
+                );
+                let ty = ["SCALAR", "VEC2", "VEC3", "VEC4"][width - 1];
+                let accessor = self.push_accessor(json!({
+                    "bufferView": view, "componentType": FLOAT, "count": items * repeat, "type": ty
+                }));
+                primitive["attributes"][semantic] = json!(accessor);
+            }
+        }
+    }
+
+    /// The sphere instances merged into one primitive: the template translated to every
+    /// centre (as [`SphereInstances::merged`] does), each vertex with its instance's
+    /// attribute values.
+    fn merged_spheres(&mut self, s: &'a SphereInstances, normals: bool) -> Value {
+        let t = &s.template;
+        let n = t.vertex_count();
+        let count = n * s.centers.len();
+        let position = move |i: usize| t.positions[i % n] + s.centers[i / n];
+        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        for i in 0..count {
+            for (k, v) in position(i).to_array().into_iter().enumerate() {
+                lo[k] = lo[k].min(v);
+                hi[k] = hi[k].max(v);
+            }
+        }
+        let vec3 = |v: Vec3, buf: &mut Vec<u8>| {
+            for c in v.to_array() {
+                buf.extend_from_slice(&c.to_le_bytes());
+            }
+        };
+        let view = self.push_view(
+            Payload::Generated {
+                items: count,
+                item_bytes: 12,
+                encode: Box::new(move |i, buf| vec3(position(i), buf)),
+            },
+            Some(ARRAY_BUFFER),
+        );
+        let position = self.push_accessor(json!({
+            "bufferView": view, "componentType": FLOAT, "count": count,
+            "type": "VEC3", "min": lo, "max": hi
+        }));
+        let mut attributes = json!({ "POSITION": position });
+        if normals && t.normals.len() == n {
+            let view = self.push_view(
+                Payload::Generated {
+                    items: count,
+                    item_bytes: 12,
+                    encode: Box::new(move |i, buf| vec3(t.normals[i % n], buf)),
+                },
+                Some(ARRAY_BUFFER),
+            );
+            let normal = self.push_accessor(json!({
+                "bufferView": view, "componentType": FLOAT, "count": count, "type": "VEC3"
+            }));
+            attributes["NORMAL"] = json!(normal);
+        }
+        let per = t.triangle_count();
+        let used = t.triangles.iter().flatten();
+        let lo_index = used.clone().copied().min().unwrap_or(0);
+        let hi_index = used.copied().max().unwrap_or(0) + ((s.centers.len() - 1) * n) as u32;
+        let view = self.push_view(
+            Payload::Generated {
+                items: per * s.centers.len(),
+                item_bytes: 12,
+                encode: Box::new(move |j, buf| {
+                    let base = (j / per * n) as u32;
+                    for v in t.triangles[j % per] {
+                        buf.extend_from_slice(&(v + base).to_le_bytes());
+                    }
+                }),
+            },
+            Some(ELEMENT_ARRAY_BUFFER),
+        );
+        let indices = self.push_accessor(json!({
+            "bufferView": view, "componentType": UNSIGNED_INT, "count": per * s.centers.len() * 3,
+            "type": "SCALAR", "min": [lo_index], "max": [hi_index]
+        }));
+        let mut p = json!({ "attributes": attributes, "indices": indices, "mode": 4 });
+        self.attributes(&mut p, &s.attributes, n, s.centers.len());
+        p
+    }
+
     fn finish(self, json: Value, vertices: usize) -> Document<'a> {
         Document {
             json,
@@ -149,14 +284,29 @@ pub(super) fn build(surface: &Surface, normals: bool) -> Document<'_> {
     let mut vertices = 0;
     // glTF forbids empty accessors: an empty part is left out.
     if surface.fluid.triangle_count() > 0 {
-        let p = b.primitive(&surface.fluid, normals);
+        let mut p = b.primitive(&surface.fluid, normals);
+        b.attributes(
+            &mut p,
+            &surface.fluid.attributes,
+            1,
+            surface.fluid.vertex_count(),
+        );
         meshes.push(json!({"name": "fluid", "primitives": [p]}));
         nodes.push(json!({"name": "fluid", "mesh": meshes.len() - 1}));
         roots.push(nodes.len() - 1);
         vertices += surface.fluid.vertex_count();
     }
     let spheres = &surface.spheres;
-    if !spheres.centers.is_empty() && spheres.template.triangle_count() > 0 {
+    if !spheres.centers.is_empty()
+        && spheres.template.triangle_count() > 0
+        && !spheres.attributes.is_empty()
+    {
+        let p = b.merged_spheres(spheres, normals);
+        meshes.push(json!({"name": "isolated_particles", "primitives": [p]}));
+        nodes.push(json!({"name": "isolated_particles", "mesh": meshes.len() - 1}));
+        roots.push(nodes.len() - 1);
+        vertices += spheres.template.vertex_count() * spheres.centers.len();
+    } else if !spheres.centers.is_empty() && spheres.template.triangle_count() > 0 {
         let p = b.primitive(&spheres.template, normals);
         meshes.push(json!({"name": "isolated_particle", "primitives": [p]}));
         let mesh = meshes.len() - 1;
@@ -196,7 +346,8 @@ pub(super) fn build_sequence(frames: &[TriMesh], fps: f32, normals: bool) -> Doc
     for (i, mesh) in frames.iter().enumerate() {
         let mut node = json!({"name": format!("frame_{i}"), "scale": if i == 0 { [1.0, 1.0, 1.0] } else { [0.0, 0.0, 0.0] }});
         if mesh.triangle_count() > 0 {
-            let p = b.primitive(mesh, normals);
+            let mut p = b.primitive(mesh, normals);
+            b.attributes(&mut p, &mesh.attributes, 1, mesh.vertex_count());
             meshes.push(json!({"name": format!("frame_{i}"), "primitives": [p]}));
             node["mesh"] = json!(meshes.len() - 1);
             vertices += mesh.vertex_count();

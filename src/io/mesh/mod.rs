@@ -1,16 +1,23 @@
 //! Mesh writers (and readers for round trips and for meshes from other tools).
 //!
-//! | format | extension | what is written |
-//! |---|---|---|
-//! | glTF 2.0 binary | `.glb` | fluid mesh node + one sphere mesh instanced by a node per isolated particle; POSITION (with min/max), NORMAL, u32 indices |
-//! | glTF 2.0 | `.gltf` | the same, with the buffer embedded as a base64 data URI (one self-contained file, so the write stays atomic) |
-//! | PLY | `.ply` | binary little-endian, float x y z (+ nx ny nz), uchar/uint face lists |
-//! | OBJ | `.obj` | `v`, `vn`, `f a//a` (1-based) |
-//! | legacy VTK | `.vtk` | binary POLYDATA with POLYGONS and NORMALS point data |
+//! | format | extension | what is written | attributes |
+//! |---|---|---|---|
+//! | glTF 2.0 binary | `.glb` | fluid mesh node + one sphere mesh instanced by a node per isolated particle; POSITION (with min/max), NORMAL, u32 indices | `_NAME` float accessors (SCALAR/VEC2/VEC3/VEC4; `_NAME_0 … _NAME_k` scalars beyond 4 components); spheres with attributes become one merged mesh node `isolated_particles` |
+//! | glTF 2.0 | `.gltf` | the same, with the buffer embedded as a base64 data URI (one self-contained file, so the write stays atomic) | as `.glb` |
+//! | PLY | `.ply` | binary little-endian, float x y z (+ nx ny nz), uchar/uint face lists | float vertex properties `name` / `name_x name_y [name_z [name_w]]` / `name_0 … name_k` |
+//! | OBJ | `.obj` | `v`, `vn`, `f a//a` (1-based) | none: listed in [`MeshWriteStats::dropped_attributes`] |
+//! | legacy VTK | `.vtk` | binary POLYDATA with POLYGONS and NORMALS point data | in the one `POINT_DATA` section after NORMALS: `SCALARS name float 1` (1 component), `VECTORS name float` (3), a `FIELD` array otherwise |
+//!
+//! Attribute naming is detailed in `columns.rs`; [`read_mesh`] reads the attributes of
+//! PLY, glTF and VTK back. PLY and VTK hold fluid and spheres in one vertex table, so
+//! they carry the attributes both have (the others are reported as dropped). Attributes
+//! with a wrong value count or whose names collide in the format are refused before
+//! anything is written.
 //!
 //! Formats without instancing get [`Surface::merged`]. Every write is atomic: a failed
 //! write leaves no partial file and keeps an existing target.
 
+mod columns;
 mod gltf_writer;
 mod read;
 mod simple;
@@ -95,6 +102,11 @@ pub struct MeshWriteStats {
     pub vertices: usize,
     /// Triangles represented (fluid plus every sphere instance).
     pub triangles: usize,
+    /// Names of the attributes the file does not hold, each once: all of them for OBJ;
+    /// for PLY and VTK those the fluid and the spheres do not both carry (one vertex
+    /// table holds both). Empty when everything was written. The mesh is written anyway;
+    /// callers warn about these.
+    pub dropped_attributes: Vec<String>,
 }
 
 /// Writes a whole sequence as one glTF (`.glb` or `.gltf`), atomically: one node per frame
@@ -117,11 +129,13 @@ pub fn write_sequence_gltf(
             message: "a sequence in one file needs .glb, .gltf or .mseq; use a {} pattern for one file per frame".into(),
         });
     }
+    columns::check_frames(path, frames)?;
     let doc = gltf_writer::build_sequence(frames, fps, options.normals);
     Ok(MeshWriteStats {
         bytes: write_document(path, &doc, format)?,
         vertices: doc.vertices,
         triangles: frames.iter().map(|f| f.triangle_count()).sum(),
+        dropped_attributes: Vec::new(),
     })
 }
 
@@ -148,6 +162,14 @@ pub fn write_surface(
     };
     let triangles = surface.fluid.triangle_count()
         + surface.spheres.template.triangle_count() * surface.spheres.centers.len();
+    let naming = match format {
+        MeshFormat::Glb | MeshFormat::Gltf => Some(columns::Column::Gltf),
+        MeshFormat::Ply => Some(columns::Column::Ply),
+        MeshFormat::Vtk => Some(columns::Column::Vtk),
+        MeshFormat::Obj => None,
+    };
+    columns::check_surface(path, surface, naming)?;
+    let mut dropped_attributes = Vec::new();
     let (bytes, vertices) = match format {
         MeshFormat::Glb | MeshFormat::Gltf => {
             let doc = gltf_writer::build(surface, options.normals);
@@ -161,10 +183,16 @@ pub fn write_surface(
                 parts.push(simple::Part::Spheres(&surface.spheres));
             }
             let normals = options.normals && parts.iter().all(|p| p.has_normals());
+            let shared = if other == MeshFormat::Obj {
+                dropped_attributes = columns::all_names(surface);
+                simple::Shared::new(&[], &mut Vec::new())
+            } else {
+                simple::Shared::new(&parts, &mut dropped_attributes)
+            };
             let bytes = write_atomically(path, |w| match other {
-                MeshFormat::Ply => simple::write_ply(w, &parts, normals),
+                MeshFormat::Ply => simple::write_ply(w, &parts, normals, &shared),
                 MeshFormat::Obj => simple::write_obj(w, &parts, normals),
-                MeshFormat::Vtk => simple::write_vtk(w, &parts, normals),
+                MeshFormat::Vtk => simple::write_vtk(w, &parts, normals, &shared),
                 MeshFormat::Glb | MeshFormat::Gltf => unreachable!(),
             })?;
             (
@@ -178,5 +206,6 @@ pub fn write_surface(
         bytes,
         vertices,
         triangles,
+        dropped_attributes,
     })
 }

@@ -1,11 +1,20 @@
 //! Mesh readers: PLY (ASCII, binary LE / BE, any scalar types, polygon faces
 //! fan-triangulated), OBJ (`v`, `f` with `v`, `v/t`, `v//n`, `v/t/n` and negative indices,
-//! polygons fan-triangulated) and glTF (`.glb`, `.gltf` with embedded buffers: every
-//! triangle primitive of the default scene, node transforms applied).
+//! polygons fan-triangulated), glTF (`.glb`, `.gltf` with embedded buffers: every
+//! triangle primitive of the default scene, node transforms applied) and legacy VTK
+//! (ASCII or BINARY, `POINTS` and `POLYGONS`, polygons fan-triangulated).
+//!
+//! Attributes come back as [`super::columns`] names them: PLY `float`/`double` vertex
+//! properties other than `x y z nx ny nz` (regrouped); glTF float `_NAME` accessors,
+//! named `name` (lower-cased, sorted by name; values as stored, not transformed by the
+//! nodes; primitives that do not all carry the same attributes lose them, as
+//! [`TriMesh::append`] does); VTK point-data arrays other than `NORMALS`. OBJ has none.
 
+use super::columns;
+use crate::attributes::Attribute;
 use crate::error::{Error, Result};
 use crate::io::ply_header;
-use crate::io::text::Cursor;
+use crate::io::text::{Cursor, Scalar};
 use crate::mesh::TriMesh;
 use glam::{Mat4, Vec3};
 use std::path::Path;
@@ -22,10 +31,11 @@ pub fn read_mesh(path: &Path) -> Result<TriMesh> {
         "ply" => read_ply(path, &bytes)?,
         "obj" => read_obj(path, &bytes)?,
         "glb" | "gltf" => read_gltf(path, &bytes)?,
+        "vtk" => read_vtk(path, &bytes)?,
         _ => {
             return Err(Error::UnsupportedFormat {
                 path: path.to_path_buf(),
-                message: "mesh input must be .ply, .obj, .glb or .gltf".into(),
+                message: "mesh input must be .ply, .obj, .glb, .gltf or .vtk".into(),
             })
         }
     };
@@ -58,6 +68,19 @@ fn read_ply(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
                     return Err(c.error("vertex element without x, y, z"));
                 };
                 let normal = (element.find("nx"), element.find("ny"), element.find("nz"));
+                // Float properties other than position and normal: attribute columns.
+                let extra: Vec<usize> = (0..element.properties.len())
+                    .filter(|&k| {
+                        let p = &element.properties[k];
+                        p.list_count.is_none()
+                            && matches!(p.scalar, Scalar::F32 | Scalar::F64)
+                            && !["x", "y", "z", "nx", "ny", "nz"].contains(&p.name.as_str())
+                    })
+                    .collect();
+                let mut columns: Vec<(String, Vec<f32>)> = extra
+                    .iter()
+                    .map(|&k| (element.properties[k].name.clone(), Vec::new()))
+                    .collect();
                 let mut row = vec![0.0f32; element.properties.len()];
                 for _ in 0..element.count {
                     for (slot, p) in row.iter_mut().zip(&element.properties) {
@@ -72,7 +95,11 @@ fn read_ply(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
                     if let (Some(a), Some(b), Some(cz)) = normal {
                         mesh.normals.push(Vec3::new(row[a], row[b], row[cz]));
                     }
+                    for (column, &k) in columns.iter_mut().zip(&extra) {
+                        column.1.push(row[k]);
+                    }
                 }
+                mesh.attributes = columns::regroup(columns, true);
             }
             "face" => {
                 for _ in 0..element.count {
@@ -174,7 +201,6 @@ fn read_gltf(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
     let bad = |m: String| Error::parse(path, "glTF", m);
     let (doc, buffers, _) = gltf::import_slice(bytes).map_err(|e| bad(e.to_string()))?;
     let mut mesh = TriMesh::default();
-    let mut all_normals = true;
     let scene = doc
         .default_scene()
         .or_else(|| doc.scenes().next())
@@ -190,35 +216,39 @@ fn read_gltf(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
                     continue;
                 }
                 let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-                let base = mesh.positions.len() as u32;
-                let positions: Vec<Vec3> = reader
-                    .read_positions()
-                    .ok_or_else(|| bad("a primitive has no POSITION".into()))?
-                    .map(|p| transform.transform_point3(Vec3::from(p)))
-                    .collect();
-                let n = positions.len() as u32;
-                mesh.positions.extend(positions);
-                match reader.read_normals() {
-                    Some(ns) => mesh.normals.extend(ns.map(|v| {
-                        transform
-                            .transform_vector3(Vec3::from(v))
-                            .normalize_or_zero()
-                    })),
-                    None => all_normals = false,
+                let mut piece = TriMesh {
+                    positions: reader
+                        .read_positions()
+                        .ok_or_else(|| bad("a primitive has no POSITION".into()))?
+                        .map(|p| transform.transform_point3(Vec3::from(p)))
+                        .collect(),
+                    ..TriMesh::default()
+                };
+                let n = piece.positions.len() as u32;
+                if let Some(ns) = reader.read_normals() {
+                    piece.normals = ns
+                        .map(|v| {
+                            transform
+                                .transform_vector3(Vec3::from(v))
+                                .normalize_or_zero()
+                        })
+                        .collect();
                 }
                 match reader.read_indices() {
                     Some(ix) => {
                         let ix: Vec<u32> = ix.into_u32().collect();
-                        for t in ix.chunks_exact(3) {
-                            mesh.triangles.push([t[0] + base, t[1] + base, t[2] + base]);
-                        }
+                        piece.triangles = ix.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
                     }
                     None => {
-                        for i in (0..n / 3 * 3).step_by(3) {
-                            mesh.triangles.push([base + i, base + i + 1, base + i + 2]);
-                        }
+                        piece.triangles = (0..n / 3 * 3)
+                            .step_by(3)
+                            .map(|i| [i, i + 1, i + 2])
+                            .collect();
                     }
                 }
+                piece.attributes = gltf_attributes(path, &prim, &buffers, n as usize)?;
+                // Normals and attributes are kept only when every primitive has them.
+                mesh.append(&piece);
             }
         }
         let children: Vec<gltf::Node> = node.children().collect();
@@ -226,7 +256,365 @@ fn read_gltf(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
             stack.push((child, transform));
         }
     }
-    if !all_normals {
+    Ok(mesh)
+}
+
+/// The application-specific float attributes (`_NAME`) of a primitive with `vertices`
+/// vertices, sorted by name, `_NAME_0 … _NAME_k` scalars (k ≥ 4) regrouped. Attributes of
+/// other component types or of matrix type are skipped.
+fn gltf_attributes(
+    path: &Path,
+    prim: &gltf::Primitive,
+    buffers: &[gltf::buffer::Data],
+    vertices: usize,
+) -> Result<Vec<Attribute>> {
+    use gltf::accessor::{util::Iter, DataType, Dimensions};
+    let get = |b: gltf::Buffer| buffers.get(b.index()).map(|d| &d.0[..]);
+    let mut vectors = Vec::new();
+    let mut scalars = Vec::new();
+    for (semantic, accessor) in prim.attributes() {
+        let gltf::Semantic::Extras(name) = semantic else {
+            continue;
+        };
+        let components = match accessor.dimensions() {
+            Dimensions::Scalar => 1,
+            Dimensions::Vec2 => 2,
+            Dimensions::Vec3 => 3,
+            Dimensions::Vec4 => 4,
+            _ => continue,
+        };
+        if accessor.data_type() != DataType::F32 {
+            continue;
+        }
+        if accessor.count() != vertices {
+            return Err(Error::parse(
+                path,
+                format!("attribute _{name}"),
+                format!(
+                    "{} values for a primitive of {vertices} vertices",
+                    accessor.count()
+                ),
+            ));
+        }
+        let unreadable = || {
+            Error::parse(
+                path,
+                format!("attribute _{name}"),
+                "the accessor's data cannot be read",
+            )
+        };
+        let values: Vec<f32> = match components {
+            1 => Iter::<f32>::new(accessor, get)
+                .ok_or_else(unreadable)?
+                .collect(),
+            2 => Iter::<[f32; 2]>::new(accessor, get)
+                .ok_or_else(unreadable)?
+                .flatten()
+                .collect(),
+            3 => Iter::<[f32; 3]>::new(accessor, get)
+                .ok_or_else(unreadable)?
+                .flatten()
+                .collect(),
+            _ => Iter::<[f32; 4]>::new(accessor, get)
+                .ok_or_else(unreadable)?
+                .flatten()
+                .collect(),
+        };
+        let name = name.to_ascii_lowercase();
+        if components == 1 {
+            scalars.push((name, values));
+        } else {
+            vectors.push(Attribute {
+                name,
+                components,
+                values,
+            });
+        }
+    }
+    // `_S_10` after `_S_9`, so that split attributes regroup in component order.
+    let key = |name: &str| match name.rsplit_once('_') {
+        Some((base, n)) if !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()) => {
+            (base.to_string(), n.parse::<u64>().ok())
+        }
+        _ => (name.to_string(), None),
+    };
+    scalars.sort_by_key(|(name, _)| key(name));
+    let mut all = columns::regroup(scalars, false);
+    all.extend(vectors);
+    all.sort_by(|a, b| a.name.cmp(&b.name));
+    Ok(all)
+}
+
+fn vtk_scalar(name: &str) -> Option<Scalar> {
+    Some(match name.to_ascii_lowercase().as_str() {
+        "char" => Scalar::I8,
+        "unsigned_char" => Scalar::U8,
+        "short" => Scalar::I16,
+        "unsigned_short" => Scalar::U16,
+        "int" | "vtkidtype" => Scalar::I32,
+        "unsigned_int" => Scalar::U32,
+        "long" | "vtktypeint64" => Scalar::I64,
+        "unsigned_long" | "vtktypeuint64" => Scalar::U64,
+        "float" => Scalar::F32,
+        "double" => Scalar::F64,
+        _ => return None,
+    })
+}
+
+/// Legacy VTK: `POINTS`, `POLYGONS` (classic or 5.x offsets/connectivity layout), point
+/// data (`NORMALS` as normals, every other array as an attribute); other cells and cell
+/// data are skipped.
+fn read_vtk(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
+    let mut c = Cursor::new(path, bytes);
+    let version = c.line()?;
+    if !version.starts_with("# vtk DataFile Version") {
+        return Err(Error::parse(
+            path,
+            "line 1",
+            format!("not a legacy VTK file: first line is {version:?}"),
+        ));
+    }
+    let new_cells = version
+        .rsplit(' ')
+        .next()
+        .and_then(|v| v.parse::<f32>().ok())
+        .is_some_and(|v| v >= 5.0);
+    c.line()?; // title
+    let binary = match c.line()?.trim().to_ascii_uppercase().as_str() {
+        "BINARY" => Some(true),
+        "ASCII" => None,
+        other => return Err(c.error(format!("expected ASCII or BINARY, found {other:?}"))),
+    };
+    let mut mesh = TriMesh::default();
+    let mut npoints = 0usize;
+    // The item count of the current data section and whether it is point data.
+    let mut section: Option<(usize, bool)> = None;
+    let typed = |c: &mut Cursor, what: &str| -> Result<Scalar> {
+        let ty = c.token(what)?;
+        vtk_scalar(ty).ok_or_else(|| c.error(format!("unsupported {what} {ty:?}")))
+    };
+    while !c.at_end() {
+        let keyword = c.token("a section keyword")?.to_ascii_uppercase();
+        match keyword.as_str() {
+            "DATASET" => {
+                let kind = c.token("a dataset type")?;
+                if !kind.eq_ignore_ascii_case("POLYDATA") {
+                    return Err(
+                        c.error(format!("a mesh must be a POLYDATA dataset, found {kind:?}"))
+                    );
+                }
+            }
+            "POINTS" => {
+                npoints = c.number("the point count")?;
+                let scalar = typed(&mut c, "point type")?;
+                if binary.is_some() {
+                    c.finish_line();
+                }
+                let v = c.values(npoints * 3, scalar, binary)?;
+                mesh.positions = v
+                    .chunks_exact(3)
+                    .map(|p| Vec3::new(p[0], p[1], p[2]))
+                    .collect();
+            }
+            "VERTICES" | "LINES" | "POLYGONS" | "TRIANGLE_STRIPS" => {
+                let cells: usize = c.number("the cell count")?;
+                let size: usize = c.number("the cell list size")?;
+                if keyword == "TRIANGLE_STRIPS" {
+                    return Err(c.error("TRIANGLE_STRIPS are not supported; write POLYGONS"));
+                }
+                let polygons = keyword == "POLYGONS";
+                let mut lists: Vec<Vec<u32>> = Vec::new();
+                if new_cells {
+                    let mut offsets = Vec::new();
+                    for part in ["OFFSETS", "CONNECTIVITY"] {
+                        let found = c.token(part)?;
+                        if !found.eq_ignore_ascii_case(part) {
+                            return Err(c.error(format!("expected {part}, found {found:?}")));
+                        }
+                        let scalar = typed(&mut c, "index type")?;
+                        if binary.is_some() {
+                            c.finish_line();
+                        }
+                        let count = if part == "OFFSETS" { cells } else { size };
+                        if !polygons {
+                            c.skip_values(count, scalar, binary)?;
+                        } else if part == "OFFSETS" {
+                            offsets = c.indices(count, scalar, binary)?;
+                        } else {
+                            let ids = c.indices(count, scalar, binary)?;
+                            for w in offsets.windows(2) {
+                                let (a, b) = (w[0] as usize, w[1] as usize);
+                                if a > b || b > ids.len() {
+                                    return Err(c.error("polygon offsets out of order"));
+                                }
+                                lists.push(ids[a..b].to_vec());
+                            }
+                        }
+                    }
+                } else {
+                    if binary.is_some() {
+                        c.finish_line();
+                    }
+                    if polygons {
+                        let mut left = size;
+                        for _ in 0..cells {
+                            let n = c.indices(1, Scalar::I32, binary)?[0] as usize;
+                            if n >= left {
+                                return Err(c.error("a polygon overruns the cell list size"));
+                            }
+                            lists.push(c.indices(n, Scalar::I32, binary)?);
+                            left -= n + 1;
+                        }
+                    } else {
+                        c.skip_values(size, Scalar::I32, binary)?;
+                    }
+                }
+                for ids in lists {
+                    for j in 1..ids.len().saturating_sub(1) {
+                        mesh.triangles.push([ids[0], ids[j], ids[j + 1]]);
+                    }
+                }
+            }
+            "POINT_DATA" | "CELL_DATA" => {
+                let n: usize = c.number("the item count")?;
+                let points = keyword == "POINT_DATA";
+                if points && n != npoints {
+                    return Err(c.error(format!("POINT_DATA has {n} values, POINTS has {npoints}")));
+                }
+                section = Some((n, points));
+            }
+            "SCALARS"
+            | "VECTORS"
+            | "NORMALS"
+            | "TENSORS"
+            | "TEXTURE_COORDINATES"
+            | "COLOR_SCALARS" => {
+                let Some((items, points)) = section else {
+                    return Err(c.error(format!("{keyword} outside POINT_DATA or CELL_DATA")));
+                };
+                let name = c.token("an array name")?.to_string();
+                let (components, scalar) = match keyword.as_str() {
+                    "SCALARS" => {
+                        let scalar = typed(&mut c, "scalar type")?;
+                        let rest = c.line()?.trim().to_string();
+                        let k = if rest.is_empty() {
+                            1
+                        } else {
+                            rest.parse()
+                                .map_err(|_| c.error(format!("bad component count {rest:?}")))?
+                        };
+                        let table = c.token("LOOKUP_TABLE")?;
+                        if !table.eq_ignore_ascii_case("LOOKUP_TABLE") {
+                            return Err(c.error(format!(
+                                "expected LOOKUP_TABLE after SCALARS, found {table:?}"
+                            )));
+                        }
+                        c.token("a lookup table name")?;
+                        (k, scalar)
+                    }
+                    "VECTORS" | "NORMALS" => (3, typed(&mut c, "vector type")?),
+                    "TENSORS" => (9, typed(&mut c, "tensor type")?),
+                    "TEXTURE_COORDINATES" => {
+                        let k: usize = c.number("a dimension")?;
+                        (k, typed(&mut c, "texture coordinate type")?)
+                    }
+                    _ => {
+                        let k: usize = c.number("a component count")?;
+                        let scalar = if binary.is_some() {
+                            Scalar::U8
+                        } else {
+                            Scalar::F32
+                        };
+                        (k, scalar)
+                    }
+                };
+                if binary.is_some() {
+                    c.finish_line();
+                }
+                let count = items
+                    .checked_mul(components)
+                    .ok_or_else(|| c.error("value count overflows"))?;
+                if !points {
+                    c.skip_values(count, scalar, binary)?;
+                    continue;
+                }
+                let mut values = c.values(count, scalar, binary)?;
+                if keyword == "COLOR_SCALARS" && binary.is_some() {
+                    values.iter_mut().for_each(|v| *v /= 255.0);
+                }
+                if keyword == "NORMALS" {
+                    mesh.normals = values
+                        .chunks_exact(3)
+                        .map(|n| Vec3::new(n[0], n[1], n[2]))
+                        .collect();
+                } else {
+                    mesh.attributes.push(Attribute {
+                        name,
+                        components,
+                        values,
+                    });
+                }
+            }
+            "FIELD" => {
+                let Some((items, points)) = section else {
+                    return Err(c.error("FIELD outside POINT_DATA or CELL_DATA"));
+                };
+                c.token("a field name")?;
+                let arrays: usize = c.number("the array count")?;
+                for _ in 0..arrays {
+                    let name = c.token("an array name")?.to_string();
+                    let components: usize = c.number("a component count")?;
+                    let tuples: usize = c.number("a tuple count")?;
+                    let scalar = typed(&mut c, "array type")?;
+                    if binary.is_some() {
+                        c.finish_line();
+                    }
+                    let count = tuples
+                        .checked_mul(components)
+                        .ok_or_else(|| c.error("value count overflows"))?;
+                    if !points {
+                        c.skip_values(count, scalar, binary)?;
+                        continue;
+                    }
+                    if tuples != items || components == 0 {
+                        return Err(Error::parse(
+                            path,
+                            format!("attribute {name}"),
+                            format!(
+                                "{tuples} tuples of {components} components for {items} points"
+                            ),
+                        ));
+                    }
+                    let values = c.values(count, scalar, binary)?;
+                    mesh.attributes.push(Attribute {
+                        name,
+                        components,
+                        values,
+                    });
+                }
+            }
+            "LOOKUP_TABLE" => {
+                c.token("a lookup table name")?;
+                let size: usize = c.number("a table size")?;
+                let scalar = if binary.is_some() {
+                    Scalar::U8
+                } else {
+                    Scalar::F32
+                };
+                if binary.is_some() {
+                    c.finish_line();
+                }
+                c.skip_values(size * 4, scalar, binary)?;
+            }
+            "METADATA" => loop {
+                if c.pos >= c.bytes.len() || c.line()?.trim().is_empty() {
+                    break;
+                }
+            },
+            other => return Err(c.error(format!("unknown section {other:?}"))),
+        }
+    }
+    if mesh.normals.len() != mesh.positions.len() {
         mesh.normals.clear();
     }
     Ok(mesh)

@@ -4,7 +4,13 @@
 //! spheres) that share one vertex numbering, so nothing is merged or copied first; binary
 //! data goes out in chunks of [`CHUNK_BYTES`], so writing adds no more than that to the
 //! memory peak.
+//!
+//! Attributes ([`Shared`]) are written when every non-empty part has them (same name and
+//! components): PLY as float vertex properties, VTK as point-data arrays beside the
+//! normals; OBJ has no place for them.
 
+use super::columns;
+use crate::attributes::Attribute;
 use crate::mesh::{SphereInstances, TriMesh};
 use glam::Vec3;
 use std::io::{Result, Write};
@@ -54,6 +60,20 @@ impl Part<'_> {
             Part::Spheres(s) => s.template.normals[i % s.template.vertex_count()],
         }
     }
+    /// The part's attributes (per vertex for a mesh, per instance for spheres).
+    fn attributes(&self) -> &[Attribute] {
+        match self {
+            Part::Mesh(m) => &m.attributes,
+            Part::Spheres(s) => &s.attributes,
+        }
+    }
+    /// The values of attribute `k` at vertex `i`.
+    fn attribute_item(&self, k: usize, i: usize) -> &[f32] {
+        match self {
+            Part::Mesh(m) => m.attributes[k].item(i),
+            Part::Spheres(s) => s.attributes[k].item(i / s.template.vertex_count()),
+        }
+    }
     fn triangle(&self, j: usize) -> [u32; 3] {
         match self {
             Part::Mesh(m) => m.triangles[j],
@@ -61,6 +81,83 @@ impl Part<'_> {
                 let n = s.template.triangle_count();
                 let base = (j / n * s.template.vertex_count()) as u32;
                 s.template.triangles[j % n].map(|v| v + base)
+            }
+        }
+    }
+}
+
+/// The attributes written for a list of parts: those every part with vertices has (same
+/// name and components), in the order of the first such part.
+pub(super) struct Shared<'a> {
+    /// Name and components of each written attribute.
+    pub list: Vec<&'a Attribute>,
+    /// For each part, the index in its own attributes of each written attribute.
+    index: Vec<Vec<usize>>,
+}
+
+impl<'a> Shared<'a> {
+    /// Chooses the attributes of `parts`; `dropped` receives the names of the others.
+    pub(super) fn new(parts: &[Part<'a>], dropped: &mut Vec<String>) -> Self {
+        let filled: Vec<&Part<'a>> = parts.iter().filter(|p| p.vertex_count() > 0).collect();
+        let find = |p: &Part<'a>, a: &Attribute| {
+            p.attributes()
+                .iter()
+                .position(|b| b.name == a.name && b.components == a.components)
+        };
+        let mut list = Vec::new();
+        if let Some(first) = filled.first() {
+            let first: &[Attribute] = match **first {
+                Part::Mesh(m) => &m.attributes,
+                Part::Spheres(s) => &s.attributes,
+            };
+            for a in first {
+                if filled.iter().all(|p| find(p, a).is_some()) {
+                    list.push(a);
+                }
+            }
+        }
+        for p in parts {
+            for a in p.attributes() {
+                let kept = list
+                    .iter()
+                    .any(|b| b.name == a.name && b.components == a.components);
+                if !kept && !dropped.contains(&a.name) {
+                    dropped.push(a.name.clone());
+                }
+            }
+        }
+        let index = parts
+            .iter()
+            .map(|p| {
+                list.iter()
+                    .map(|a| find(p, a).unwrap_or(usize::MAX))
+                    .collect()
+            })
+            .collect();
+        Shared { list, index }
+    }
+
+    /// Appends the little-endian or big-endian bytes of every written attribute at vertex
+    /// `i` of part `p` (all attributes, item-major), or only attribute `only`.
+    fn encode(
+        &self,
+        parts: &[Part],
+        p: usize,
+        i: usize,
+        only: Option<usize>,
+        big: bool,
+        buf: &mut Vec<u8>,
+    ) {
+        for (k, &own) in self.index[p].iter().enumerate() {
+            if only.is_some_and(|o| o != k) {
+                continue;
+            }
+            for v in parts[p].attribute_item(own, i) {
+                buf.extend_from_slice(&if big {
+                    v.to_be_bytes()
+                } else {
+                    v.to_le_bytes()
+                });
             }
         }
     }
@@ -114,7 +211,12 @@ fn all_normals<'a>(parts: &'a [Part<'a>]) -> impl Iterator<Item = Vec3> + 'a {
         .flat_map(|m| (0..m.vertex_count()).map(move |i| m.normal(i)))
 }
 
-pub(super) fn write_ply(w: &mut impl Write, parts: &[Part], normals: bool) -> Result<()> {
+pub(super) fn write_ply(
+    w: &mut impl Write,
+    parts: &[Part],
+    normals: bool,
+    shared: &Shared,
+) -> Result<()> {
     let (nv, nt) = counts(parts);
     write!(
         w,
@@ -123,11 +225,16 @@ pub(super) fn write_ply(w: &mut impl Write, parts: &[Part], normals: bool) -> Re
     if normals {
         w.write_all(b"property float nx\nproperty float ny\nproperty float nz\n")?;
     }
+    for a in &shared.list {
+        for name in columns::ply_names(a) {
+            writeln!(w, "property float {name}")?;
+        }
+    }
     write!(
         w,
         "element face {nt}\nproperty list uchar uint vertex_indices\nend_header\n",
     )?;
-    for m in parts {
+    for (p, m) in parts.iter().enumerate() {
         write_chunked(w, 0..m.vertex_count(), |buf, i| {
             for v in m.position(i).to_array() {
                 buf.extend_from_slice(&v.to_le_bytes());
@@ -137,6 +244,7 @@ pub(super) fn write_ply(w: &mut impl Write, parts: &[Part], normals: bool) -> Re
                     buf.extend_from_slice(&v.to_le_bytes());
                 }
             }
+            shared.encode(parts, p, i, None, false, buf);
         })?;
     }
     write_chunked(w, all_triangles(parts), |buf, t| {
@@ -170,7 +278,12 @@ pub(super) fn write_obj(w: &mut impl Write, parts: &[Part], normals: bool) -> Re
     Ok(())
 }
 
-pub(super) fn write_vtk(w: &mut impl Write, parts: &[Part], normals: bool) -> Result<()> {
+pub(super) fn write_vtk(
+    w: &mut impl Write,
+    parts: &[Part],
+    normals: bool,
+    shared: &Shared,
+) -> Result<()> {
     let (nv, nt) = counts(parts);
     write!(w, "# vtk DataFile Version 4.2\nmeniscus surface\nBINARY\nDATASET POLYDATA\nPOINTS {nv} float\n")?;
     write_chunked(w, all_positions(parts), |buf, p| {
@@ -186,13 +299,31 @@ pub(super) fn write_vtk(w: &mut impl Write, parts: &[Part], normals: bool) -> Re
         }
     })?;
     w.write_all(b"\n")?;
+    // One POINT_DATA section holds every point array.
+    if normals || !shared.list.is_empty() {
+        writeln!(w, "POINT_DATA {nv}")?;
+    }
     if normals {
-        write!(w, "POINT_DATA {nv}\nNORMALS normals float\n")?;
+        w.write_all(b"NORMALS normals float\n")?;
         write_chunked(w, all_normals(parts), |buf, n| {
             for v in n.to_array() {
                 buf.extend_from_slice(&v.to_be_bytes());
             }
         })?;
+        w.write_all(b"\n")?;
+    }
+    for (k, a) in shared.list.iter().enumerate() {
+        let name = columns::word(&a.name);
+        match a.components {
+            1 => writeln!(w, "SCALARS {name} float 1\nLOOKUP_TABLE default")?,
+            3 => writeln!(w, "VECTORS {name} float")?,
+            c => writeln!(w, "FIELD FieldData 1\n{name} {c} {nv} float")?,
+        }
+        for p in 0..parts.len() {
+            write_chunked(w, 0..parts[p].vertex_count(), |buf, i| {
+                shared.encode(parts, p, i, Some(k), true, buf)
+            })?;
+        }
         w.write_all(b"\n")?;
     }
     Ok(())

@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# Checks that Blender 5 imports meniscus attributes: installs bpy 5.0.1 (Blender as a
+# Python module) into target/bpy-venv if missing, writes the attribute fixtures with the
+# attribute_fixture example, and runs tests/blender/import_attributes.py on them.
+# Exits non-zero when an import loses or changes an attribute value.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+venv=target/bpy-venv
+python="${MENISCUS_PYTHON:-python3.11}"
+if ! "$venv/bin/python" -c "import bpy" >/dev/null 2>&1; then
+  command -v "$python" >/dev/null || { echo "$python is needed for the Blender check (bpy 5.0.1 wheels are for CPython 3.11)" >&2; exit 1; }
+  rm -rf "$venv"
+  "$python" -m venv "$venv"
+  "$venv/bin/pip" install --quiet --disable-pip-version-check bpy==5.0.1
+fi
+out=target/ci/blender
+cargo run --release --quiet --example attribute_fixture -- "$out" >/dev/null
+# Blender 5.0.1's glTF importer pairs custom attributes with their data through a Python
+# set, whose order follows the hash seed: with two or more custom attributes the import
+# fails for some seeds (KhronosGroup/glTF-Blender-IO#2658, fixed by #2665, not in 5.0.1).
+# A seed under which it works keeps this check about our files, not about that bug.
+PYTHONHASHSEED=2 "$venv/bin/python" tests/blender/import_attributes.py "$out"
