@@ -85,6 +85,8 @@ pub struct FrameReport {
     pub write_seconds: f64,
     /// Bytes written.
     pub output_bytes: u64,
+    /// Attributes the output format could not hold (an OBJ file holds none).
+    pub dropped_attributes: Vec<String>,
 }
 
 /// Reads `input`, reconstructs it and sends it to `sink`: the file `output`, an archive
@@ -160,6 +162,7 @@ pub fn reconstruct_file(
     cancel.check()?;
     on_stage("write");
     let clock = Instant::now();
+    let mut dropped_attributes = Vec::new();
     let written = match sink {
         Sink::Archive(writer) => {
             let frame = ArchiveFrame {
@@ -182,7 +185,11 @@ pub fn reconstruct_file(
             frames.push(surface.merged());
             0
         }
-        Sink::File => write_surface(output, &surface, &job.write)?.bytes,
+        Sink::File => {
+            let stats = write_surface(output, &surface, &job.write)?;
+            dropped_attributes = stats.dropped_attributes;
+            stats.bytes
+        }
     };
     let write_seconds = clock.elapsed().as_secs_f64();
     reconstruction.push_stage("write", write_seconds, reconstruction.fluid_triangles);
@@ -195,6 +202,7 @@ pub fn reconstruct_file(
         reconstruction,
         write_seconds,
         output_bytes: written,
+        dropped_attributes,
     })
 }
 
@@ -312,6 +320,7 @@ pub fn run_frames(
                 reconstruction: ReconstructionStats::default(),
                 write_seconds: 0.0,
                 output_bytes: 0,
+                dropped_attributes: Vec::new(),
             }
         } else {
             if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {

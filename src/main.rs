@@ -472,6 +472,7 @@ fn reconstruct(args: &ReconstructArgs, cancel: &meniscus::CancelToken) -> Result
         bar
     };
     let clock = Instant::now();
+    let mut warned = false;
     let result = run_frames(
         &plan,
         &options,
@@ -480,6 +481,16 @@ fn reconstruct(args: &ReconstructArgs, cancel: &meniscus::CancelToken) -> Result
         &mut |stage| bar.set_message(stage.to_string()),
         &mut |report: &FrameReport| {
             bar.inc(1);
+            if !warned && !report.dropped_attributes.is_empty() {
+                warned = true;
+                bar.suspend(|| {
+                    eprintln!(
+                        "warning: {} cannot hold point attributes; not written: {}",
+                        report.output.display(),
+                        report.dropped_attributes.join(", ")
+                    )
+                });
+            }
             if !args.quiet && plan.len() == 1 {
                 bar.suspend(|| eprint!("{}", report.reconstruction.table()));
             }

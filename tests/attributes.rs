@@ -309,3 +309,82 @@ fn bad_attributes_are_clear_errors_naming_the_file_and_attribute() {
     let err = select_attributes(&vtk, short, &AttributeSelection::Velocity).unwrap_err();
     assert!(err.to_string().contains("\"velocity\""), "{err}");
 }
+
+fn entries(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect()
+}
+
+#[test]
+fn an_obj_output_warns_once_that_it_drops_the_attributes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s.obj");
+    let result = meniscus()
+        .arg("reconstruct")
+        .arg(dataset("dambreak_small/ParticleData_Fluid_25.vtk"))
+        .args(["-r", "0.012", "-q", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(result.status.success());
+    let err = String::from_utf8_lossy(&result.stderr);
+    assert_eq!(err.matches("warning").count(), 1, "{err}");
+    assert!(err.contains("velocity") && err.contains("s.obj"), "{err}");
+    assert!(out.exists());
+}
+
+#[test]
+fn spilled_runs_with_attributes_leave_no_temporary_file_on_success_error_or_ctrl_c() {
+    let dir = tempfile::tempdir().unwrap();
+    let temp = dir.path().join("temp");
+    std::fs::create_dir(&temp).unwrap();
+    let vtk = dataset("dambreak_small/ParticleData_Fluid_25.vtk");
+    let tiled = |out: &Path, tile: &str| {
+        let mut cmd = meniscus();
+        cmd.arg("reconstruct")
+            .arg(&vtk)
+            .args(["-r", "0.012", "-q", "--tile-size", tile, "--temp-dir"])
+            .arg(&temp)
+            .arg("-o")
+            .arg(out);
+        cmd
+    };
+    // Success: the velocity is in the output.
+    let out = dir.path().join("s.ply");
+    assert!(tiled(&out, "64").status().unwrap().success());
+    let bytes = std::fs::read(&out).unwrap();
+    let header = String::from_utf8_lossy(&bytes[..400]);
+    assert!(header.contains("property float velocity_x"), "{header}");
+    assert!(entries(&temp).is_empty(), "{:?}", entries(&temp));
+    // An error after the spill (the output is a directory).
+    let blocked = dir.path().join("blocked.ply");
+    std::fs::create_dir(&blocked).unwrap();
+    let result = tiled(&blocked, "64").output().unwrap();
+    assert_eq!(result.status.code(), Some(1));
+    assert!(entries(&temp).is_empty(), "{:?}", entries(&temp));
+    // Ctrl-C during one-block tiles.
+    let out = dir.path().join("c.ply");
+    let mut child = tiled(&out, "8")
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let clock = std::time::Instant::now();
+    while entries(&temp).is_empty() {
+        assert!(clock.elapsed().as_secs() < 60, "no spill file appeared");
+        assert!(child.try_wait().unwrap().is_none(), "the run ended early");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(100));
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let result = child.wait_with_output().unwrap();
+    assert_eq!(result.status.code(), Some(130));
+    assert!(String::from_utf8_lossy(&result.stderr).contains("interrupted"));
+    assert!(!out.exists());
+    assert!(entries(&temp).is_empty(), "{:?}", entries(&temp));
+}
