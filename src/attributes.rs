@@ -257,29 +257,52 @@ pub(crate) fn transfer<S: crate::io::particles::ParticleSource>(
             continue;
         }
         let rows_of_tile = crate::grid::row_ranges(loaded.halves.iter().copied());
-        // The tile's points, in group order: their rows and whether each was resolved.
-        let mut values = vec![0f32; group.len() * width];
-        let found: Vec<bool> = values
-            .par_chunks_mut(width.max(1))
-            .zip(group.par_iter())
+        // The tile's points in (z, y, x) order of their half-blocks, so that neighbouring
+        // evaluations read the same particles (a mesh's vertex order is not spatial after
+        // subdivision); each point's value is its own, whatever the order.
+        let halves: Vec<BlockKey> = group
+            .par_iter()
+            .map(|&k| search.half_block_of(points[k as usize].as_dvec3()))
+            .collect();
+        let order = crate::grid::sort_by_key_zyx(&halves);
+        let group: Vec<u32> = order.iter().map(|&i| group[i as usize]).collect();
+        let halves: Vec<BlockKey> = order.iter().map(|&i| halves[i as usize]).collect();
+        drop(order);
+        // Runs of points in one half-block share the rows they search.
+        let runs = crate::grid::key_runs(halves.iter().copied());
+        let results: Vec<(Vec<f32>, Vec<bool>)> = runs
+            .par_iter()
             .map_init(
                 || vec![0f64; width],
-                |sum, (out, &k)| {
-                    let p = points[k as usize];
-                    search.weighted_mean(p, &loaded, &rows_of_tile, sum, out)
-                        || search.nearest_in_window(p, &loaded, &rows_of_tile, out)
+                |sum, &(half, start, end)| {
+                    let near = search.rows_near(half, &loaded, &rows_of_tile);
+                    let points_here = &group[start as usize..end as usize];
+                    let mut values = vec![0f32; points_here.len() * width];
+                    let found = points_here
+                        .iter()
+                        .zip(values.chunks_exact_mut(width.max(1)))
+                        .map(|(&k, out)| {
+                            let p = points[k as usize];
+                            search.weighted_mean(p, &loaded, &near, sum, out)
+                                || search.nearest_in_window(p, &loaded, &rows_of_tile, out)
+                        })
+                        .collect();
+                    (values, found)
                 },
             )
             .collect();
-        for ((&k, value), found) in group
-            .iter()
-            .zip(values.chunks_exact(width.max(1)))
-            .zip(found)
-        {
-            if found {
-                let k = k as usize;
-                rows[k * width..(k + 1) * width].copy_from_slice(&value[..width]);
-                resolved[k] = true;
+        for (&(_, start, end), (values, found)) in runs.iter().zip(results) {
+            let points_here = &group[start as usize..end as usize];
+            for ((&k, value), found) in points_here
+                .iter()
+                .zip(values.chunks_exact(width.max(1)))
+                .zip(found)
+            {
+                if found {
+                    let k = k as usize;
+                    rows[k * width..(k + 1) * width].copy_from_slice(&value[..width]);
+                    resolved[k] = true;
+                }
             }
         }
     }
@@ -327,6 +350,14 @@ pub(crate) fn transfer<S: crate::io::particles::ParticleSource>(
         }
     }
     Ok(out)
+}
+
+/// Particles `start..end` of a tile, the half-blocks near a point in one (y, z) row.
+struct NearRow {
+    y: i32,
+    z: i32,
+    start: u32,
+    end: u32,
 }
 
 /// The neighbourhood search of [`transfer`] over a tile's particles, sorted in the
@@ -409,14 +440,42 @@ impl Search {
         [c.x, c.y, c.z].map(|v| (v.floor() as i32).div_euclid(HALF_BLOCK_EDGE))
     }
 
+    /// The rows of particles that may lie within the radius of a point of half-block
+    /// `c`: per (y, z) row of half-blocks within reach, in the canonical order, the
+    /// particles of its half-blocks within reach in x.
+    fn rows_near(
+        &self,
+        c: BlockKey,
+        loaded: &LoadedParticles,
+        rows: &HashMap<[i32; 2], (u32, u32)>,
+    ) -> Vec<NearRow> {
+        // A hair more than the radius, against the rounding of the half-blocks.
+        let reach = (self.radius * (1.0 + 1e-6) / self.half_edge + 1e-6).ceil() as i32;
+        let mut near = Vec::new();
+        for z in c[2] - reach..=c[2] + reach {
+            for y in c[1] - reach..=c[1] + reach {
+                let Some(&(a, b)) = rows.get(&[y, z]) else {
+                    continue;
+                };
+                let row = &loaded.halves[a as usize..b as usize];
+                let start = a + row.partition_point(|k| k[0] < c[0] - reach) as u32;
+                let end = a + row.partition_point(|k| k[0] <= c[0] + reach) as u32;
+                if start < end {
+                    near.push(NearRow { y, z, start, end });
+                }
+            }
+        }
+        near
+    }
+
     /// Writes to `out` the kernel-weighted mean of the payload of the particles within the
     /// radius of `p`, summed in f64 (in `sum`) in the canonical order; false when there is
-    /// none.
+    /// none. `near` are the rows of `p`'s half-block ([`Search::rows_near`]).
     fn weighted_mean(
         &self,
         p: Vec3,
         loaded: &LoadedParticles,
-        rows: &HashMap<[i32; 2], (u32, u32)>,
+        near: &[NearRow],
         sum: &mut [f64],
         out: &mut [f32],
     ) -> bool {
@@ -424,20 +483,45 @@ impl Search {
         let x = p.as_dvec3();
         sum.fill(0.0);
         let mut weights = 0f64;
-        self.for_each_near(p, self.radius, loaded, rows, |k| {
-            let d2 = (loaded.positions[k].as_dvec3() - x).length_squared();
-            if d2 < self.radius2 {
-                let q = 1.0 - d2 * self.inv_radius2;
-                let w = q * q * q;
-                weights += w;
-                for (s, v) in sum
-                    .iter_mut()
-                    .zip(&loaded.payload[k * width..(k + 1) * width])
-                {
-                    *s += w * *v as f64;
+        // A hair more than the radius, against the rounding of the half-blocks.
+        let e = self.radius * (1.0 + 1e-6) + 1e-6 * self.half_edge;
+        let gap = |c: f64, k: i32| {
+            let (a, b) = (k as f64 * self.half_edge, (k + 1) as f64 * self.half_edge);
+            (a - c).max(c - b).max(0.0)
+        };
+        let reject = (self.radius2 * (1.0 + 1e-4)) as f32;
+        for row in near {
+            let (dy, dz) = (gap(x.y, row.y), gap(x.z, row.z));
+            let left = e * e - dz * dz - dy * dy;
+            if left < 0.0 {
+                continue;
+            }
+            let reach_x = left.sqrt();
+            let x_lo = self.half_block_of(glam::DVec3::splat(x.x - reach_x))[0];
+            let x_hi = self.half_block_of(glam::DVec3::splat(x.x + reach_x))[0];
+            let halves = &loaded.halves[row.start as usize..row.end as usize];
+            let first = row.start as usize + halves.partition_point(|k| k[0] < x_lo);
+            let end = row.start as usize + halves.partition_point(|k| k[0] <= x_hi);
+            for k in first..end {
+                // Most candidates are rejected in f32 with a margin; the rest are decided
+                // and weighed in f64.
+                if (loaded.positions[k] - p).length_squared() > reject {
+                    continue;
+                }
+                let d2 = (loaded.positions[k].as_dvec3() - x).length_squared();
+                if d2 < self.radius2 {
+                    let q = 1.0 - d2 * self.inv_radius2;
+                    let w = q * q * q;
+                    weights += w;
+                    for (s, v) in sum
+                        .iter_mut()
+                        .zip(&loaded.payload[k * width..(k + 1) * width])
+                    {
+                        *s += w * *v as f64;
+                    }
                 }
             }
-        });
+        }
         if weights > 0.0 {
             for (o, s) in out.iter_mut().zip(sum.iter()) {
                 *o = (s / weights) as f32;
