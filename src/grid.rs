@@ -42,7 +42,7 @@ pub type BlockValues = [f32; BLOCK_VOLUME];
 /// only for arrays of up to 16 elements: on the 4M-particle scene 0.24–0.55 s of serial
 /// writing before the field, and 40 MiB of peak memory for candidate blocks no particle
 /// reaches, 2026-11-24.)
-pub fn zeroed_blocks(count: usize) -> Vec<BlockValues> {
+pub(crate) fn zeroed_blocks(count: usize) -> Vec<BlockValues> {
     if count == 0 {
         return Vec::new();
     }
@@ -101,7 +101,7 @@ impl SparseField {
     }
 
     /// A field from parallel arrays of distinct keys and their values (no copy).
-    pub fn from_parts(
+    pub(crate) fn from_parts(
         cell_size: f64,
         outside_value: f32,
         keys: &[BlockKey],
@@ -122,7 +122,7 @@ impl SparseField {
     }
 
     /// Adds `delta` to every stored value and to the value of vertices not stored.
-    pub fn shift_values(&mut self, delta: f32) {
+    pub(crate) fn shift_values(&mut self, delta: f32) {
         self.outside_value += delta;
         self.values
             .par_iter_mut()
@@ -141,13 +141,13 @@ impl SparseField {
     }
 
     /// The values of block `key` for writing, if stored.
-    pub fn block_mut(&mut self, key: &BlockKey) -> Option<&mut BlockValues> {
+    pub(crate) fn block_mut(&mut self, key: &BlockKey) -> Option<&mut BlockValues> {
         self.index.get(key).map(|&i| &mut self.values[i as usize])
     }
 
     /// The keys of the blocks holding a value `< 0`, in no particular order; the blocks
     /// are scanned in parallel.
-    pub fn keys_of_negative_blocks(&self) -> Vec<BlockKey> {
+    pub(crate) fn keys_of_negative_blocks(&self) -> Vec<BlockKey> {
         let mut key_of = vec![None; self.values.len()];
         for (key, &slot) in &self.index {
             key_of[slot as usize] = Some(*key);
@@ -196,7 +196,7 @@ impl SparseField {
 /// axes span (relative to the smallest key) and sorts those with a stable radix sort:
 /// beside the index in one `u64` when they fit in 32 bits, in a pair when they fit in 63
 /// (as any block key does); else compares the keys.
-pub fn sort_by_key_zyx(keys: &[[i32; 3]]) -> Vec<u32> {
+pub(crate) fn sort_by_key_zyx(keys: &[[i32; 3]]) -> Vec<u32> {
     use rayon::prelude::*;
     if keys.is_empty() {
         return Vec::new();
@@ -341,11 +341,11 @@ impl<T> SharedSlots<T> {
 }
 
 /// Per key (cell or block), the range of a sorted index list holding its entries.
-pub type KeyRanges = hashbrown::HashMap<[i32; 3], (u32, u32)>;
+pub(crate) type KeyRanges = hashbrown::HashMap<[i32; 3], (u32, u32)>;
 
 /// `keys` binned: the indices in [`sort_by_key_zyx`] order, and for every key present the
 /// range of that order holding its indices (ascending index within a key).
-pub fn bin_by_key(keys: &[[i32; 3]]) -> (Vec<u32>, KeyRanges) {
+pub(crate) fn bin_by_key(keys: &[[i32; 3]]) -> (Vec<u32>, KeyRanges) {
     let order = sort_by_key_zyx(keys);
     let ranges = group_runs(order.iter().map(|&i| keys[i as usize]));
     (order, ranges)
@@ -353,7 +353,7 @@ pub fn bin_by_key(keys: &[[i32; 3]]) -> (Vec<u32>, KeyRanges) {
 
 /// The range of positions each key holds in `keys`, a sequence in which equal keys are
 /// contiguous (panics otherwise).
-pub fn group_runs(keys: impl IntoIterator<Item = [i32; 3]>) -> KeyRanges {
+pub(crate) fn group_runs(keys: impl IntoIterator<Item = [i32; 3]>) -> KeyRanges {
     let mut ranges = KeyRanges::new();
     for (key, start, end) in key_runs(keys) {
         let previous = ranges.insert(key, (start, end));
@@ -364,7 +364,7 @@ pub fn group_runs(keys: impl IntoIterator<Item = [i32; 3]>) -> KeyRanges {
 
 /// The runs of equal keys in `keys`, in order: each key with the range of positions
 /// `start..end` it holds.
-pub fn key_runs(keys: impl IntoIterator<Item = [i32; 3]>) -> Vec<([i32; 3], u32, u32)> {
+pub(crate) fn key_runs(keys: impl IntoIterator<Item = [i32; 3]>) -> Vec<([i32; 3], u32, u32)> {
     let mut runs: Vec<([i32; 3], u32, u32)> = Vec::new();
     for (n, key) in (0u32..).zip(keys) {
         match runs.last_mut() {
@@ -377,7 +377,9 @@ pub fn key_runs(keys: impl IntoIterator<Item = [i32; 3]>) -> Vec<([i32; 3], u32,
 
 /// Per row `[y, z]` of `keys`, a sequence in (z, y, x) order, the range of positions
 /// `start..end` holding that row's keys (panics when a row's keys are not contiguous).
-pub fn row_ranges(keys: impl IntoIterator<Item = [i32; 3]>) -> HashMap<[i32; 2], (u32, u32)> {
+pub(crate) fn row_ranges(
+    keys: impl IntoIterator<Item = [i32; 3]>,
+) -> HashMap<[i32; 2], (u32, u32)> {
     let mut rows: Vec<([i32; 2], u32, u32)> = Vec::new();
     for (n, key) in (0u32..).zip(keys) {
         let row = [key[1], key[2]];

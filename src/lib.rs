@@ -49,7 +49,7 @@ pub mod isolated;
 pub mod job;
 pub mod marching_cubes;
 pub mod mesh;
-pub mod neighbors;
+pub(crate) mod neighbors;
 pub mod pipeline;
 pub mod sequence;
 pub mod subdivision;

@@ -56,24 +56,6 @@ impl CellHash {
         }
         false
     }
-
-    /// Calls `visit(j)` for every particle `j` within the 27 cells around `p` (a superset
-    /// of the particles within one cell size of `p`), cells in (z, y, x) order, particles
-    /// of a cell in ascending index.
-    pub fn for_each_candidate(&self, p: Vec3, mut visit: impl FnMut(u32)) {
-        let c = cell_of(p, 1.0 / self.cell_size);
-        for dz in -1..=1 {
-            for dy in -1..=1 {
-                for dx in -1..=1 {
-                    if let Some(&(s, e)) = self.cells.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
-                        for &j in &self.order[s as usize..e as usize] {
-                            visit(j);
-                        }
-                    }
-                }
-            }
-        }
-    }
 }
 
 fn cell_of(p: Vec3, inv: f32) -> [i32; 3] {

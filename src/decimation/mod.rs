@@ -80,12 +80,12 @@ mod tri_list;
 use crate::mesh::TriMesh;
 use collapse::{Candidate, View, WalkTally};
 use glam::{DVec3, Vec3};
+pub(crate) use pieces::decimate_band;
 pub(crate) use pieces::place_survivors;
-pub use pieces::{decimate_band, BAND_RINGS};
 use placement::place_candidates;
 use quadric::{Plane, Quadric};
 use rayon::prelude::*;
-pub use tiles::{TileDecimation, TILE_ERROR_CAP};
+pub(crate) use tiles::TileDecimation;
 use tri_list::TriList;
 
 /// Options of [`decimate`].
@@ -169,7 +169,7 @@ impl DecimateStats {
 
 /// Triangles per chunk of the parallel walk. Fixed, so the output does not depend on the
 /// number of threads.
-pub const CHUNK_TRIANGLES: usize = 16 * 1024;
+pub(crate) const CHUNK_TRIANGLES: usize = 16 * 1024;
 
 /// Decimates `mesh` in place.
 pub fn decimate(mesh: &mut TriMesh, options: &DecimateOptions) -> DecimateStats {
@@ -192,7 +192,7 @@ fn bounds(positions: &[Vec3]) -> (DVec3, DVec3) {
 /// Decimates to `target` triangles or the error bound, with the `extra_locked` vertices
 /// (indexed like the mesh's; may be empty) never moving; returns the stats and the new
 /// index of every input vertex (`u32::MAX` when it was removed).
-pub fn decimate_locked(
+pub(crate) fn decimate_locked(
     mesh: &mut TriMesh,
     target: usize,
     max_error: Option<f32>,

@@ -14,7 +14,7 @@ use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 /// Rings of triangles around the flagged vertices that [`decimate_band`] works on.
-pub const BAND_RINGS: usize = 2;
+pub(crate) const BAND_RINGS: usize = 2;
 
 /// A piece of a mesh, numbered on its own.
 struct Piece {
@@ -303,7 +303,7 @@ fn morton_regions(positions: &[Vec3], region_vertices: usize) -> Vec<u32> {
 /// pass across tile seams after each tile was decimated with its seam vertices locked
 /// ([`crate::tiles`]). Unused vertices are removed; the order of the untouched triangles
 /// and vertices is kept, the band's triangles come last.
-pub fn decimate_band(
+pub(crate) fn decimate_band(
     mesh: &mut TriMesh,
     flagged: &[bool],
     target: usize,

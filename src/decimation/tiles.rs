@@ -26,11 +26,11 @@ use std::time::Instant;
 /// it 18 of 41 912 particles end up just outside the surface, with it none, at the same
 /// 80 % and a lower flat-region bumpiness (0.0092 r instead of 0.0097 r); 0.05 r misses
 /// the fraction on `double_dambreak`.
-pub const TILE_ERROR_CAP: f32 = 0.1;
+pub(crate) const TILE_ERROR_CAP: f32 = 0.1;
 
 /// A [`TileSink`] that decimates every tile's piece with its border locked and joins the
 /// pieces; [`TileDecimation::finish`] decimates the seam band.
-pub struct TileDecimation {
+pub(crate) struct TileDecimation {
     /// The options, with the error bound capped ([`TILE_ERROR_CAP`]).
     options: DecimateOptions,
     joined: JoinedPieces,

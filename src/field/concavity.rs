@@ -3,7 +3,7 @@
 //! characteristic cubic, in f64).
 
 /// The factor `f` of Solenthaler et al. 2007 for the largest eigenvalue `ev`.
-pub fn concavity_factor(ev: f64, t_low: f64, t_high: f64) -> f64 {
+pub(crate) fn concavity_factor(ev: f64, t_low: f64, t_high: f64) -> f64 {
     if ev.is_nan() || ev < t_low {
         // Also catches NaN: treat an undefined eigenvalue as a flat neighbourhood.
         return 1.0;
@@ -21,7 +21,8 @@ pub fn concavity_factor(ev: f64, t_low: f64, t_high: f64) -> f64 {
 /// degree-8 polynomial fit (Chebyshev, in `s`) gets it within 9e-9, so the root is within
 /// `1e-8·ρ` — below the f32 precision of the field — for a sixth of the time of the libm
 /// `acos` and `cos` (which took a quarter of the field stage).
-pub fn largest_eigenvalue_real_part(m: &[f64; 9]) -> f64 {
+#[cfg(test)]
+pub(crate) fn largest_eigenvalue_real_part(m: &[f64; 9]) -> f64 {
     let c = Cubic::of(*m);
     if c.disc > 0.0 {
         c.largest_with_one_real_root()

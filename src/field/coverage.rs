@@ -27,7 +27,7 @@ const UNCOVERED_MARGIN: f64 = 0.25;
 /// beyond the sphere, so that its crossings interpolate the sphere on both ends). For
 /// exact tiling, `field` must hold every block within `c·r + 2h` of the blocks whose
 /// values are used.
-pub fn apply_coverage(
+pub(crate) fn apply_coverage(
     field: &mut SparseField,
     positions: &[Vec3],
     options: &FieldOptions,

@@ -36,9 +36,9 @@ mod concavity;
 mod coverage;
 mod rows;
 use candidates::candidate_blocks;
+pub(crate) use concavity::concavity_factor;
 use concavity::largest_eigenvalue_real_part_lanes;
-pub use concavity::{concavity_factor, largest_eigenvalue_real_part};
-pub use coverage::apply_coverage;
+pub(crate) use coverage::apply_coverage;
 use rows::{row_mask, transpose_bits, HalfRowIndex, RowLists};
 
 /// Parameters of the field. Lengths other than the particle radius are multiples of `r`.
@@ -194,7 +194,7 @@ const MAX_CELL_COORDINATE: f64 = (1u64 << 23) as f64;
 
 /// An inclusive box of block keys.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct BlockRange {
+pub(crate) struct BlockRange {
     /// Lowest block key, per axis.
     pub lo: BlockKey,
     /// Highest block key, per axis (inclusive).
@@ -218,30 +218,30 @@ impl BlockRange {
 
 /// Blocks, per axis, between a block and the farthest block a particle of it can reach
 /// (`⌈R / (8h)⌉`).
-pub fn block_reach(options: &FieldOptions) -> i32 {
+pub(crate) fn block_reach(options: &FieldOptions) -> i32 {
     (options.influence_radius / options.cell_size / BLOCK_EDGE as f32).ceil() as i32
 }
 
 /// Edge of a half-block, in cells.
-pub const HALF_BLOCK_EDGE: i32 = BLOCK_EDGE / 2;
+pub(crate) const HALF_BLOCK_EDGE: i32 = BLOCK_EDGE / 2;
 
 /// The home half-block of one position (the 4³ cells of its home block's eighth that
 /// contain it), `inv_h` = 1 / cell size (world units). Its home block is
 /// [`block_of_half`].
 #[inline]
-pub fn home_half_block(p: Vec3, inv_h: f64) -> BlockKey {
+pub(crate) fn home_half_block(p: Vec3, inv_h: f64) -> BlockKey {
     home_cube(p, inv_h, HALF_BLOCK_EDGE)
 }
 
 /// The block a half-block lies in: its key divided by 2, rounded down.
 #[inline]
-pub fn block_of_half(half: BlockKey) -> BlockKey {
+pub(crate) fn block_of_half(half: BlockKey) -> BlockKey {
     half.map(|c| c.div_euclid(2))
 }
 
 /// The home block of one position, `inv_h` = 1 / cell size (world units).
 #[inline]
-pub fn home_block(p: Vec3, inv_h: f64) -> BlockKey {
+pub(crate) fn home_block(p: Vec3, inv_h: f64) -> BlockKey {
     home_cube(p, inv_h, BLOCK_EDGE)
 }
 
@@ -253,12 +253,12 @@ fn home_cube(p: Vec3, inv_h: f64, edge: i32) -> BlockKey {
 }
 
 /// Checks that every position is finite and within the lattice's coordinate range.
-pub fn check_positions(positions: &[Vec3], options: &FieldOptions) -> Result<()> {
+pub(crate) fn check_positions(positions: &[Vec3], options: &FieldOptions) -> Result<()> {
     check_positions_from(0, positions, options)
 }
 
 /// [`check_positions`] for a chunk whose first particle has input index `first`.
-pub fn check_positions_from(
+pub(crate) fn check_positions_from(
     first: usize,
     positions: &[Vec3],
     options: &FieldOptions,
@@ -294,7 +294,7 @@ pub fn compute_field(
 
 /// Moves the zero level set outwards by [`FieldOptions::iso_offset`]: every value, and
 /// the value of vertices not stored, minus `δ·r`. Applied last, after coverage.
-pub fn apply_iso_offset(field: &mut SparseField, options: &FieldOptions) {
+pub(crate) fn apply_iso_offset(field: &mut SparseField, options: &FieldOptions) {
     let delta = options.iso_offset * options.particle_radius;
     if delta != 0.0 {
         field.shift_values(-delta);
@@ -305,7 +305,7 @@ pub fn apply_iso_offset(field: &mut SparseField, options: &FieldOptions) {
 /// `None`) from `positions`, which must include every particle within `R` of those blocks,
 /// in a canonical order (the same relative order in every tiling). Coverage is applied
 /// afterwards by [`apply_coverage`]. Options must be valid.
-pub fn compute_blocks(
+pub(crate) fn compute_blocks(
     positions: &[Vec3],
     options: &FieldOptions,
     range: Option<BlockRange>,

@@ -62,7 +62,7 @@ fn edge_ref(owner_offset: u32, local_edge: u32) -> EdgeRef {
 
 /// The marching-cubes output of one block: the vertices it owns and its triangles, which
 /// may refer to vertices owned by its +x/+y/+z neighbours. Joined by [`stitch`].
-pub struct BlockSurface {
+pub(crate) struct BlockSurface {
     key: BlockKey,
     /// Owned vertex ids, ascending, and their positions.
     owned: Vec<(u16, Vec3)>,
@@ -84,7 +84,7 @@ pub fn extract_surface(field: &SparseField) -> (TriMesh, MarchingCubesStats) {
 /// Marches the cells of every block within `range` (all when `None`) whose cells can
 /// touch a negative vertex. `field` must hold every block of `range` grown by one block
 /// upwards. Results are sorted by block key in (z, y, x) order.
-pub fn march_blocks(field: &SparseField, range: Option<BlockRange>) -> Vec<BlockSurface> {
+pub(crate) fn march_blocks(field: &SparseField, range: Option<BlockRange>) -> Vec<BlockSurface> {
     // Blocks to visit: the block itself or one of its +x/+y/+z neighbours holds a negative
     // value.
     // (Found in parallel, then sorted and deduplicated.)
@@ -122,7 +122,7 @@ pub fn march_blocks(field: &SparseField, range: Option<BlockRange>) -> Vec<Block
 /// Joins block surfaces (from one or many tiles) into one mesh. Vertices are numbered in
 /// (z, y, x) block order, then by id within the block, whatever order the blocks come in,
 /// so the result is the same however the blocks were grouped into tiles.
-pub fn stitch(mut surfaces: Vec<BlockSurface>) -> (TriMesh, MarchingCubesStats) {
+pub(crate) fn stitch(mut surfaces: Vec<BlockSurface>) -> (TriMesh, MarchingCubesStats) {
     surfaces.sort_unstable_by_key(|s| [s.key[2], s.key[1], s.key[0]]);
     let (base, index_of) = number_blocks(&surfaces);
     // Every block fills its own slices of the output, in parallel, in place.
@@ -230,7 +230,7 @@ fn resolve(
 /// owners of the vertices on the upper faces of `own`). Vertices are numbered in block
 /// order like [`stitch`]; a vertex's position depends only on its edge's two end values,
 /// so a seam vertex has the same position in every tile that uses it.
-pub fn stitch_range(surfaces: &[BlockSurface], own: BlockRange) -> RangeMesh {
+pub(crate) fn stitch_range(surfaces: &[BlockSurface], own: BlockRange) -> RangeMesh {
     let (base, index_of) = number_blocks(surfaces);
     let total = *base.last().unwrap() as usize;
     let mut triangles: Vec<[u32; 3]> = Vec::new();
@@ -290,10 +290,10 @@ pub fn stitch_range(surfaces: &[BlockSurface], own: BlockRange) -> RangeMesh {
 }
 
 /// Global identity of a mesh vertex: its owning block and its id there.
-pub type VertexKey = (BlockKey, u16);
+pub(crate) type VertexKey = (BlockKey, u16);
 
 /// A piece of the marching-cubes mesh cut along block borders ([`stitch_range`]).
-pub struct RangeMesh {
+pub(crate) struct RangeMesh {
     /// The triangles of the range and the vertices they use.
     pub mesh: TriMesh,
     /// Per vertex: the global key when the vertex lies on the range's border (other

@@ -10,13 +10,13 @@ use hashbrown::HashMap;
 
 /// Peak memory of an untiled run with full post-processing, bytes per particle (4M
 /// particles of `dambreak_small` copies: 720 MB, on top of [`BASE_BYTES`]).
-pub const UNTILED_BYTES_PER_PARTICLE: u64 = 170;
+pub(crate) const UNTILED_BYTES_PER_PARTICLE: u64 = 170;
 /// Peak memory of one tile, bytes per particle it loads (own and ghost): particles,
 /// neighbour grid, field blocks, block surfaces and the tile's decimation state.
-pub const TILE_BYTES_PER_PARTICLE: u64 = 600;
+pub(crate) const TILE_BYTES_PER_PARTICLE: u64 = 600;
 /// Marching-cubes triangles per particle of a fluid body at h = r (`dambreak_small`:
 /// 2.67).
-pub const MC_TRIANGLES_PER_PARTICLE: f64 = 2.7;
+pub(crate) const MC_TRIANGLES_PER_PARTICLE: f64 = 2.7;
 /// Peak working set of one Loop step, bytes per input triangle (the input's triangles,
 /// side → edge indices, the output mesh; measured 104 on 32M particles, 134 on 4M where
 /// heap left over from the tiles counts more). 110 put the 32M scene's whole-run estimate
@@ -24,21 +24,21 @@ pub const MC_TRIANGLES_PER_PARTICLE: f64 = 2.7;
 /// under a 2 GiB budget; 120 refused that run. Since the step frees the input positions
 /// before writing the triangles (2026-11-24) that run peaks at 1762 MiB: the estimate is
 /// now 8 % high, kept as margin.
-pub const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 110.0;
+pub(crate) const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 110.0;
 /// Memory of the process before any particle (code, thread stacks, allocator), bytes.
-pub const BASE_BYTES: u64 = 64 << 20;
+pub(crate) const BASE_BYTES: u64 = 64 << 20;
 /// Bytes per particle of a tile's particles loaded with a payload of `w` floats for the
 /// attribute stage, on top of `4·w` (records and rows read back, positions and indices,
 /// home half-blocks, the sort order, the sorted copy).
-pub const ATTRIBUTE_TILE_BYTES_PER_PARTICLE: u64 = 76;
+pub(crate) const ATTRIBUTE_TILE_BYTES_PER_PARTICLE: u64 = 76;
 /// Bytes per triangle of a finished mesh with normals (12 for indices, half a vertex of
 /// 24 for position and normal).
-pub const MESH_BYTES_PER_TRIANGLE: f64 = 24.0;
+pub(crate) const MESH_BYTES_PER_TRIANGLE: f64 = 24.0;
 
 /// Memory the surface needs after the tiles (the post-processing's peak), bytes per
 /// particle, for decimation removing `reduction` of the triangles (`None`: no
 /// decimation; an error-bounded run counts as 0.8) and `subdivide_levels` Loop steps.
-pub fn output_bytes_per_particle(reduction: Option<f32>, subdivide_levels: u32) -> u64 {
+pub(crate) fn output_bytes_per_particle(reduction: Option<f32>, subdivide_levels: u32) -> u64 {
     let mut triangles = MC_TRIANGLES_PER_PARTICLE;
     // Without decimation the block surfaces (≈ 20 B per triangle) and the stitched mesh
     // (≈ 18 B) exist together.

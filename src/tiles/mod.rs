@@ -54,7 +54,7 @@
 //! the stitched marching-cubes mesh is bit-identical for every tiling.
 
 pub mod budget;
-pub mod plan;
+pub(crate) mod plan;
 pub(crate) mod spill;
 pub(crate) mod store;
 
@@ -69,9 +69,10 @@ use crate::io::particles::ParticleSource;
 use crate::marching_cubes::{march_blocks, stitch, BlockSurface, MarchingCubesStats};
 use crate::mesh::TriMesh;
 use crate::neighbors::find_isolated_sorted;
-pub use budget::{default_memory_budget, output_bytes_per_particle, parse_memory_size};
+pub(crate) use budget::output_bytes_per_particle;
+pub use budget::{default_memory_budget, parse_memory_size};
 use glam::Vec3;
-pub use plan::{plan_tiles, TilePlan};
+pub(crate) use plan::{plan_tiles, TilePlan};
 use std::path::PathBuf;
 use std::time::Instant;
 pub(crate) use store::ParticleStore;
@@ -131,7 +132,7 @@ pub struct TileStats {
 }
 
 /// Where the tile loop hands each tile's marching-cubes output.
-pub trait TileSink {
+pub(crate) trait TileSink {
     /// The blocks to march for a tile owning the blocks `own`.
     fn march_range(&self, own: BlockRange) -> BlockRange;
     /// Takes the block surfaces of the tile owning `own`.
@@ -141,7 +142,7 @@ pub trait TileSink {
 /// The plain sink: gathers every tile's block surfaces and stitches them into one mesh,
 /// bit-identical for every tiling.
 #[derive(Default)]
-pub struct StitchSink {
+pub(crate) struct StitchSink {
     surfaces: Vec<BlockSurface>,
 }
 
@@ -165,7 +166,7 @@ impl TileSink for StitchSink {
 }
 
 /// What the tile loop found besides the surfaces it handed to its sink.
-pub struct TileRun {
+pub(crate) struct TileRun {
     /// Centres of isolated particles, in input order.
     pub isolated: Vec<Vec3>,
     /// Field figures summed over tiles (particles counts the field particles once).

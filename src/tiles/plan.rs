@@ -17,7 +17,7 @@ pub(crate) const SPILL_CELL_BLOCKS: i32 = 4;
 
 /// What the counting pass decided: the tiles, their size, and the memory estimate.
 #[derive(Clone, Debug)]
-pub struct TilePlan {
+pub(crate) struct TilePlan {
     /// Particles in the input.
     pub particles: usize,
     /// Floats of payload per particle (the selected attributes).
@@ -86,7 +86,7 @@ const COUNT_PIECE: usize = 1 << 14;
 /// tiles: the memory budget of `tile_options` picks their size, counting
 /// `output_bytes_per_particle` for the surface after the tiles
 /// ([`super::output_bytes_per_particle`]) and the payload the source carries.
-pub fn plan_tiles<S: ParticleSource + ?Sized>(
+pub(crate) fn plan_tiles<S: ParticleSource + ?Sized>(
     source: &S,
     field_options: &FieldOptions,
     tile_options: &TileOptions,
