@@ -128,20 +128,16 @@ impl AttributeSelection {
 /// Names the default selection takes as the velocity (compared ignoring case).
 pub const VELOCITY_NAMES: [&str; 3] = ["v", "vel", "velocity"];
 
-/// Keeps the attributes of `particles` that `selection` asks for, in its order, after
-/// checking each: `components × particles` values, all finite. `path` names the input in
-/// errors. A name the input lacks is an error listing the names it has.
-pub fn select_attributes(
+/// The indices into `available` (an input's attribute names, in file order) of the
+/// attributes `selection` asks for, in its order. A name the input lacks (or selected
+/// twice) is an [`crate::Error::Attribute`] naming `path` and listing the names it has.
+/// The one rule for whole-file and streaming readers.
+pub fn resolve_selection(
     path: &std::path::Path,
-    mut particles: crate::io::particles::Particles,
+    available: &[&str],
     selection: &AttributeSelection,
-) -> crate::Result<crate::io::particles::Particles> {
-    let available: Vec<String> = particles
-        .attributes
-        .iter()
-        .map(|a| a.name.clone())
-        .collect();
-    let wanted: Vec<usize> = match selection {
+) -> crate::Result<Vec<usize>> {
+    Ok(match selection {
         AttributeSelection::None => Vec::new(),
         AttributeSelection::All => (0..available.len()).collect(),
         AttributeSelection::Velocity => available
@@ -152,7 +148,7 @@ pub fn select_attributes(
         AttributeSelection::Names(names) => {
             let mut wanted = Vec::with_capacity(names.len());
             for name in names {
-                let exact = available.iter().position(|n| n == name);
+                let exact = available.iter().position(|n| *n == name.as_str());
                 let folded: Vec<usize> = (0..available.len())
                     .filter(|&k| available[k].eq_ignore_ascii_case(name))
                     .collect();
@@ -182,7 +178,24 @@ pub fn select_attributes(
             }
             wanted
         }
-    };
+    })
+}
+
+/// Keeps the attributes of `particles` that `selection` asks for, in its order, after
+/// checking each: `components × particles` values, all finite. `path` names the input in
+/// errors. A name the input lacks is an error listing the names it has
+/// ([`resolve_selection`]).
+pub fn select_attributes(
+    path: &std::path::Path,
+    mut particles: crate::io::particles::Particles,
+    selection: &AttributeSelection,
+) -> crate::Result<crate::io::particles::Particles> {
+    let available: Vec<&str> = particles
+        .attributes
+        .iter()
+        .map(|a| a.name.as_str())
+        .collect();
+    let wanted = resolve_selection(path, &available, selection)?;
     let count = particles.positions.len();
     let mut columns: Vec<Option<Attribute>> = std::mem::take(&mut particles.attributes)
         .into_iter()
@@ -194,6 +207,21 @@ pub fn select_attributes(
         particles.attributes.push(a);
     }
     Ok(particles)
+}
+
+/// The error for the non-finite `value` of `attribute` at `particle` of `path`, as
+/// [`check_attribute`] reports it.
+pub fn non_finite_attribute(
+    path: &std::path::Path,
+    attribute: &str,
+    particle: usize,
+    value: f32,
+) -> crate::Error {
+    crate::Error::Attribute {
+        path: path.to_path_buf(),
+        attribute: attribute.to_string(),
+        message: format!("particle {particle} has a non-finite value {value}"),
+    }
 }
 
 /// Checks that `a` holds `count` items of at least one component, all finite.
@@ -211,11 +239,12 @@ pub fn check_attribute(path: &std::path::Path, a: &Attribute, count: usize) -> c
         )));
     }
     if let Some(v) = a.values.iter().position(|v| !v.is_finite()) {
-        return Err(fail(format!(
-            "particle {} has a non-finite value {}",
+        return Err(non_finite_attribute(
+            path,
+            &a.name,
             v / a.components,
-            a.values[v]
-        )));
+            a.values[v],
+        ));
     }
     Ok(())
 }

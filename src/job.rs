@@ -7,7 +7,7 @@ use crate::cancel::CancelToken;
 use crate::error::{Error, Result};
 use crate::io::mesh::{write_sequence_gltf, write_surface, MeshWriteOptions};
 use crate::io::particles::{read_particles, ParticleFormat};
-use crate::io::particles::{MappedXyz, Particles, SpooledXyz};
+use crate::io::particles::{MappedXyz, Particles, SpooledParticles};
 use crate::mesh::TriMesh;
 use crate::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
 use crate::sequence::{self, Frame};
@@ -17,7 +17,7 @@ use std::time::Instant;
 /// A frame's particles as the job hands them to the pipeline.
 enum Input {
     Mapped(MappedXyz),
-    Spooled(SpooledXyz),
+    Spooled(SpooledParticles),
     Parsed(Particles),
 }
 
@@ -104,10 +104,11 @@ pub fn reconstruct_file(
 ) -> Result<FrameReport> {
     on_stage("read");
     let clock = Instant::now();
-    // Raw .xyz is mapped window by window; BGEO, and VTK and PLY (binary or ASCII) with
-    // their points first, are streamed once into a temporary .xyz that is then mapped the
-    // same way; other layouts are parsed into memory and handed over, so a tiled run can
-    // drop them once they are spilled.
+    // Raw .xyz is mapped window by window; BGEO, PLY (binary or ASCII) with its vertices
+    // first, and VTK whose sections a scan can follow are streamed once, positions and
+    // the selected attributes, into temporary files that are then mapped the same way;
+    // other layouts are parsed into memory and handed over, so a tiled run can drop them
+    // once they are spilled.
     let format = match job.input_format {
         Some(f) => f,
         None => ParticleFormat::from_path(input)?,
@@ -125,10 +126,13 @@ pub fn reconstruct_file(
             }
             Input::Mapped(MappedXyz::open(input)?)
         }
-        // Attributes come from the parsed file.
-        _ if !job.attributes.is_none() => parsed(input, format, &job.attributes)?,
-        _ => match SpooledXyz::from_file(input, format, options.tiles.temp_dir.as_deref(), cancel)?
-        {
+        _ => match SpooledParticles::from_file(
+            input,
+            format,
+            &job.attributes,
+            options.tiles.temp_dir.as_deref(),
+            cancel,
+        )? {
             Some(spooled) => Input::Spooled(spooled),
             None => parsed(input, format, &job.attributes)?,
         },

@@ -8,7 +8,8 @@
 //! values), then per point `P[4]` (x, y, z, w) as f32 followed by every attribute's values.
 //! Attribute types kept: 0 float, 1 int (as f32), 5 vector. Others are rejected.
 
-use super::{Attribute, Particles};
+use super::{Attribute, Particles, RecordSink};
+use crate::attributes::AttributeLayout;
 use crate::error::{Error, Result};
 use glam::Vec3;
 use std::io::{BufRead, Read};
@@ -62,15 +63,21 @@ impl Stream<'_> {
     }
 }
 
-/// Parses a BGEO stream (gzip detected by its magic bytes) chunk by chunk: positions go
-/// to `positions` in chunks of at most [`CHUNK_POINTS`], the other attributes to
-/// `attributes` when given. Returns the point count. Memory: one chunk of records.
+/// Chooses, from the attributes a header declares (in file order), the indices of those
+/// to stream, in payload order.
+pub(super) type Select<'a> = dyn FnMut(&[AttributeLayout]) -> Result<Vec<usize>> + 'a;
+
+/// Parses a BGEO stream (gzip detected by its magic bytes) chunk by chunk: once the
+/// header is read, `select` picks the attributes to carry; then positions and the
+/// selected attributes' payload rows (in `select`'s order) go to `sink` in chunks of at
+/// most [`CHUNK_POINTS`]. Returns the point count and the selected layout. Memory: one
+/// chunk of records.
 fn parse<'a, R: BufRead + 'a>(
     path: &'a Path,
     mut source: R,
-    mut attributes: Option<&mut Vec<Attribute>>,
-    positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
-) -> Result<usize> {
+    select: &mut Select<'_>,
+    sink: &mut RecordSink<'_>,
+) -> Result<(usize, Vec<AttributeLayout>)> {
     let gzip = source
         .fill_buf()
         .map_err(|e| Error::io(path, e))?
@@ -137,16 +144,27 @@ fn parse<'a, R: BufRead + 'a>(
     npoints
         .checked_mul(stride)
         .ok_or_else(|| Error::parse(path, "header", "point count overflows"))?;
-    if let Some(out) = attributes.as_deref_mut() {
-        out.extend(defs.iter().map(|(name, size, _)| Attribute {
+    let declared: Vec<AttributeLayout> = defs
+        .iter()
+        .map(|(name, size, _)| AttributeLayout {
             name: name.clone(),
             components: *size,
-            values: Vec::with_capacity(npoints * size),
-        }));
+        })
+        .collect();
+    let chosen = select(&declared)?;
+    // Byte offset in the record, components and int-ness of each selected attribute.
+    let mut at = Vec::with_capacity(defs.len());
+    let mut o = 16;
+    for (_, size, ty) in &defs {
+        at.push((o, *size, *ty == 1));
+        o += 4 * size;
     }
+    let fields: Vec<(usize, usize, bool)> = chosen.iter().map(|&k| at[k]).collect();
+    let layout: Vec<AttributeLayout> = chosen.iter().map(|&k| declared[k].clone()).collect();
     let f = |b: &[u8]| f32::from_be_bytes(b.try_into().expect("4 bytes"));
     let mut records = vec![0u8; CHUNK_POINTS.min(npoints) * stride];
     let mut chunk: Vec<Vec3> = Vec::with_capacity(CHUNK_POINTS.min(npoints));
+    let mut payload: Vec<f32> = Vec::new();
     let mut first = 0;
     while first < npoints {
         let count = CHUNK_POINTS.min(npoints - first);
@@ -157,6 +175,7 @@ fn parse<'a, R: BufRead + 'a>(
             &format!("points {first}..{} of {stride} bytes", first + count),
         )?;
         chunk.clear();
+        payload.clear();
         for (k, rec) in data.chunks_exact(stride).enumerate() {
             let p = Vec3::new(f(&rec[0..4]), f(&rec[4..8]), f(&rec[8..12]));
             if !p.is_finite() {
@@ -171,38 +190,59 @@ fn parse<'a, R: BufRead + 'a>(
                 ));
             }
             chunk.push(p);
-            if let Some(out) = attributes.as_deref_mut() {
-                let mut o = 16;
-                for (attr, (_, size, ty)) in out.iter_mut().zip(&defs) {
-                    for k in 0..*size {
-                        let b = &rec[o + 4 * k..o + 4 * k + 4];
-                        attr.values.push(if *ty == 1 {
-                            i32::from_be_bytes(b.try_into().expect("4 bytes")) as f32
-                        } else {
-                            f(b)
-                        });
-                    }
-                    o += 4 * size;
+            for &(o, size, int) in &fields {
+                for b in rec[o..o + 4 * size].chunks_exact(4) {
+                    payload.push(if int {
+                        i32::from_be_bytes(b.try_into().expect("4 bytes")) as f32
+                    } else {
+                        f(b)
+                    });
                 }
             }
         }
-        positions(&chunk)?;
+        sink(&chunk, &payload)?;
         first += count;
     }
-    Ok(npoints)
+    Ok((npoints, layout))
 }
 
 /// Reads a whole BGEO file held in memory (gzip-compressed or plain).
 pub(super) fn read(path: &Path, raw: &[u8]) -> Result<Particles> {
     let mut positions = Vec::new();
-    let mut attributes = Vec::new();
-    parse(path, raw, Some(&mut attributes), &mut |chunk| {
-        positions.extend_from_slice(chunk);
-        Ok(())
-    })?;
+    let attributes = std::cell::RefCell::new(Vec::<Attribute>::new());
+    parse(
+        path,
+        raw,
+        &mut |declared| {
+            // Every attribute, values gathered as the records come (no reservation from
+            // the header's count).
+            *attributes.borrow_mut() = declared
+                .iter()
+                .map(|l| Attribute {
+                    name: l.name.clone(),
+                    components: l.components,
+                    values: Vec::new(),
+                })
+                .collect();
+            Ok((0..declared.len()).collect())
+        },
+        &mut |chunk, rows| {
+            positions.extend_from_slice(chunk);
+            let mut attributes = attributes.borrow_mut();
+            let width: usize = attributes.iter().map(|a| a.components).sum();
+            for row in rows.chunks_exact(width.max(1)).take(chunk.len()) {
+                let mut o = 0;
+                for a in attributes.iter_mut() {
+                    a.values.extend_from_slice(&row[o..o + a.components]);
+                    o += a.components;
+                }
+            }
+            Ok(())
+        },
+    )?;
     Ok(Particles {
         positions,
-        attributes,
+        attributes: attributes.into_inner(),
     })
 }
 
@@ -213,5 +253,22 @@ pub fn stream_positions(
     path: &Path,
     positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
 ) -> Result<usize> {
-    parse(path, super::open_buffered(path)?, None, positions)
+    let (count, _) = parse(
+        path,
+        super::open_buffered(path)?,
+        &mut |_| Ok(Vec::new()),
+        &mut |chunk, _| positions(chunk),
+    )?;
+    Ok(count)
+}
+
+/// Streams the positions of a BGEO file and the payload rows of the attributes `select`
+/// picks from its header, in chunks of at most 65 536 particles. Returns the particle
+/// count and the selected layout. Memory: one chunk, whatever the file size.
+pub(crate) fn stream(
+    path: &Path,
+    select: &mut Select<'_>,
+    sink: &mut RecordSink<'_>,
+) -> Result<(usize, Vec<AttributeLayout>)> {
+    parse(path, super::open_buffered(path)?, select, sink)
 }

@@ -11,13 +11,13 @@
 //! ([`Error::EmptyInput`]), truncated data, non-finite coordinates and malformed headers
 //! with a [`Error::Parse`] naming the file and the line or byte offset.
 
-mod bgeo;
-mod ply;
+pub(crate) mod bgeo;
+pub(crate) mod ply;
 mod source;
-mod vtk;
+pub(crate) mod vtk;
 mod xyz;
 
-pub use source::{MappedXyz, ParticleChunk, ParticleSource, SpooledXyz};
+pub use source::{MappedXyz, ParticleChunk, ParticleSource, SpooledParticles};
 
 pub use bgeo::stream_positions as stream_bgeo_positions;
 pub use ply::stream_positions as stream_ply_positions;
@@ -169,15 +169,23 @@ fn non_finite(path: &Path, location: String, p: Vec3) -> Error {
     Error::parse(path, location, format!("non-finite coordinate {p}"))
 }
 
+/// Takes a record's position (when it holds one) and appends its payload values to the
+/// row buffer: the decoder of [`stream_records`].
+type Decode<'a> = &'a dyn Fn(&[u8], &mut Vec<f32>) -> Option<Vec3>;
+
+/// Receives consecutive records: their positions (empty when the records hold none) and
+/// their payload rows, row-major.
+pub(crate) type RecordSink<'a> = dyn FnMut(&[Vec3], &[f32]) -> Result<()> + 'a;
+
 /// Reads the records from `reader` (positioned at the first one) in chunks of at most
-/// 65 536, takes each record's position with `position`, checks it is finite and hands
-/// the chunks to `sink`. Memory: one chunk.
+/// 65 536, decodes each with `decode` (its position, checked finite, and its payload
+/// values) and hands the chunks to `sink`. Memory: one chunk.
 fn stream_records(
     path: &Path,
     reader: &mut dyn std::io::Read,
     records: Records,
-    position: &dyn Fn(&[u8]) -> Vec3,
-    sink: &mut dyn FnMut(&[Vec3]) -> Result<()>,
+    decode: Decode<'_>,
+    sink: &mut RecordSink<'_>,
 ) -> Result<()> {
     let Records {
         mut offset,
@@ -188,6 +196,7 @@ fn stream_records(
     } = records;
     let mut bytes = vec![0u8; CHUNK_RECORDS.min(count) * stride];
     let mut chunk: Vec<Vec3> = Vec::with_capacity(CHUNK_RECORDS.min(count));
+    let mut payload: Vec<f32> = Vec::new();
     let mut first = 0;
     while first < count {
         let n = CHUNK_RECORDS.min(count - first);
@@ -204,14 +213,16 @@ fn stream_records(
             )
         })?;
         chunk.clear();
+        payload.clear();
         for (k, record) in data.chunks_exact(stride).enumerate() {
-            let p = position(record);
-            if !p.is_finite() {
-                return Err(non_finite(path, format!("{one} {}", first + k), p));
+            if let Some(p) = decode(record, &mut payload) {
+                if !p.is_finite() {
+                    return Err(non_finite(path, format!("{one} {}", first + k), p));
+                }
+                chunk.push(p);
             }
-            chunk.push(p);
         }
-        sink(&chunk)?;
+        sink(&chunk, &payload)?;
         offset += data.len() as u64;
         first += n;
     }
@@ -220,37 +231,44 @@ fn stream_records(
 
 /// Where the records of an ASCII file are: `count` records of `fields` whitespace-separated
 /// numbers each (a record may span lines or share one), the position taken from the fields
-/// `xyz`; `line` is the 1-based line number at the reader's position (for errors).
-struct AsciiRecords {
+/// `xyz` (none: the records hold no position) and the payload row from the fields
+/// `payload`, in that order; `line` is the 1-based line number at the reader's position
+/// (for errors).
+struct AsciiRecords<'a> {
     line: usize,
     count: usize,
     fields: usize,
-    xyz: [usize; 3],
+    xyz: Option<[usize; 3]>,
+    payload: &'a [usize],
     one: &'static str,
     many: &'static str,
 }
 
 /// [`stream_records`] for ASCII files: reads line by line from `reader` (positioned at the
 /// first record), parses numbers like the whole-file readers (as f64, then rounded to
-/// f32) and hands chunks of at most 65 536 positions to `sink`. Memory: one line and one
+/// f32) and hands chunks of at most 65 536 records to `sink`. Memory: one line and one
 /// chunk. What follows the last record is not read.
 fn stream_ascii_records(
     path: &Path,
     reader: &mut dyn std::io::BufRead,
     records: AsciiRecords,
-    sink: &mut dyn FnMut(&[Vec3]) -> Result<()>,
+    sink: &mut RecordSink<'_>,
 ) -> Result<()> {
     let AsciiRecords {
         mut line,
         count,
         fields,
         xyz,
+        payload: columns,
         one,
         many,
     } = records;
     let mut chunk: Vec<Vec3> = Vec::with_capacity(CHUNK_RECORDS.min(count));
+    let mut payload: Vec<f32> = Vec::new();
     let mut text = Vec::new();
-    let (mut done, mut field, mut record) = (0, 0, [0.0f32; 3]);
+    // `fields` comes from a header line, so the record is no larger than what was read.
+    let (mut done, mut field, mut record) = (0, 0, vec![0.0f32; fields]);
+    let mut rows = 0;
     let at = |line: usize, done: usize| format!("line {line}, {one} {done}");
     while done < count {
         text.clear();
@@ -279,28 +297,32 @@ fn stream_ascii_records(
                     format!("expected a number, found {word:?}"),
                 )
             })?;
-            if let Some(axis) = xyz.iter().position(|&k| k == field) {
-                record[axis] = value as f32;
-            }
+            record[field] = value as f32;
             field += 1;
             if field == fields {
-                let p = Vec3::from(record);
-                if !p.is_finite() {
-                    return Err(non_finite(path, at(line, done), p));
+                if let Some([x, y, z]) = xyz {
+                    let p = Vec3::new(record[x], record[y], record[z]);
+                    if !p.is_finite() {
+                        return Err(non_finite(path, at(line, done), p));
+                    }
+                    chunk.push(p);
                 }
-                chunk.push(p);
+                payload.extend(columns.iter().map(|&k| record[k]));
                 field = 0;
                 done += 1;
-                if chunk.len() == CHUNK_RECORDS {
-                    sink(&chunk)?;
+                rows += 1;
+                if rows == CHUNK_RECORDS {
+                    sink(&chunk, &payload)?;
                     chunk.clear();
+                    payload.clear();
+                    rows = 0;
                 }
             }
         }
         line += 1;
     }
-    if !chunk.is_empty() {
-        sink(&chunk)?;
+    if rows > 0 {
+        sink(&chunk, &payload)?;
     }
     Ok(())
 }

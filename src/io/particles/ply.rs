@@ -4,6 +4,7 @@
 //! 3-component `velocity`). Other elements are skipped, list properties included.
 
 use super::{Attribute, Particles};
+use crate::attributes::AttributeLayout;
 use crate::error::Result;
 use crate::io::atomic::write_atomically;
 use crate::io::ply_header;
@@ -51,8 +52,11 @@ pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
     })
 }
 
-/// Turns the non-position columns into attributes, grouping velocity components.
-fn group_attributes(names: &[&str], mut columns: Vec<Vec<f32>>, xyz: [usize; 3]) -> Vec<Attribute> {
+/// The attributes of a vertex element with property `names` and positions in the columns
+/// `xyz`: name and columns of each, in the order the readers give them (`vx, vy, vz` and
+/// `velocity_x/y/z` grouped into one 3-component `velocity` first, then every other
+/// property as a scalar, in file order).
+fn attribute_columns(names: &[&str], xyz: [usize; 3]) -> Vec<(String, Vec<usize>)> {
     let mut used = vec![false; names.len()];
     for k in xyz {
         used[k] = true;
@@ -67,30 +71,46 @@ fn group_attributes(names: &[&str], mut columns: Vec<Vec<f32>>, xyz: [usize; 3])
             .map(|t| names.iter().position(|n| n == t))
             .collect();
         if let [Some(a), Some(b), Some(c)] = idx[..] {
-            let mut values = Vec::with_capacity(3 * columns[a].len());
-            for ((x, y), z) in columns[a].iter().zip(&columns[b]).zip(&columns[c]) {
-                values.extend([*x, *y, *z]);
-            }
             used[a] = true;
             used[b] = true;
             used[c] = true;
-            out.push(Attribute {
-                name: "velocity".into(),
-                components: 3,
-                values,
-            });
+            out.push(("velocity".to_string(), vec![a, b, c]));
         }
     }
     for (k, name) in names.iter().enumerate() {
         if !used[k] {
-            out.push(Attribute {
-                name: name.to_string(),
-                components: 1,
-                values: std::mem::take(&mut columns[k]),
-            });
+            out.push((name.to_string(), vec![k]));
         }
     }
     out
+}
+
+/// Turns the non-position columns into attributes, grouping velocity components.
+fn group_attributes(names: &[&str], mut columns: Vec<Vec<f32>>, xyz: [usize; 3]) -> Vec<Attribute> {
+    attribute_columns(names, xyz)
+        .into_iter()
+        .map(|(name, ks)| match ks[..] {
+            [k] => Attribute {
+                name,
+                components: 1,
+                values: std::mem::take(&mut columns[k]),
+            },
+            _ => {
+                let items = columns[ks[0]].len();
+                let mut values = Vec::with_capacity(ks.len() * items);
+                values.extend(
+                    (0..items)
+                        .flat_map(|i| ks.iter().map(move |&k| (k, i)))
+                        .map(|(k, i)| columns[k][i]),
+                );
+                Attribute {
+                    name,
+                    components: ks.len(),
+                    values,
+                }
+            }
+        })
+        .collect()
 }
 
 pub(super) fn write(path: &Path, particles: &Particles) -> Result<()> {
@@ -133,6 +153,21 @@ pub fn stream_positions(
     path: &Path,
     positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
 ) -> Result<Option<usize>> {
+    Ok(stream(path, &mut |_| Ok(Vec::new()), &mut |chunk, _| {
+        positions(chunk)
+    })?
+    .map(|(count, _)| count))
+}
+
+/// [`stream_positions`] with payload: once the header is read, `select` picks among the
+/// vertex attributes (named and grouped as the whole-file reader does); their payload rows
+/// go to `sink` with the positions. Returns the count and the selected layout, or
+/// `Ok(None)` for a layout that does not stream.
+pub(crate) fn stream(
+    path: &Path,
+    select: &mut super::bgeo::Select<'_>,
+    sink: &mut super::RecordSink<'_>,
+) -> Result<Option<(usize, Vec<AttributeLayout>)>> {
     use crate::error::Error;
     use std::io::BufRead;
     let mut r = super::open_buffered(path)?;
@@ -162,6 +197,22 @@ pub fn stream_positions(
     else {
         return Ok(None);
     };
+    let names: Vec<&str> = element.properties.iter().map(|p| p.name.as_str()).collect();
+    let declared = attribute_columns(&names, [x, y, z]);
+    let layouts: Vec<AttributeLayout> = declared
+        .iter()
+        .map(|(name, ks)| AttributeLayout {
+            name: name.clone(),
+            components: ks.len(),
+        })
+        .collect();
+    let chosen = select(&layouts)?;
+    // The property columns of the payload row, in order.
+    let columns: Vec<usize> = chosen
+        .iter()
+        .flat_map(|&k| declared[k].1.iter().copied())
+        .collect();
+    let layout: Vec<AttributeLayout> = chosen.iter().map(|&k| layouts[k].clone()).collect();
     let Some(big_endian) = h.binary else {
         super::stream_ascii_records(
             path,
@@ -170,13 +221,14 @@ pub fn stream_positions(
                 line: header.iter().filter(|&&b| b == b'\n').count() + 1,
                 count: element.count,
                 fields: element.properties.len(),
-                xyz: [x, y, z],
+                xyz: Some([x, y, z]),
+                payload: &columns,
                 one: "vertex",
                 many: "vertices",
             },
-            positions,
+            sink,
         )?;
-        return Ok(Some(element.count));
+        return Ok(Some((element.count, layout)));
     };
     let mut offsets = Vec::with_capacity(element.properties.len());
     let mut stride = 0;
@@ -199,8 +251,15 @@ pub fn stream_positions(
             one: "vertex",
             many: "vertices",
         },
-        &|record| Vec3::new(field(record, x), field(record, y), field(record, z)),
-        positions,
+        &|record, payload| {
+            payload.extend(columns.iter().map(|&k| field(record, k)));
+            Some(Vec3::new(
+                field(record, x),
+                field(record, y),
+                field(record, z),
+            ))
+        },
+        sink,
     )?;
-    Ok(Some(element.count))
+    Ok(Some((element.count, layout)))
 }

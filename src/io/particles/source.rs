@@ -7,7 +7,7 @@
 //! spill file).
 
 use super::{Attribute, Particles};
-use crate::attributes::AttributeLayout;
+use crate::attributes::{payload_width, resolve_selection, AttributeLayout, AttributeSelection};
 use crate::cancel::CancelToken;
 use crate::error::{Error, Result};
 use glam::Vec3;
@@ -207,51 +207,240 @@ impl ParticleSource for MappedXyz {
 }
 
 /// Particles of a file that cannot be mapped as it is (gzip BGEO, binary VTK and PLY),
-/// streamed once into a raw `.xyz` temporary file (positions only, 12 bytes per particle) and then read like
-/// [`MappedXyz`]: memory stays one chunk while converting and one window while reading,
-/// whatever the input size. The temporary file is removed when this is dropped (also on
-/// errors and Ctrl-C, as the error unwinds).
-pub struct SpooledXyz {
+/// streamed once into temporary files and then read window by window like [`MappedXyz`]:
+/// the positions into a raw `.xyz` (12 bytes per particle) and, when the run carries
+/// attributes, their values into a payload file (little-endian f32). Memory stays one
+/// chunk while converting and one window while reading, whatever the input size. The
+/// temporary files are removed when this is dropped (also on errors and Ctrl-C, as the
+/// error unwinds).
+///
+/// The payload file is a sequence of blocks, each `particles × width` floats, row-major:
+/// one block holding every selected attribute for formats whose records interleave them
+/// (BGEO, PLY), one per attribute for VTK, whose arrays follow each other. Reading
+/// gathers each chunk's rows in the selection's order.
+pub struct SpooledParticles {
     mapped: MappedXyz,
-    _file: tempfile::TempPath,
+    layout: Vec<AttributeLayout>,
+    payload: Option<MappedPayload>,
+    _files: Vec<tempfile::TempPath>,
 }
 
-impl SpooledXyz {
-    /// Streams the positions of `path` (in `format`) into a temporary file in `temp_dir`
-    /// (`None`: the system's temporary directory). Gzip or plain BGEO always streams;
-    /// VTK and PLY, binary or ASCII, when their points come first
-    /// ([`crate::io::particles::stream_vtk_positions`],
-    /// [`crate::io::particles::stream_ply_positions`]); `Ok(None)` otherwise (and for
-    /// `.xyz`, which is mapped as it is).
+/// A payload file of blocks (see [`SpooledParticles`]), mapped a window at a time.
+struct MappedPayload {
+    path: PathBuf,
+    file: std::fs::File,
+    /// Byte offset and floats per row of each block.
+    blocks: Vec<(u64, usize)>,
+    /// For each attribute of the layout in order: its block and first column there.
+    columns: Vec<(usize, usize)>,
+    /// Floats per gathered row.
+    width: usize,
+}
+
+impl MappedPayload {
+    /// Writes to `rows` the payload rows of particles `first..first + count`.
+    fn gather(
+        &self,
+        layout: &[AttributeLayout],
+        first: usize,
+        count: usize,
+        rows: &mut Vec<f32>,
+    ) -> Result<()> {
+        rows.clear();
+        rows.resize(count * self.width, 0.0);
+        let len = self
+            .file
+            .metadata()
+            .map_err(|e| Error::io(&self.path, e))?
+            .len();
+        let mut at = 0;
+        for (a, &(block, column)) in layout.iter().zip(&self.columns) {
+            let (offset, block_width) = self.blocks[block];
+            let start = offset + (first * block_width * 4) as u64;
+            let bytes = count * block_width * 4;
+            // Checked before mapping, as for the positions: a map past the end faults.
+            if len < start + bytes as u64 {
+                return Err(Error::parse(
+                    &self.path,
+                    format!("byte offset {len}"),
+                    "the payload file was truncated while being read",
+                ));
+            }
+            // SAFETY: a read-only map of a range checked above to lie within the file
+            // (this process's own temporary file), dropped before the next one.
+            let map = unsafe {
+                memmap2::MmapOptions::new()
+                    .offset(start)
+                    .len(bytes)
+                    .map(&self.file)
+            }
+            .map_err(|e| Error::io(&self.path, e))?;
+            for (row, record) in rows
+                .chunks_exact_mut(self.width)
+                .zip(map.chunks_exact(block_width * 4))
+            {
+                let values = &record[column * 4..(column + a.components) * 4];
+                for (out, b) in row[at..at + a.components]
+                    .iter_mut()
+                    .zip(values.chunks_exact(4))
+                {
+                    *out = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+                }
+            }
+            at += a.components;
+        }
+        Ok(())
+    }
+}
+
+/// The temporary files being written by [`SpooledParticles::from_file`]: created once the
+/// selection is resolved, so that a bad selection leaves nothing behind.
+struct Spool<'a> {
+    path: &'a Path,
+    cancel: &'a CancelToken,
+    positions: TempWriter,
+    payload: Option<TempWriter>,
+    /// Particles written to the positions file.
+    count: usize,
+    bytes: Vec<u8>,
+}
+
+/// A temporary file being written, with its path for errors.
+struct TempWriter {
+    path: PathBuf,
+    writer: std::io::BufWriter<tempfile::NamedTempFile>,
+    /// Bytes written so far.
+    len: u64,
+}
+
+impl TempWriter {
+    fn create(dir: &Path, prefix: &str, suffix: &str) -> Result<Self> {
+        let file = tempfile::Builder::new()
+            .prefix(prefix)
+            .suffix(suffix)
+            .tempfile_in(dir)
+            .map_err(|e| Error::io(dir, e))?;
+        Ok(TempWriter {
+            path: file.path().to_path_buf(),
+            writer: std::io::BufWriter::with_capacity(1 << 20, file),
+            len: 0,
+        })
+    }
+
+    fn write(&mut self, bytes: &[u8]) -> Result<()> {
+        std::io::Write::write_all(&mut self.writer, bytes).map_err(|e| Error::io(&self.path, e))?;
+        self.len += bytes.len() as u64;
+        Ok(())
+    }
+
+    fn finish(self) -> Result<(tempfile::TempPath, u64)> {
+        let file = self
+            .writer
+            .into_inner()
+            .map_err(|e| Error::io(&self.path, e.into_error()))?;
+        Ok((file.into_temp_path(), self.len))
+    }
+}
+
+impl<'a> Spool<'a> {
+    fn new(
+        path: &'a Path,
+        dir: &Path,
+        cancel: &'a CancelToken,
+        with_payload: bool,
+    ) -> Result<Self> {
+        let positions = TempWriter::create(dir, "meniscus-input-", ".xyz")?;
+        let payload = if with_payload {
+            Some(TempWriter::create(dir, "meniscus-payload-", ".f32")?)
+        } else {
+            None
+        };
+        Ok(Spool {
+            path,
+            cancel,
+            positions,
+            payload,
+            count: 0,
+            bytes: Vec::new(),
+        })
+    }
+
+    /// Appends positions.
+    fn positions(&mut self, chunk: &[Vec3]) -> Result<()> {
+        self.cancel.check()?;
+        self.bytes.clear();
+        for p in chunk {
+            for c in p.to_array() {
+                self.bytes.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+        self.count += chunk.len();
+        self.positions.write(&self.bytes)
+    }
+
+    /// Appends payload rows of `attributes` (their components in row order), for the
+    /// particles from `first` on, after checking every value is finite.
+    fn payload(
+        &mut self,
+        attributes: &[AttributeLayout],
+        first: usize,
+        rows: &[f32],
+    ) -> Result<()> {
+        self.cancel.check()?;
+        let width = payload_width(attributes);
+        if let Some(k) = rows.iter().position(|v| !v.is_finite()) {
+            let mut column = k % width;
+            let attribute = attributes
+                .iter()
+                .find(|a| {
+                    let here = column < a.components;
+                    if !here {
+                        column -= a.components;
+                    }
+                    here
+                })
+                .map_or("", |a| a.name.as_str());
+            return Err(crate::attributes::non_finite_attribute(
+                self.path,
+                attribute,
+                first + k / width,
+                rows[k],
+            ));
+        }
+        self.bytes.clear();
+        for v in rows {
+            self.bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        match self.payload.as_mut() {
+            Some(w) => w.write(&self.bytes),
+            None => Ok(()),
+        }
+    }
+}
+
+impl SpooledParticles {
+    /// Streams the positions of `path` (in `format`), and the attributes `selection` asks
+    /// for, into temporary files in `temp_dir` (`None`: the system's temporary directory).
+    /// The selection is resolved against the file's attribute names before any file is
+    /// created, by the rules and with the errors of
+    /// [`crate::attributes::select_attributes`]; every value is checked finite. Gzip or
+    /// plain BGEO always streams; PLY, binary or ASCII, when its first element is `vertex`
+    /// ([`crate::io::particles::stream_ply_positions`]); VTK, binary or ASCII, positions
+    /// only when its points come first ([`crate::io::particles::stream_vtk_positions`]),
+    /// with attributes when a scan of its sections finds the points and the
+    /// `POINT_DATA` arrays (one more pass over the file, no value decoded). `Ok(None)`
+    /// otherwise (and for `.xyz`, which is mapped as it is): the caller parses the file.
     pub fn from_file(
         path: &Path,
         format: crate::io::particles::ParticleFormat,
+        selection: &AttributeSelection,
         temp_dir: Option<&Path>,
         cancel: &CancelToken,
-    ) -> Result<Option<SpooledXyz>> {
+    ) -> Result<Option<SpooledParticles>> {
         use crate::io::particles::{self as p, ParticleFormat};
-        match format {
-            ParticleFormat::Xyz => Ok(None),
-            ParticleFormat::Bgeo => Self::spool(path, temp_dir, cancel, &mut |sink| {
-                p::stream_bgeo_positions(path, sink).map(Some)
-            }),
-            ParticleFormat::Vtk => Self::spool(path, temp_dir, cancel, &mut |sink| {
-                p::stream_vtk_positions(path, sink)
-            }),
-            ParticleFormat::Ply => Self::spool(path, temp_dir, cancel, &mut |sink| {
-                p::stream_ply_positions(path, sink)
-            }),
+        if format == ParticleFormat::Xyz {
+            return Ok(None);
         }
-    }
-
-    /// Runs `stream` with a sink that appends to a new temporary `.xyz`, then maps it.
-    #[allow(clippy::type_complexity)]
-    fn spool(
-        path: &Path,
-        temp_dir: Option<&Path>,
-        cancel: &CancelToken,
-        stream: &mut dyn FnMut(&mut dyn FnMut(&[Vec3]) -> Result<()>) -> Result<Option<usize>>,
-    ) -> Result<Option<SpooledXyz>> {
         if std::fs::metadata(path)
             .map_err(|e| Error::io(path, e))?
             .len()
@@ -264,49 +453,170 @@ impl SpooledXyz {
         let dir = temp_dir
             .map(Path::to_path_buf)
             .unwrap_or_else(std::env::temp_dir);
-        let file = tempfile::Builder::new()
-            .prefix("meniscus-input-")
-            .suffix(".xyz")
-            .tempfile_in(&dir)
-            .map_err(|e| Error::io(&dir, e))?;
-        let spool_path = file.path().to_path_buf();
-        let mut writer = std::io::BufWriter::with_capacity(1 << 20, file);
-        let mut bytes = Vec::new();
-        let count = stream(&mut |chunk| {
-            cancel.check()?;
-            bytes.clear();
-            for p in chunk {
-                for c in p.to_array() {
-                    bytes.extend_from_slice(&c.to_le_bytes());
-                }
+        if format == ParticleFormat::Vtk && !selection.is_none() {
+            return Self::spool_vtk(path, selection, &dir, cancel);
+        }
+        // BGEO, PLY and positions-only VTK: records read front to back, the selection
+        // resolved once the header is read, the files created then.
+        let spool: std::cell::RefCell<Option<Spool>> = std::cell::RefCell::new(None);
+        let layout: std::cell::RefCell<Vec<AttributeLayout>> = Default::default();
+        let select = &mut |declared: &[AttributeLayout]| -> Result<Vec<usize>> {
+            let names: Vec<&str> = declared.iter().map(|a| a.name.as_str()).collect();
+            let chosen = resolve_selection(path, &names, selection)?;
+            *layout.borrow_mut() = chosen.iter().map(|&k| declared[k].clone()).collect();
+            *spool.borrow_mut() = Some(Spool::new(path, &dir, cancel, !chosen.is_empty())?);
+            Ok(chosen)
+        };
+        let sink = &mut |chunk: &[Vec3], rows: &[f32]| -> Result<()> {
+            let mut spool = spool.borrow_mut();
+            let spool = spool.as_mut().expect("created by the selection");
+            let first = spool.count;
+            spool.positions(chunk)?;
+            if !rows.is_empty() {
+                spool.payload(&layout.borrow(), first, rows)?;
             }
-            std::io::Write::write_all(&mut writer, &bytes).map_err(|e| Error::io(&spool_path, e))
-        })?;
+            Ok(())
+        };
+        let count = match format {
+            ParticleFormat::Bgeo => Some(p::bgeo::stream(path, select, sink)?.0),
+            ParticleFormat::Ply => p::ply::stream(path, select, sink)?.map(|(n, _)| n),
+            ParticleFormat::Vtk => {
+                select(&[])?;
+                p::stream_vtk_positions(path, &mut |chunk| sink(chunk, &[]))?
+            }
+            ParticleFormat::Xyz => unreachable!("mapped as it is"),
+        };
         let Some(count) = count else {
             return Ok(None);
         };
+        let spool = spool.into_inner().expect("created by the selection");
+        let layout = layout.into_inner();
+        let blocks = if layout.is_empty() {
+            Vec::new()
+        } else {
+            vec![(0, payload_width(&layout))]
+        };
+        let mut columns = Vec::with_capacity(layout.len());
+        let mut at = 0;
+        for a in &layout {
+            columns.push((0, at));
+            at += a.components;
+        }
+        Self::finish(path, spool, count, layout, blocks, columns)
+    }
+
+    /// VTK with attributes: scan the sections, resolve the selection, then stream the
+    /// points and each selected array (in file order, one payload block each).
+    fn spool_vtk(
+        path: &Path,
+        selection: &AttributeSelection,
+        dir: &Path,
+        cancel: &CancelToken,
+    ) -> Result<Option<SpooledParticles>> {
+        let Some(scan) = crate::io::particles::vtk::scan(path)? else {
+            return Ok(None);
+        };
+        let declared = scan.attributes();
+        let names: Vec<&str> = declared.iter().map(|a| a.name.as_str()).collect();
+        let chosen = resolve_selection(path, &names, selection)?;
+        let layout: Vec<AttributeLayout> = chosen.iter().map(|&k| declared[k].clone()).collect();
+        let mut spool = Spool::new(path, dir, cancel, !chosen.is_empty())?;
+        scan.stream_points(path, &mut |chunk, _| spool.positions(chunk))?;
+        // Arrays in file order, each its own block.
+        let mut in_file = chosen.clone();
+        in_file.sort_unstable();
+        let mut blocks = Vec::with_capacity(in_file.len());
+        for &k in &in_file {
+            let offset = spool.payload.as_ref().map_or(0, |w| w.len);
+            let attribute = std::slice::from_ref(&declared[k]);
+            let mut first = 0;
+            scan.stream_attribute(path, k, &mut |_, rows| {
+                spool.payload(attribute, first, rows)?;
+                first += rows.len() / declared[k].components;
+                Ok(())
+            })?;
+            blocks.push((offset, declared[k].components));
+        }
+        let columns = chosen
+            .iter()
+            .map(|k| (in_file.binary_search(k).expect("selected"), 0))
+            .collect();
+        Self::finish(path, spool, scan.count(), layout, blocks, columns)
+    }
+
+    /// Closes the spool's files and maps them.
+    fn finish(
+        path: &Path,
+        spool: Spool,
+        count: usize,
+        layout: Vec<AttributeLayout>,
+        blocks: Vec<(u64, usize)>,
+        columns: Vec<(usize, usize)>,
+    ) -> Result<Option<SpooledParticles>> {
         if count == 0 {
             return Err(Error::EmptyInput {
                 path: path.to_path_buf(),
             });
         }
-        let file = writer
-            .into_inner()
-            .map_err(|e| Error::io(&spool_path, e.into_error()))?;
-        let temp_path = file.into_temp_path();
-        let mapped = MappedXyz::open(&temp_path)?;
-        Ok(Some(SpooledXyz {
+        if let Some(a) = layout.iter().find(|a| a.components == 0) {
+            // As [`crate::attributes::check_attribute`] reports it.
+            return Err(Error::Attribute {
+                path: path.to_path_buf(),
+                attribute: a.name.clone(),
+                message: format!("0 values of 0 components for {count} particles"),
+            });
+        }
+        let Spool {
+            positions, payload, ..
+        } = spool;
+        let (positions, _) = positions.finish()?;
+        let mapped = MappedXyz::open(&positions)?;
+        let mut files = vec![positions];
+        let payload = match payload {
+            Some(writer) => {
+                let (temp, len) = writer.finish()?;
+                let file = std::fs::File::open(&temp).map_err(|e| Error::io(&temp, e))?;
+                let width = payload_width(&layout);
+                debug_assert_eq!(len, (count * width * 4) as u64);
+                let mapped = MappedPayload {
+                    path: temp.to_path_buf(),
+                    file,
+                    blocks,
+                    columns,
+                    width,
+                };
+                files.push(temp);
+                Some(mapped)
+            }
+            None => None,
+        };
+        Ok(Some(SpooledParticles {
             mapped,
-            _file: temp_path,
+            layout,
+            payload,
+            _files: files,
         }))
     }
 }
 
-impl ParticleSource for SpooledXyz {
+impl ParticleSource for SpooledParticles {
     fn particle_count(&self) -> usize {
         self.mapped.particle_count()
     }
+    fn attribute_layout(&self) -> Vec<AttributeLayout> {
+        self.layout.clone()
+    }
     fn visit_chunks(&self, visit: &mut dyn FnMut(ParticleChunk<'_>) -> Result<()>) -> Result<()> {
-        self.mapped.visit_chunks(visit)
+        let Some(payload) = &self.payload else {
+            return self.mapped.visit_chunks(visit);
+        };
+        let mut rows = Vec::new();
+        self.mapped.visit_chunks(&mut |chunk| {
+            payload.gather(&self.layout, chunk.first, chunk.positions.len(), &mut rows)?;
+            visit(ParticleChunk {
+                payload: &rows,
+                ..chunk
+            })
+        })
     }
 }

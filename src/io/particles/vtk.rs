@@ -3,6 +3,7 @@
 //! `POINT_DATA` SCALARS, VECTORS, NORMALS and FIELD arrays become attributes.
 
 use super::{Attribute, Particles};
+use crate::attributes::AttributeLayout;
 use crate::error::{Error, Result};
 use crate::io::atomic::write_atomically;
 use crate::io::text::{Cursor, Scalar};
@@ -329,11 +330,12 @@ pub fn stream_positions(
                 line: lines_read + 1,
                 count,
                 fields: 3,
-                xyz: [0, 1, 2],
+                xyz: Some([0, 1, 2]),
+                payload: &[],
                 one: "particle",
                 many: "points",
             },
-            positions,
+            &mut |chunk, _| positions(chunk),
         )?;
         return Ok(Some(count));
     }
@@ -355,14 +357,486 @@ pub fn stream_positions(
             one: "particle",
             many: "points",
         },
-        &|record| {
-            Vec3::new(
+        &|record, _| {
+            Some(Vec3::new(
                 coordinate(record, 0),
                 coordinate(record, 1),
                 coordinate(record, 2),
-            )
+            ))
         },
-        positions,
+        &mut |chunk, _| positions(chunk),
     )?;
     Ok(Some(count))
+}
+
+/// Where one data block of a legacy VTK file starts: byte offset (binary: its first byte;
+/// ASCII: just after its header's last token), 1-based line there, value type.
+#[derive(Clone, Copy, Debug)]
+struct Block {
+    offset: u64,
+    line: usize,
+    scalar: Scalar,
+}
+
+/// The layout of a legacy VTK file found by [`scan`]: where its points are and where each
+/// `POINT_DATA` array is, without reading any value.
+pub(crate) struct Layout {
+    /// BINARY (big-endian), else ASCII.
+    binary: bool,
+    count: usize,
+    points: Block,
+    /// The point attributes in file order, named as the whole-file reader names them.
+    arrays: Vec<(AttributeLayout, Block)>,
+}
+
+/// A token reader over a file for [`scan`]: tracks the byte offset and line number, skips
+/// blocks of values without decoding them. Tokens longer than 4 KiB end the scan.
+struct Scanner {
+    path: std::path::PathBuf,
+    r: std::io::BufReader<std::fs::File>,
+    len: u64,
+    pos: u64,
+    line: usize,
+}
+
+/// A layout [`scan`] does not follow (the whole-file reader takes over and reports).
+struct Unstreamable;
+
+/// The scan's outcome: an error, or a layout it does not follow.
+enum ScanError {
+    Error(Error),
+    Unstreamable,
+}
+
+impl From<Error> for ScanError {
+    fn from(e: Error) -> Self {
+        ScanError::Error(e)
+    }
+}
+
+impl From<Unstreamable> for ScanError {
+    fn from(_: Unstreamable) -> Self {
+        ScanError::Unstreamable
+    }
+}
+
+type Scan<T> = std::result::Result<T, ScanError>;
+
+impl Scanner {
+    fn peek(&mut self) -> Scan<Option<u8>> {
+        use std::io::BufRead;
+        let buf = self.r.fill_buf().map_err(|e| Error::io(&self.path, e))?;
+        Ok(buf.first().copied())
+    }
+
+    fn bump(&mut self, b: u8) {
+        use std::io::BufRead;
+        self.r.consume(1);
+        self.pos += 1;
+        if b == b'\n' {
+            self.line += 1;
+        }
+    }
+
+    fn skip_whitespace(&mut self) -> Scan<()> {
+        while let Some(b) = self.peek()? {
+            if !b.is_ascii_whitespace() {
+                break;
+            }
+            self.bump(b);
+        }
+        Ok(())
+    }
+
+    /// The next whitespace-separated token; `None` at the end of the file.
+    fn token(&mut self) -> Scan<Option<String>> {
+        self.skip_whitespace()?;
+        let mut t = Vec::new();
+        while let Some(b) = self.peek()? {
+            if b.is_ascii_whitespace() {
+                break;
+            }
+            if t.len() == 4096 {
+                return Err(Unstreamable.into());
+            }
+            t.push(b);
+            self.bump(b);
+        }
+        if t.is_empty() {
+            return Ok(None);
+        }
+        Ok(Some(String::from_utf8(t).map_err(|_| Unstreamable)?))
+    }
+
+    /// The next token, which must exist.
+    fn word(&mut self) -> Scan<String> {
+        Ok(self.token()?.ok_or(Unstreamable)?)
+    }
+
+    fn number<T: std::str::FromStr>(&mut self) -> Scan<T> {
+        Ok(self.word()?.parse().map_err(|_| Unstreamable)?)
+    }
+
+    /// The rest of the current line, consuming its newline (as [`Cursor::line`]).
+    fn line(&mut self) -> Scan<String> {
+        let mut t = Vec::new();
+        while let Some(b) = self.peek()? {
+            self.bump(b);
+            if b == b'\n' {
+                break;
+            }
+            if t.len() == 4096 {
+                return Err(Unstreamable.into());
+            }
+            t.push(b);
+        }
+        let t = String::from_utf8(t).map_err(|_| Unstreamable)?;
+        Ok(t.trim_end_matches('\r').to_string())
+    }
+
+    /// Skips to just past the next newline (as [`Cursor::finish_line`]).
+    fn finish_line(&mut self) -> Scan<()> {
+        while let Some(b) = self.peek()? {
+            self.bump(b);
+            if b == b'\n' {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    /// Where the scanner is, as a data block of `scalar`.
+    fn block(&self, scalar: Scalar) -> Block {
+        Block {
+            offset: self.pos,
+            line: self.line,
+            scalar,
+        }
+    }
+
+    fn error(&self, message: String) -> Error {
+        Error::parse(
+            &self.path,
+            format!("line {} (byte offset {})", self.line, self.pos),
+            message,
+        )
+    }
+
+    /// Skips `count` values of `scalar`: binary by seeking (the file must hold them),
+    /// ASCII token by token.
+    fn skip_values(&mut self, count: usize, scalar: Scalar, binary: bool) -> Scan<()> {
+        if binary {
+            let need = (count as u64)
+                .checked_mul(scalar.size() as u64)
+                .ok_or_else(|| self.error("value count overflows".into()))?;
+            if self.len - self.pos < need {
+                return Err(self
+                    .error(format!(
+                        "truncated: {count} values of {} bytes need {need} bytes, {} left",
+                        scalar.size(),
+                        self.len - self.pos
+                    ))
+                    .into());
+            }
+            self.r
+                .seek_relative(need as i64)
+                .map_err(|e| Error::io(&self.path, e))?;
+            self.pos += need;
+        } else {
+            for _ in 0..count {
+                if self.token()?.is_none() {
+                    return Err(self
+                        .error("unexpected end of file, expected a number".into())
+                        .into());
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Finds where the points and the `POINT_DATA` arrays of a legacy VTK file are, following
+/// the grammar of the whole-file reader but reading no value: binary blocks are seeked
+/// over, ASCII ones skipped token by token. `Ok(None)` for what it does not follow (an
+/// unknown section, `CELL_DATA` arrays, a count that disagrees, ...), which the whole-file
+/// reader then reports on; a truncated block is an error. Memory: one buffer.
+pub(crate) fn scan(path: &Path) -> Result<Option<Layout>> {
+    match scan_layout(path) {
+        Ok(layout) => Ok(Some(layout)),
+        Err(ScanError::Unstreamable) => Ok(None),
+        Err(ScanError::Error(e)) => Err(e),
+    }
+}
+
+fn scan_layout(path: &Path) -> Scan<Layout> {
+    let r = super::open_buffered(path)?;
+    let len = r
+        .get_ref()
+        .metadata()
+        .map_err(|e| Error::io(path, e))?
+        .len();
+    let mut s = Scanner {
+        path: path.to_path_buf(),
+        r,
+        len,
+        pos: 0,
+        line: 1,
+    };
+    let version = s.line()?;
+    if !version.starts_with("# vtk DataFile Version") {
+        return Err(Unstreamable.into());
+    }
+    let new_cells = version
+        .rsplit(' ')
+        .next()
+        .and_then(|v| v.parse::<f32>().ok())
+        .is_some_and(|v| v >= 5.0);
+    s.line()?; // title
+    let binary = match s.line()?.trim().to_ascii_uppercase().as_str() {
+        "BINARY" => true,
+        "ASCII" => false,
+        _ => return Err(Unstreamable.into()),
+    };
+    let scalar_of = |ty: &str| scalar_type(ty).ok_or(Unstreamable);
+    let mut points: Option<(usize, Block)> = None;
+    let mut arrays = Vec::new();
+    let mut point_data = false;
+    while let Some(keyword) = s.token()? {
+        let keyword = keyword.to_ascii_uppercase();
+        match keyword.as_str() {
+            "DATASET" => {
+                s.word()?;
+            }
+            "POINTS" => {
+                let n: usize = s.number()?;
+                let scalar = scalar_of(&s.word()?)?;
+                if points.is_some() {
+                    return Err(Unstreamable.into());
+                }
+                if binary {
+                    s.finish_line()?;
+                }
+                let block = s.block(scalar);
+                let values = n.checked_mul(3).ok_or(Unstreamable)?;
+                s.skip_values(values, scalar, binary)?;
+                points = Some((n, block));
+            }
+            "VERTICES" | "LINES" | "POLYGONS" | "TRIANGLE_STRIPS" | "CELLS" => {
+                let n: usize = s.number()?;
+                let size: usize = s.number()?;
+                if new_cells {
+                    for _ in 0..2 {
+                        let part = s.word()?;
+                        let scalar = scalar_of(&s.word()?)?;
+                        if binary {
+                            s.finish_line()?;
+                        }
+                        let count = if part.eq_ignore_ascii_case("OFFSETS") {
+                            n
+                        } else {
+                            size
+                        };
+                        s.skip_values(count, scalar, binary)?;
+                    }
+                } else {
+                    if binary {
+                        s.finish_line()?;
+                    }
+                    s.skip_values(size, Scalar::I32, binary)?;
+                }
+            }
+            "CELL_TYPES" => {
+                let n: usize = s.number()?;
+                if binary {
+                    s.finish_line()?;
+                }
+                s.skip_values(n, Scalar::I32, binary)?;
+            }
+            "POINT_DATA" => {
+                let n: usize = s.number()?;
+                if points.is_none_or(|(count, _)| count != n) {
+                    return Err(Unstreamable.into());
+                }
+                point_data = true;
+            }
+            "CELL_DATA" => {
+                let _n: usize = s.number()?;
+                point_data = false;
+            }
+            "SCALARS"
+            | "VECTORS"
+            | "NORMALS"
+            | "TENSORS"
+            | "COLOR_SCALARS"
+            | "TEXTURE_COORDINATES" => {
+                let name = s.word()?;
+                let (components, scalar) = match keyword.as_str() {
+                    "SCALARS" => {
+                        let scalar = scalar_of(&s.word()?)?;
+                        let rest = s.line()?.trim().to_string();
+                        let comps = if rest.is_empty() {
+                            1
+                        } else {
+                            rest.parse().map_err(|_| Unstreamable)?
+                        };
+                        if !s.word()?.eq_ignore_ascii_case("LOOKUP_TABLE") {
+                            return Err(Unstreamable.into());
+                        }
+                        s.word()?;
+                        (comps, scalar)
+                    }
+                    "VECTORS" | "NORMALS" => (3, scalar_of(&s.word()?)?),
+                    "TENSORS" => (9, scalar_of(&s.word()?)?),
+                    "COLOR_SCALARS" => (s.number()?, Scalar::U8),
+                    _ => {
+                        let d: usize = s.number()?;
+                        (d, scalar_of(&s.word()?)?)
+                    }
+                };
+                if !point_data || components == 0 {
+                    return Err(Unstreamable.into());
+                }
+                if binary {
+                    s.finish_line()?;
+                }
+                let count = points.map_or(0, |(n, _)| n);
+                let block = s.block(scalar);
+                let values = count.checked_mul(components).ok_or(Unstreamable)?;
+                s.skip_values(values, scalar, binary)?;
+                arrays.push((AttributeLayout { name, components }, block));
+            }
+            "FIELD" => {
+                s.word()?;
+                let n: usize = s.number()?;
+                for _ in 0..n {
+                    let name = s.word()?;
+                    let components: usize = s.number()?;
+                    let tuples: usize = s.number()?;
+                    let scalar = scalar_of(&s.word()?)?;
+                    if binary {
+                        s.finish_line()?;
+                    }
+                    let block = s.block(scalar);
+                    let values = components.checked_mul(tuples).ok_or(Unstreamable)?;
+                    s.skip_values(values, scalar, binary)?;
+                    if point_data && points.is_some_and(|(count, _)| count == tuples) {
+                        if components == 0 {
+                            return Err(Unstreamable.into());
+                        }
+                        arrays.push((AttributeLayout { name, components }, block));
+                    }
+                }
+            }
+            "METADATA" => loop {
+                if s.peek()?.is_none() || s.line()?.trim().is_empty() {
+                    break;
+                }
+            },
+            _ => return Err(Unstreamable.into()),
+        }
+    }
+    let (count, points) = points.ok_or(Unstreamable)?;
+    Ok(Layout {
+        binary,
+        count,
+        points,
+        arrays,
+    })
+}
+
+impl Layout {
+    /// Number of points.
+    pub(crate) fn count(&self) -> usize {
+        self.count
+    }
+
+    /// The point attributes, in file order.
+    pub(crate) fn attributes(&self) -> Vec<AttributeLayout> {
+        self.arrays.iter().map(|(a, _)| a.clone()).collect()
+    }
+
+    /// Streams the points to `sink` (positions, no payload) in chunks of at most 65 536.
+    pub(crate) fn stream_points(
+        &self,
+        path: &Path,
+        sink: &mut super::RecordSink<'_>,
+    ) -> Result<()> {
+        self.stream_block(path, self.points, 3, true, sink)
+    }
+
+    /// Streams the values of attribute `k` (of [`Layout::attributes`]) to `sink` as payload
+    /// rows (no positions), in chunks of at most 65 536 points.
+    pub(crate) fn stream_attribute(
+        &self,
+        path: &Path,
+        k: usize,
+        sink: &mut super::RecordSink<'_>,
+    ) -> Result<()> {
+        let (a, block) = &self.arrays[k];
+        self.stream_block(path, *block, a.components, false, sink)
+    }
+
+    fn stream_block(
+        &self,
+        path: &Path,
+        block: Block,
+        fields: usize,
+        position: bool,
+        sink: &mut super::RecordSink<'_>,
+    ) -> Result<()> {
+        use std::io::Seek;
+        let mut r = super::open_buffered(path)?;
+        r.seek(std::io::SeekFrom::Start(block.offset))
+            .map_err(|e| Error::io(path, e))?;
+        let (one, many) = if position {
+            ("particle", "points")
+        } else {
+            ("particle", "point data values")
+        };
+        let all: Vec<usize> = (0..fields).collect();
+        if !self.binary {
+            return super::stream_ascii_records(
+                path,
+                &mut r,
+                super::AsciiRecords {
+                    line: block.line,
+                    count: self.count,
+                    fields,
+                    xyz: position.then_some([0, 1, 2]),
+                    payload: if position { &[] } else { &all },
+                    one,
+                    many,
+                },
+                sink,
+            );
+        }
+        let size = block.scalar.size();
+        let scalar = block.scalar;
+        let value =
+            |record: &[u8], k: usize| scalar.decode(&record[size * k..size * (k + 1)], true) as f32;
+        super::stream_records(
+            path,
+            &mut r,
+            super::Records {
+                offset: block.offset,
+                count: self.count,
+                stride: size * fields,
+                one,
+                many,
+            },
+            &|record, payload| {
+                if position {
+                    Some(Vec3::new(
+                        value(record, 0),
+                        value(record, 1),
+                        value(record, 2),
+                    ))
+                } else {
+                    payload.extend((0..fields).map(|k| value(record, k)));
+                    None
+                }
+            },
+            sink,
+        )
+    }
 }
