@@ -28,8 +28,6 @@ struct Cli {
     command: Command,
 }
 
-// Parsed once per process: boxing the large variant would buy nothing.
-#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 enum Command {
     /// Reconstruct the surface of one particle file or a `{}` sequence of them.
