@@ -249,38 +249,45 @@ pub fn check_attribute(path: &std::path::Path, a: &Attribute, count: usize) -> c
     Ok(())
 }
 
-/// The attributes of `layout`, from the payload of the particles in `store`, at `points`
-/// (world units): the kernel-weighted mean of the particles within `radius` (world units)
-/// of each point, or its nearest particle's value when none is that close (see the module
-/// docs). Points are taken tile by tile as `plan` cuts the lattice; the result does not
-/// depend on the tiling or the thread count.
+/// The attributes of `layout`, from the payload of the particles in `store`, at the
+/// points of each of `sets` (world units): the kernel-weighted mean of the particles
+/// within `radius` (world units) of each point, or its nearest particle's value when none
+/// is that close (see the module docs). Points are taken tile by tile as `plan` cuts the
+/// lattice; the result does not depend on the tiling or the thread count. One list of
+/// attributes per set.
 pub(crate) fn transfer<S: crate::io::particles::ParticleSource>(
     store: &ParticleStore<S>,
     plan: &TilePlan,
     layout: &[AttributeLayout],
-    points: &[Vec3],
+    sets: &[&[Vec3]],
     radius: f64,
     cancel: &CancelToken,
-) -> Result<Vec<Attribute>> {
+) -> Result<Vec<Vec<Attribute>>> {
+    let points = Points { sets };
     let width = plan.payload_width;
     let mut rows = vec![0f32; points.len() * width];
     let mut resolved = vec![false; points.len()];
+    let points = &points;
     let search = Search::new(plan, radius);
 
-    // The points of each tile, tiles in plan order.
-    let tiles: Vec<BlockKey> = points
-        .par_iter()
-        .map(|p| plan.tile_of(home_block(*p, plan.inv_h)))
-        .collect();
-    let mut order: Vec<u32> = (0..points.len() as u32).collect();
-    order.par_sort_by_key(|&k| {
-        let t = tiles[k as usize];
-        ([t[2], t[1], t[0]], k)
-    });
+    // The points of each tile, tiles in (z, y, x) order (untiled: one tile of all).
+    let (order, groups): (Vec<u32>, Vec<(BlockKey, u32, u32)>) = if plan.is_tiled() {
+        let tiles: Vec<BlockKey> = (0..points.len())
+            .into_par_iter()
+            .map(|k| plan.tile_of(home_block(points.get(k), plan.inv_h)))
+            .collect();
+        let order = crate::grid::sort_by_key_zyx(&tiles);
+        let groups = crate::grid::key_runs(order.iter().map(|&k| tiles[k as usize]));
+        (order, groups)
+    } else {
+        let n = points.len() as u32;
+        ((0..n).collect(), vec![([0; 3], 0, n)])
+    };
     let mut loaded = LoadedParticles::default();
-    for group in order.chunk_by(|&a, &b| tiles[a as usize] == tiles[b as usize]) {
+    for &(tile, start, end) in groups.iter().filter(|g| g.1 < g.2) {
+        let group = &order[start as usize..end as usize];
         cancel.check()?;
-        let own = plan.own_blocks(tiles[group[0] as usize]);
+        let own = plan.own_blocks(tile);
         store.load_with_payload(plan, own.grown(plan.reach, plan.reach), &mut loaded)?;
         if loaded.positions.is_empty() {
             continue;
@@ -291,7 +298,7 @@ pub(crate) fn transfer<S: crate::io::particles::ParticleSource>(
         // subdivision); each point's value is its own, whatever the order.
         let halves: Vec<BlockKey> = group
             .par_iter()
-            .map(|&k| search.half_block_of(points[k as usize].as_dvec3()))
+            .map(|&k| search.half_block_of(points.get(k as usize).as_dvec3()))
             .collect();
         let order = crate::grid::sort_by_key_zyx(&halves);
         let group: Vec<u32> = order.iter().map(|&i| group[i as usize]).collect();
@@ -302,17 +309,17 @@ pub(crate) fn transfer<S: crate::io::particles::ParticleSource>(
         let results: Vec<(Vec<f32>, Vec<bool>)> = runs
             .par_iter()
             .map_init(
-                || vec![0f64; width],
-                |sum, &(half, start, end)| {
-                    let near = search.rows_near(half, &loaded, &rows_of_tile);
+                || Near::with_width(width),
+                |near, &(half, start, end)| {
+                    search.gather_near(half, &loaded, &rows_of_tile, near);
                     let points_here = &group[start as usize..end as usize];
                     let mut values = vec![0f32; points_here.len() * width];
                     let found = points_here
                         .iter()
                         .zip(values.chunks_exact_mut(width.max(1)))
                         .map(|(&k, out)| {
-                            let p = points[k as usize];
-                            search.weighted_mean(p, &loaded, &near, sum, out)
+                            let p = points.get(k as usize);
+                            search.weighted_mean(p, &loaded, near, out)
                                 || search.nearest_in_window(p, &loaded, &rows_of_tile, out)
                         })
                         .collect();
@@ -345,7 +352,7 @@ pub(crate) fn transfer<S: crate::io::particles::ParticleSource>(
         store.for_each_stored(&mut |positions, indices, payload| {
             cancel.check()?;
             best.par_iter_mut().zip(&far).for_each(|(b, &k)| {
-                let p = points[k].as_dvec3();
+                let p = points.get(k).as_dvec3();
                 for (j, x) in positions.iter().enumerate() {
                     let d2 = (x.as_dvec3() - p).length_squared();
                     if (d2, indices[j]) < (b.0, b.1) {
@@ -362,31 +369,84 @@ pub(crate) fn transfer<S: crate::io::particles::ParticleSource>(
         }
     }
 
-    // Rows into one attribute per layout entry.
-    let mut out: Vec<Attribute> = layout
-        .iter()
-        .map(|l| Attribute {
-            name: l.name.clone(),
-            components: l.components,
-            values: Vec::with_capacity(points.len() * l.components),
-        })
-        .collect();
-    for row in rows.chunks_exact(width.max(1)).take(points.len()) {
-        let mut at = 0;
-        for a in &mut out {
-            a.values.extend_from_slice(&row[at..at + a.components]);
-            at += a.components;
+    // Rows into one attribute per layout entry, per set.
+    let mut out = Vec::with_capacity(sets.len());
+    let mut first = 0;
+    for set in sets {
+        let rows = &rows[first * width..(first + set.len()) * width];
+        first += set.len();
+        let mut attributes: Vec<Attribute> = layout
+            .iter()
+            .map(|l| Attribute {
+                name: l.name.clone(),
+                components: l.components,
+                values: Vec::with_capacity(set.len() * l.components),
+            })
+            .collect();
+        for row in rows.chunks_exact(width.max(1)) {
+            let mut at = 0;
+            for a in &mut attributes {
+                a.values.extend_from_slice(&row[at..at + a.components]);
+                at += a.components;
+            }
         }
+        out.push(attributes);
     }
     Ok(out)
 }
 
-/// Particles `start..end` of a tile, the half-blocks near a point in one (y, z) row.
-struct NearRow {
-    y: i32,
-    z: i32,
-    start: u32,
-    end: u32,
+/// The points of several sets, numbered one after the other.
+struct Points<'a> {
+    sets: &'a [&'a [Vec3]],
+}
+
+impl Points<'_> {
+    fn len(&self) -> usize {
+        self.sets.iter().map(|s| s.len()).sum()
+    }
+
+    fn get(&self, mut k: usize) -> Vec3 {
+        for set in self.sets {
+            if k < set.len() {
+                return set[k];
+            }
+            k -= set.len();
+        }
+        panic!("point {k} past the sets")
+    }
+}
+
+/// The particles near one half-block, as columns (positions in f32 for a vectorized
+/// distance test, index into the tile), with scratch for one point.
+struct Near {
+    x: Vec<f32>,
+    y: Vec<f32>,
+    z: Vec<f32>,
+    index: Vec<u32>,
+    d2: Vec<f32>,
+    hits: Vec<u32>,
+    sum: Vec<f64>,
+}
+
+impl Near {
+    fn with_width(width: usize) -> Self {
+        Near {
+            x: Vec::new(),
+            y: Vec::new(),
+            z: Vec::new(),
+            index: Vec::new(),
+            d2: Vec::new(),
+            hits: Vec::new(),
+            sum: vec![0.0; width],
+        }
+    }
+
+    fn clear(&mut self) {
+        self.x.clear();
+        self.y.clear();
+        self.z.clear();
+        self.index.clear();
+    }
 }
 
 /// The neighbourhood search of [`transfer`] over a tile's particles, sorted in the
@@ -469,86 +529,99 @@ impl Search {
         [c.x, c.y, c.z].map(|v| (v.floor() as i32).div_euclid(HALF_BLOCK_EDGE))
     }
 
-    /// The rows of particles that may lie within the radius of a point of half-block
-    /// `c`: per (y, z) row of half-blocks within reach, in the canonical order, the
-    /// particles of its half-blocks within reach in x.
-    fn rows_near(
+    /// Gathers into `near` the particles that may lie within the radius of a point of
+    /// half-block `c`, in the canonical order: the half-blocks within reach of `c`'s box,
+    /// less the rows farther than the radius from it.
+    fn gather_near(
         &self,
         c: BlockKey,
         loaded: &LoadedParticles,
         rows: &HashMap<[i32; 2], (u32, u32)>,
-    ) -> Vec<NearRow> {
-        // A hair more than the radius, against the rounding of the half-blocks.
-        let reach = (self.radius * (1.0 + 1e-6) / self.half_edge + 1e-6).ceil() as i32;
-        let mut near = Vec::new();
+        near: &mut Near,
+    ) {
+        near.clear();
+        // Half-blocks whose span lies within the radius of the box: a particle closer
+        // than the radius to a point lies in one of them, up to the rounding of a home
+        // half-block at its border, which could only drop a particle at the radius
+        // itself (weight ≈ 0), and drops it alike in every tiling.
+        let e = self.radius;
+        let reach = (e / self.half_edge - 1e-9).ceil() as i32;
+        // Distance between the spans of half-blocks `a` and `b` on one axis.
+        let gap = |a: i32, b: i32| ((a - b).abs() - 1).max(0) as f64 * self.half_edge;
+        // The half-block's box, a hair larger, and the squared radius, a hair larger.
+        let corner = |k: [i32; 3]| glam::DVec3::from(k.map(|v| v as f64)) * self.half_edge;
+        let box_lo = (corner(c) - 1e-6 * self.half_edge).as_vec3();
+        let box_hi = (corner(c.map(|v| v + 1)) + 1e-6 * self.half_edge).as_vec3();
+        let reach2 = (e * e * (1.0 + 1e-4)) as f32;
         for z in c[2] - reach..=c[2] + reach {
             for y in c[1] - reach..=c[1] + reach {
+                let (dy, dz) = (gap(y, c[1]), gap(z, c[2]));
+                if dy * dy + dz * dz >= e * e {
+                    continue;
+                }
                 let Some(&(a, b)) = rows.get(&[y, z]) else {
                     continue;
                 };
                 let row = &loaded.halves[a as usize..b as usize];
-                let start = a + row.partition_point(|k| k[0] < c[0] - reach) as u32;
-                let end = a + row.partition_point(|k| k[0] <= c[0] + reach) as u32;
-                if start < end {
-                    near.push(NearRow { y, z, start, end });
+                let start = a as usize + row.partition_point(|k| k[0] < c[0] - reach);
+                let end = a as usize + row.partition_point(|k| k[0] <= c[0] + reach);
+                for k in start..end {
+                    // Only particles within the radius of the half-block's box.
+                    let q = loaded.positions[k];
+                    let d = (box_lo - q).max(q - box_hi).max(glam::Vec3::ZERO);
+                    if d.length_squared() > reach2 {
+                        continue;
+                    }
+                    near.x.push(q.x);
+                    near.y.push(q.y);
+                    near.z.push(q.z);
+                    near.index.push(k as u32);
                 }
             }
         }
-        near
     }
 
     /// Writes to `out` the kernel-weighted mean of the payload of the particles within the
-    /// radius of `p`, summed in f64 (in `sum`) in the canonical order; false when there is
-    /// none. `near` are the rows of `p`'s half-block ([`Search::rows_near`]).
+    /// radius of `p`, summed in f64 in the canonical order; false when there is none.
+    /// `near` holds the particles near `p`'s half-block ([`Search::gather_near`]).
     fn weighted_mean(
         &self,
         p: Vec3,
         loaded: &LoadedParticles,
-        near: &[NearRow],
-        sum: &mut [f64],
+        near: &mut Near,
         out: &mut [f32],
     ) -> bool {
-        let width = sum.len();
-        let x = p.as_dvec3();
+        let width = out.len();
+        // Squared distances in f32 for all (a loop the compiler vectorizes); the weights of
+        // those within the radius summed in f64.
+        let n = near.x.len();
+        near.d2.resize(n, 0.0);
+        near.hits.resize(n, 0);
+        let radius2 = self.radius2 as f32;
+        // The candidates within the radius, listed without a branch (about half of them
+        // are: a branch per candidate would be mispredicted half the time).
+        let mut hits = 0;
+        for j in 0..n {
+            let (dx, dy, dz) = (near.x[j] - p.x, near.y[j] - p.y, near.z[j] - p.z);
+            let d2 = dx * dx + dy * dy + dz * dz;
+            near.d2[j] = d2;
+            near.hits[hits] = j as u32;
+            hits += (d2 < radius2) as usize;
+        }
+        let inv_radius2 = self.inv_radius2 as f32;
+        let sum = &mut near.sum;
         sum.fill(0.0);
         let mut weights = 0f64;
-        // A hair more than the radius, against the rounding of the half-blocks.
-        let e = self.radius * (1.0 + 1e-6) + 1e-6 * self.half_edge;
-        let gap = |c: f64, k: i32| {
-            let (a, b) = (k as f64 * self.half_edge, (k + 1) as f64 * self.half_edge);
-            (a - c).max(c - b).max(0.0)
-        };
-        let reject = (self.radius2 * (1.0 + 1e-4)) as f32;
-        for row in near {
-            let (dy, dz) = (gap(x.y, row.y), gap(x.z, row.z));
-            let left = e * e - dz * dz - dy * dy;
-            if left < 0.0 {
-                continue;
-            }
-            let reach_x = left.sqrt();
-            let x_lo = self.half_block_of(glam::DVec3::splat(x.x - reach_x))[0];
-            let x_hi = self.half_block_of(glam::DVec3::splat(x.x + reach_x))[0];
-            let halves = &loaded.halves[row.start as usize..row.end as usize];
-            let first = row.start as usize + halves.partition_point(|k| k[0] < x_lo);
-            let end = row.start as usize + halves.partition_point(|k| k[0] <= x_hi);
-            for k in first..end {
-                // Most candidates are rejected in f32 with a margin; the rest are decided
-                // and weighed in f64.
-                if (loaded.positions[k] - p).length_squared() > reject {
-                    continue;
-                }
-                let d2 = (loaded.positions[k].as_dvec3() - x).length_squared();
-                if d2 < self.radius2 {
-                    let q = 1.0 - d2 * self.inv_radius2;
-                    let w = q * q * q;
-                    weights += w;
-                    for (s, v) in sum
-                        .iter_mut()
-                        .zip(&loaded.payload[k * width..(k + 1) * width])
-                    {
-                        *s += w * *v as f64;
-                    }
-                }
+        for &j in &near.hits[..hits] {
+            let (d2, k) = (near.d2[j as usize], near.index[j as usize] as usize);
+            let q = (1.0 - d2 * inv_radius2) as f64;
+            let w = q * q * q;
+            weights += w;
+            for (s, v) in sum
+                .iter_mut()
+                .zip(&loaded.payload[k * width..(k + 1) * width])
+            {
+                *s += w * *v as f64;
             }
         }
         if weights > 0.0 {
@@ -598,7 +671,8 @@ mod tests {
     use crate::io::particles::{ParticleSource, Particles};
     use crate::tiles::{plan_tiles, TileOptions};
 
-    /// Values at `points` from `particles`, untiled or in tiles of `tile` cells.
+    /// Values at `points` from `particles`, untiled or in tiles of `tile` cells (the
+    /// points handed over as two sets, the results joined).
     fn values_at(particles: &Particles, points: &[Vec3], tile: Option<u32>) -> Vec<Attribute> {
         let field = FieldOptions::new(0.025);
         let options = TileOptions {
@@ -610,15 +684,25 @@ mod tests {
         assert_eq!(plan.is_tiled(), tile.is_some());
         let layout = particles.attribute_layout();
         let store = ParticleStore::build(particles.clone(), &plan, None, &cancel).unwrap();
-        transfer(
+        let (a, b) = points.split_at(points.len() / 2);
+        let mut sets = transfer(
             &store,
             &plan,
             &layout,
-            points,
+            &[a, b],
             field.influence_radius_world(),
             &cancel,
         )
-        .unwrap()
+        .unwrap();
+        assert_eq!(sets.len(), 2);
+        let second = sets.pop().unwrap();
+        let mut joined = sets.pop().unwrap();
+        for (j, s) in joined.iter_mut().zip(second) {
+            assert_eq!(j.len(), a.len());
+            assert_eq!(s.len(), b.len());
+            j.values.extend(s.values);
+        }
+        joined
     }
 
     #[test]

@@ -352,22 +352,10 @@ pub fn reconstruct_source<S: ParticleSource>(
         progress("attributes");
         let clock = Instant::now();
         let influence_radius = options.field.influence_radius_world();
-        fluid.attributes = transfer(
-            &store,
-            &plan,
-            &layout,
-            &fluid.positions,
-            influence_radius,
-            cancel,
-        )?;
-        spheres.attributes = transfer(
-            &store,
-            &plan,
-            &layout,
-            &spheres.centers,
-            influence_radius,
-            cancel,
-        )?;
+        let sets = [fluid.positions.as_slice(), spheres.centers.as_slice()];
+        let mut values = transfer(&store, &plan, &layout, &sets, influence_radius, cancel)?;
+        spheres.attributes = values.pop().expect("one list per set");
+        fluid.attributes = values.pop().expect("one list per set");
         drop(store);
         stats.push_stage(
             "attributes",

@@ -175,12 +175,12 @@ impl<S: ParticleSource> ParticleStore<S> {
                 let homes: Vec<BlockKey> = positions.par_iter().map(home_of).collect();
                 let mut order = canonical_order(&homes, indices);
                 order.retain(|&k| zone.contains(block_of_half(homes[k as usize])));
-                out.halves = order.iter().map(|&k| homes[k as usize]).collect();
+                out.halves = order.par_iter().map(|&k| homes[k as usize]).collect();
                 drop(homes);
-                out.indices = order.iter().map(|&k| indices(k as usize)).collect();
-                out.positions = order.iter().map(|&k| positions[k as usize]).collect();
+                out.indices = order.par_iter().map(|&k| indices(k as usize)).collect();
+                out.positions = order.par_iter().map(|&k| positions[k as usize]).collect();
                 out.payload.clear();
-                out.payload.reserve(order.len() * width);
+                out.payload.reserve_exact(order.len() * width);
                 for &k in &order {
                     let k = k as usize;
                     out.payload
