@@ -20,3 +20,10 @@ cargo run --release --quiet --example attribute_fixture -- "$out" >/dev/null
 # fails for some seeds (KhronosGroup/glTF-Blender-IO#2658, fixed by #2665, not in 5.0.1).
 # A seed under which it works keeps this check about our files, not about that bug.
 PYTHONHASHSEED=2 "$venv/bin/python" tests/blender/import_attributes.py "$out"
+# A real reconstruction with velocity (the CLI's default for this VTK frame), as a user
+# would import it for motion blur.
+cargo run --release --quiet -- reconstruct datasets/dambreak_small/ParticleData_Fluid_25.vtk \
+  --particle-radius 0.012 -o "$out/frame25.glb" --quiet
+cargo run --release --quiet -- reconstruct datasets/dambreak_small/ParticleData_Fluid_25.vtk \
+  --particle-radius 0.012 -o "$out/frame25.ply" --quiet
+PYTHONHASHSEED=2 "$venv/bin/python" tests/blender/import_reconstruction.py "$out/frame25.glb" "$out/frame25.ply"

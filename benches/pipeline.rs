@@ -1,14 +1,18 @@
 //! Whole-pipeline benchmark over real datasets: per-stage wall time (median of several
 //! runs) and the peak resident memory of a process that reconstructs one frame.
 //!
-//! `cargo bench --bench pipeline` runs the shipped frames; `MENISCUS_BENCH_SCENES` adds
-//! more as `path:radius` pairs separated by commas (for example large scenes made by
-//! `cargo run --release --example tile_scene`). Every scene runs in a child process so that
-//! its peak RSS (Linux VmHWM) is its own.
+//! `cargo bench --bench pipeline` runs the shipped frames, frame 25 twice: as `.xyz`
+//! (positions only) and as `.vtk` carrying its velocity to the surface, as the CLI does by
+//! default; `MENISCUS_BENCH_SCENES` adds more as `path:radius` pairs separated by commas
+//! (for example large scenes made by `cargo run --release --example tile_scene`, a `.ply`
+//! one with velocity). Every scene runs in a child process so that its peak RSS (Linux
+//! VmHWM) is its own.
 
+use meniscus::attributes::{select_attributes, AttributeSelection};
 use meniscus::io::particles::read_particles;
 use meniscus::job::peak_rss_bytes;
-use meniscus::pipeline::{reconstruct, ReconstructOptions};
+use meniscus::pipeline::{reconstruct_source, ReconstructOptions};
+use meniscus::CancelToken;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
@@ -27,6 +31,7 @@ fn main() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets");
     let mut scenes: Vec<(PathBuf, f32)> = vec![
         (root.join("dambreak_small/ParticleData_Fluid_25.xyz"), 0.012),
+        (root.join("dambreak_small/ParticleData_Fluid_25.vtk"), 0.012),
         (root.join("dambreak_small/ParticleData_Fluid_45.xyz"), 0.012),
         (
             root.join("double_dambreak/ParticleData_Fluid_13.xyz"),
@@ -60,15 +65,27 @@ fn main() {
 
 fn child(path: &Path, radius: f32) {
     let clock = Instant::now();
-    let particles = read_particles(path, None)
-        .expect("readable scene")
-        .positions;
+    // The velocity, when the file has one, as the CLI's default.
+    let particles = select_attributes(
+        path,
+        read_particles(path, None).expect("readable scene"),
+        &AttributeSelection::Velocity,
+    )
+    .expect("valid attributes");
+    let carried: Vec<String> = particles
+        .attributes
+        .iter()
+        .map(|a| a.name.clone())
+        .collect();
     let read = clock.elapsed().as_secs_f64();
     let options = ReconstructOptions::new(radius);
-    let runs = if particles.len() > 2_000_000 { 1 } else { 5 };
+    let count = particles.positions.len();
+    let runs = if count > 2_000_000 { 1 } else { 5 };
     let mut all = Vec::new();
     for _ in 0..runs {
-        let (_, stats) = reconstruct(&particles, &options).expect("reconstruction");
+        let (_, stats) =
+            reconstruct_source(particles.clone(), &options, &|_| {}, &CancelToken::new())
+                .expect("reconstruction");
         all.push(stats);
     }
     let mut totals: Vec<f64> = all.iter().map(|s| s.total_seconds()).collect();
@@ -78,9 +95,10 @@ fn child(path: &Path, radius: f32) {
         .position(|s| s.total_seconds() == totals[totals.len() / 2])
         .unwrap()];
     println!(
-        "\n{} — {} particles, r = {radius}, read {:.1} ms, median of {runs} runs, peak RSS {:.1} MiB",
+        "\n{} — {} particles, r = {radius}, attributes [{}], read {:.1} ms, median of {runs} runs, peak RSS {:.1} MiB",
         path.display(),
-        particles.len(),
+        count,
+        carried.join(", "),
         read * 1e3,
         peak_rss_bytes().unwrap_or(0) as f64 / (1 << 20) as f64
     );

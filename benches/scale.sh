@@ -8,20 +8,24 @@
 #   SCALE_COPIES="24 96" bash benches/scale.sh # a subset (24 copies ≈ 1M particles)
 #
 # Budgets per scene: the default (half the available memory) and, for 4M and more, the
-# issue's targets (512MiB for 4M, 2GiB for 16M and 32M). Each run writes a fresh output
-# after a `sync`. Needs python3 for the summary.
+# issue's targets (512MiB for 4M, 2GiB for 16M and 32M). At 4M the scene is also built
+# with the velocity of frame 25's VTK (a binary PLY, carried to the surface as the CLI
+# does by default) and run with the default budget and 1GiB. Each run writes a fresh
+# output after a `sync`. Needs python3 for the summary.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release --quiet
 cargo build --release --quiet --example tile_scene
 BIN=target/release/meniscus
 FRAME=datasets/dambreak_small/ParticleData_Fluid_25.xyz
+FRAME_VELOCITY=datasets/dambreak_small/ParticleData_Fluid_25.vtk
 WORK=$(mktemp -d "${TMPDIR:-/tmp}/meniscus-scale.XXXXXX")
 trap 'rm -rf "$WORK"' EXIT
 
-run() { # copies budget
-    local copies=$1 budget=$2 scene="$WORK/scene_$1.xyz"
-    [ -f "$scene" ] || target/release/examples/tile_scene "$FRAME" "$copies" "$scene" >/dev/null
+run() { # copies budget [velocity]
+    local copies=$1 budget=$2 scene="$WORK/scene_$1.xyz" frame=$FRAME
+    if [ "${3:-}" = velocity ]; then scene="$WORK/scene_$1_velocity.ply" frame=$FRAME_VELOCITY; fi
+    [ -f "$scene" ] || target/release/examples/tile_scene "$frame" "$copies" "$scene" >/dev/null
     local args=(reconstruct "$scene" -r 0.012 -o "$WORK/out.ply" --stats "$WORK/stats.json" -q)
     [ "$budget" != default ] && args+=(--memory-budget "$budget")
     # Every run writes a fresh file with the previous runs' output flushed: replacing a
@@ -33,16 +37,16 @@ run() { # copies budget
         echo "$copies copies, budget $budget: failed: $(head -1 "$WORK/time.txt")"
         return
     fi
-    python3 - "$WORK" "$budget" <<'PY'
+    python3 - "$WORK" "$budget" "${3:-}" <<'PY'
 import json, re, sys
-work, budget = sys.argv[1], sys.argv[2]
+work, budget, extra = sys.argv[1], sys.argv[2], sys.argv[3]
 t = open(f"{work}/time.txt").read()
 wall = re.search(r"Elapsed \(wall clock\) time.*: (\S+)", t).group(1)
 rss = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", t).group(1)) / 1024
 r = json.load(open(f"{work}/stats.json"))["frames"][0]["reconstruction"]
 tiles = r["tiles"]
 layout = f"{tiles['tiles']} x {tiles['tile_blocks'] * 8} cells" if tiles["tile_blocks"] else "untiled"
-print(f"| {r['particles']:>10} | {budget:>8} | {layout:>16} "
+print(f"| {r['particles']:>10}{' + velocity' if extra else ''} | {budget:>8} | {layout:>16} "
       f"| {wall:>8} | {rss:8.0f} MiB | {r['marching_cubes_triangles']:>10} -> {r['fluid_triangles']:>10} |")
 PY
 }
@@ -51,7 +55,7 @@ echo "| particles | budget | tiles | wall | peak RSS | MC -> final triangles |"
 for copies in ${SCALE_COPIES:-24 96 384 768}; do
     run "$copies" default
     case $copies in
-        96) run "$copies" 512MiB ;;
+        96) run "$copies" 512MiB; run "$copies" default velocity; run "$copies" 1GiB velocity ;;
         384 | 768) run "$copies" 2GiB ;;
     esac
 done
