@@ -265,6 +265,9 @@ pub(crate) fn transfer<S: crate::io::particles::ParticleSource>(
 ) -> Result<Vec<Vec<Attribute>>> {
     let points = Points { sets };
     let width = plan.payload_width;
+    if width == 0 {
+        return Ok(sets.iter().map(|_| Vec::new()).collect());
+    }
     let mut rows = vec![0f32; points.len() * width];
     let mut resolved = vec![false; points.len()];
     let points = &points;
@@ -304,41 +307,30 @@ pub(crate) fn transfer<S: crate::io::particles::ParticleSource>(
         let group: Vec<u32> = order.iter().map(|&i| group[i as usize]).collect();
         let halves: Vec<BlockKey> = order.iter().map(|&i| halves[i as usize]).collect();
         drop(order);
-        // Runs of points in one half-block share the rows they search.
-        let runs = crate::grid::key_runs(halves.iter().copied());
-        let results: Vec<(Vec<f32>, Vec<bool>)> = runs
-            .par_iter()
+        // Points of one half-block share the particles they search: gathered once per run
+        // of them (each parallel piece keeps the last half-block's).
+        let mut values = vec![0f32; group.len() * width];
+        let found: Vec<bool> = values
+            .par_chunks_mut(width)
+            .zip(group.par_iter().zip(halves.par_iter()))
             .map_init(
-                || Near::with_width(width),
-                |near, &(half, start, end)| {
-                    search.gather_near(half, &loaded, &rows_of_tile, near);
-                    let points_here = &group[start as usize..end as usize];
-                    let mut values = vec![0f32; points_here.len() * width];
-                    let found = points_here
-                        .iter()
-                        .zip(values.chunks_exact_mut(width.max(1)))
-                        .map(|(&k, out)| {
-                            let p = points.get(k as usize);
-                            search.weighted_mean(p, &loaded, near, out)
-                                || search.nearest_in_window(p, &loaded, &rows_of_tile, out)
-                        })
-                        .collect();
-                    (values, found)
+                || (Near::with_width(width), None::<BlockKey>),
+                |(near, gathered), (out, (&k, &half))| {
+                    if *gathered != Some(half) {
+                        search.gather_near(half, &loaded, &rows_of_tile, near);
+                        *gathered = Some(half);
+                    }
+                    let p = points.get(k as usize);
+                    search.weighted_mean(p, &loaded, near, out)
+                        || search.nearest_in_window(p, &loaded, &rows_of_tile, out)
                 },
             )
             .collect();
-        for (&(_, start, end), (values, found)) in runs.iter().zip(results) {
-            let points_here = &group[start as usize..end as usize];
-            for ((&k, value), found) in points_here
-                .iter()
-                .zip(values.chunks_exact(width.max(1)))
-                .zip(found)
-            {
-                if found {
-                    let k = k as usize;
-                    rows[k * width..(k + 1) * width].copy_from_slice(&value[..width]);
-                    resolved[k] = true;
-                }
+        for ((&k, value), found) in group.iter().zip(values.chunks_exact(width)).zip(found) {
+            if found {
+                let k = k as usize;
+                rows[k * width..(k + 1) * width].copy_from_slice(value);
+                resolved[k] = true;
             }
         }
     }
@@ -383,7 +375,7 @@ pub(crate) fn transfer<S: crate::io::particles::ParticleSource>(
                 values: Vec::with_capacity(set.len() * l.components),
             })
             .collect();
-        for row in rows.chunks_exact(width.max(1)) {
+        for row in rows.chunks_exact(width) {
             let mut at = 0;
             for a in &mut attributes {
                 a.values.extend_from_slice(&row[at..at + a.components]);
