@@ -189,6 +189,15 @@ pub(crate) fn scalars_tail<T: Tokens>(t: &mut T) -> Result<usize, T::Error> {
     Ok(components)
 }
 
+/// Whether `keyword` (upper case) starts a data array: `SCALARS`, `VECTORS`, `NORMALS`,
+/// `TENSORS`, `COLOR_SCALARS` or `TEXTURE_COORDINATES`.
+pub(crate) fn is_attribute(keyword: &str) -> bool {
+    matches!(
+        keyword,
+        "SCALARS" | "VECTORS" | "NORMALS" | "TENSORS" | "COLOR_SCALARS" | "TEXTURE_COORDINATES"
+    )
+}
+
 /// A particle attribute header after its keyword (`SCALARS`, `VECTORS`, `NORMALS`,
 /// `TENSORS`, `COLOR_SCALARS`, `TEXTURE_COORDINATES`): name, components, value type.
 /// `COLOR_SCALARS` are unsigned bytes.

@@ -449,12 +449,7 @@ fn read_vtk(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
                 }
                 section = Some((n, points));
             }
-            "SCALARS"
-            | "VECTORS"
-            | "NORMALS"
-            | "TENSORS"
-            | "TEXTURE_COORDINATES"
-            | "COLOR_SCALARS" => {
+            k if vtk_legacy::is_attribute(k) => {
                 let Some((items, points)) = section else {
                     return Err(c.error(format!("{keyword} outside POINT_DATA or CELL_DATA")));
                 };

@@ -57,12 +57,7 @@ pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
                 let _n: usize = c.number("the cell count")?;
                 point_data = false;
             }
-            "SCALARS"
-            | "VECTORS"
-            | "NORMALS"
-            | "TENSORS"
-            | "COLOR_SCALARS"
-            | "TEXTURE_COORDINATES" => {
+            k if vtk_legacy::is_attribute(k) => {
                 let (name, components, scalar) = vtk_legacy::attribute(&mut c, &keyword)?;
                 if binary.is_some() {
                     c.finish_line();
@@ -536,12 +531,7 @@ fn scan_layout(path: &Path) -> Scan<Layout> {
                 let _n: usize = s.number()?;
                 point_data = false;
             }
-            "SCALARS"
-            | "VECTORS"
-            | "NORMALS"
-            | "TENSORS"
-            | "COLOR_SCALARS"
-            | "TEXTURE_COORDINATES" => {
+            k if vtk_legacy::is_attribute(k) => {
                 let (name, components, scalar) = vtk_legacy::attribute(&mut s, &keyword)?;
                 if !point_data || components == 0 {
                     return Err(Unstreamable.into());
