@@ -10,3 +10,4 @@ pub mod mesh;
 pub mod particles;
 pub(crate) mod ply_header;
 pub(crate) mod text;
+pub(crate) mod vtk_legacy;

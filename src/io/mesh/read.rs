@@ -15,6 +15,7 @@ use crate::attributes::Attribute;
 use crate::error::{Error, Result};
 use crate::io::ply_header;
 use crate::io::text::{Cursor, Scalar};
+use crate::io::vtk_legacy;
 use crate::mesh::TriMesh;
 use glam::{Mat4, Vec3};
 use std::path::Path;
@@ -345,54 +346,19 @@ fn gltf_attributes(
     Ok(all)
 }
 
-fn vtk_scalar(name: &str) -> Option<Scalar> {
-    Some(match name.to_ascii_lowercase().as_str() {
-        "char" => Scalar::I8,
-        "unsigned_char" => Scalar::U8,
-        "short" => Scalar::I16,
-        "unsigned_short" => Scalar::U16,
-        "int" | "vtkidtype" => Scalar::I32,
-        "unsigned_int" => Scalar::U32,
-        "long" | "vtktypeint64" => Scalar::I64,
-        "unsigned_long" | "vtktypeuint64" => Scalar::U64,
-        "float" => Scalar::F32,
-        "double" => Scalar::F64,
-        _ => return None,
-    })
-}
-
 /// Legacy VTK: `POINTS`, `POLYGONS` (classic or 5.x offsets/connectivity layout), point
 /// data (`NORMALS` as normals, every other array as an attribute); other cells and cell
 /// data are skipped.
 fn read_vtk(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
     let mut c = Cursor::new(path, bytes);
-    let version = c.line()?;
-    if !version.starts_with("# vtk DataFile Version") {
-        return Err(Error::parse(
-            path,
-            "line 1",
-            format!("not a legacy VTK file: first line is {version:?}"),
-        ));
-    }
-    let new_cells = version
-        .rsplit(' ')
-        .next()
-        .and_then(|v| v.parse::<f32>().ok())
-        .is_some_and(|v| v >= 5.0);
-    c.line()?; // title
-    let binary = match c.line()?.trim().to_ascii_uppercase().as_str() {
-        "BINARY" => Some(true),
-        "ASCII" => None,
-        other => return Err(c.error(format!("expected ASCII or BINARY, found {other:?}"))),
-    };
+    let header = vtk_legacy::header(&mut c)?;
+    let new_cells = header.new_cells;
+    let binary = header.binary.then_some(true);
     let mut mesh = TriMesh::default();
     let mut npoints = 0usize;
     // The item count of the current data section and whether it is point data.
     let mut section: Option<(usize, bool)> = None;
-    let typed = |c: &mut Cursor, what: &str| -> Result<Scalar> {
-        let ty = c.token(what)?;
-        vtk_scalar(ty).ok_or_else(|| c.error(format!("unsupported {what} {ty:?}")))
-    };
+    let typed = |c: &mut Cursor, what: &str| vtk_legacy::scalar(c, what, what);
     while !c.at_end() {
         let keyword = c.token("a section keyword")?.to_ascii_uppercase();
         match keyword.as_str() {
@@ -405,8 +371,8 @@ fn read_vtk(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
                 }
             }
             "POINTS" => {
-                npoints = c.number("the point count")?;
-                let scalar = typed(&mut c, "point type")?;
+                let (n, scalar) = vtk_legacy::points(&mut c, "point type")?;
+                npoints = n;
                 if binary.is_some() {
                     c.finish_line();
                 }
@@ -483,12 +449,7 @@ fn read_vtk(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
                 }
                 section = Some((n, points));
             }
-            "SCALARS"
-            | "VECTORS"
-            | "NORMALS"
-            | "TENSORS"
-            | "TEXTURE_COORDINATES"
-            | "COLOR_SCALARS" => {
+            k if vtk_legacy::is_attribute(k) => {
                 let Some((items, points)) = section else {
                     return Err(c.error(format!("{keyword} outside POINT_DATA or CELL_DATA")));
                 };
@@ -496,21 +457,7 @@ fn read_vtk(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
                 let (components, scalar) = match keyword.as_str() {
                     "SCALARS" => {
                         let scalar = typed(&mut c, "scalar type")?;
-                        let rest = c.line()?.trim().to_string();
-                        let k = if rest.is_empty() {
-                            1
-                        } else {
-                            rest.parse()
-                                .map_err(|_| c.error(format!("bad component count {rest:?}")))?
-                        };
-                        let table = c.token("LOOKUP_TABLE")?;
-                        if !table.eq_ignore_ascii_case("LOOKUP_TABLE") {
-                            return Err(c.error(format!(
-                                "expected LOOKUP_TABLE after SCALARS, found {table:?}"
-                            )));
-                        }
-                        c.token("a lookup table name")?;
-                        (k, scalar)
+                        (vtk_legacy::scalars_tail(&mut c)?, scalar)
                     }
                     "VECTORS" | "NORMALS" => (3, typed(&mut c, "vector type")?),
                     "TENSORS" => (9, typed(&mut c, "tensor type")?),
@@ -559,16 +506,14 @@ fn read_vtk(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
                 let Some((items, points)) = section else {
                     return Err(c.error("FIELD outside POINT_DATA or CELL_DATA"));
                 };
-                c.token("a field name")?;
-                let arrays: usize = c.number("the array count")?;
+                let arrays = vtk_legacy::field(&mut c)?;
                 for _ in 0..arrays {
-                    let name = c.token("an array name")?.to_string();
-                    let components: usize = c.number("a component count")?;
-                    let tuples: usize = c.number("a tuple count")?;
-                    let scalar = typed(&mut c, "array type")?;
-                    if binary.is_some() {
-                        c.finish_line();
-                    }
+                    let (name, components, tuples, scalar) = vtk_legacy::field_array(
+                        &mut c,
+                        binary.is_some(),
+                        "array type",
+                        "array type",
+                    )?;
                     let count = tuples
                         .checked_mul(components)
                         .ok_or_else(|| c.error("value count overflows"))?;
@@ -606,11 +551,7 @@ fn read_vtk(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
                 }
                 c.skip_values(size * 4, scalar, binary)?;
             }
-            "METADATA" => loop {
-                if c.pos >= c.bytes.len() || c.line()?.trim().is_empty() {
-                    break;
-                }
-            },
+            "METADATA" => vtk_legacy::skip_metadata(&mut c)?,
             other => return Err(c.error(format!("unknown section {other:?}"))),
         }
     }

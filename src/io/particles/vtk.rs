@@ -7,49 +7,16 @@ use crate::attributes::AttributeLayout;
 use crate::error::{Error, Result};
 use crate::io::atomic::write_atomically;
 use crate::io::text::{Cursor, Scalar};
+use crate::io::vtk_legacy::{self, Tokens};
 use glam::Vec3;
 use std::io::Write;
 use std::path::Path;
 
-fn scalar_type(name: &str) -> Option<Scalar> {
-    Some(match name.to_ascii_lowercase().as_str() {
-        "bit" => return None,
-        "char" => Scalar::I8,
-        "unsigned_char" => Scalar::U8,
-        "short" => Scalar::I16,
-        "unsigned_short" => Scalar::U16,
-        "int" | "vtkidtype" => Scalar::I32,
-        "unsigned_int" => Scalar::U32,
-        "long" | "vtktypeint64" => Scalar::I64,
-        "unsigned_long" | "vtktypeuint64" => Scalar::U64,
-        "float" => Scalar::F32,
-        "double" => Scalar::F64,
-        _ => return None,
-    })
-}
-
 pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
     let mut c = Cursor::new(path, bytes);
-    let version = c.line()?;
-    if !version.starts_with("# vtk DataFile Version") {
-        return Err(Error::parse(
-            path,
-            "line 1",
-            format!("not a legacy VTK file: first line is {version:?}"),
-        ));
-    }
-    let new_cells = version
-        .rsplit(' ')
-        .next()
-        .and_then(|v| v.parse::<f32>().ok())
-        .is_some_and(|v| v >= 5.0);
-    c.line()?; // title
-    let encoding = c.line()?.trim().to_ascii_uppercase();
-    let binary = match encoding.as_str() {
-        "BINARY" => Some(true),
-        "ASCII" => None,
-        other => return Err(c.error(format!("expected ASCII or BINARY, found {other:?}"))),
-    };
+    let header = vtk_legacy::header(&mut c)?;
+    let new_cells = header.new_cells;
+    let binary = header.binary.then_some(true);
     let mut positions: Option<Vec<Vec3>> = None;
     let mut attributes = Vec::new();
     let mut point_data = false;
@@ -61,10 +28,7 @@ pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
                 c.token("a dataset type")?;
             }
             "POINTS" => {
-                let n: usize = c.number("the point count")?;
-                let ty = c.token("the point type")?;
-                let scalar = scalar_type(ty)
-                    .ok_or_else(|| c.error(format!("unsupported point type {ty:?}")))?;
+                let (n, scalar) = vtk_legacy::points(&mut c, "the point type")?;
                 if binary.is_some() {
                     c.finish_line();
                 }
@@ -77,37 +41,10 @@ pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
                 );
             }
             "VERTICES" | "LINES" | "POLYGONS" | "TRIANGLE_STRIPS" | "CELLS" => {
-                let _n: usize = c.number("the cell count")?;
-                let size: usize = c.number("the cell list size")?;
-                if new_cells {
-                    for _ in 0..2 {
-                        let part = c.token("OFFSETS or CONNECTIVITY")?;
-                        let ty = c.token("an index type")?;
-                        let scalar = scalar_type(ty)
-                            .ok_or_else(|| c.error(format!("unsupported {part} type {ty:?}")))?;
-                        if binary.is_some() {
-                            c.finish_line();
-                        }
-                        let count = if part.eq_ignore_ascii_case("OFFSETS") {
-                            _n
-                        } else {
-                            size
-                        };
-                        c.skip_values(count, scalar, binary)?;
-                    }
-                } else {
-                    if binary.is_some() {
-                        c.finish_line();
-                    }
-                    c.skip_values(size, Scalar::I32, binary)?;
-                }
+                vtk_legacy::skip_cells(&mut c, new_cells, binary.is_some())?;
             }
             "CELL_TYPES" => {
-                let n: usize = c.number("the cell count")?;
-                if binary.is_some() {
-                    c.finish_line();
-                }
-                c.skip_values(n, Scalar::I32, binary)?;
+                vtk_legacy::skip_cell_types(&mut c, binary.is_some())?;
             }
             "POINT_DATA" => {
                 let n: usize = c.number("the point count")?;
@@ -120,61 +57,8 @@ pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
                 let _n: usize = c.number("the cell count")?;
                 point_data = false;
             }
-            "SCALARS"
-            | "VECTORS"
-            | "NORMALS"
-            | "TENSORS"
-            | "COLOR_SCALARS"
-            | "TEXTURE_COORDINATES" => {
-                let name = c.token("an attribute name")?.to_string();
-                let (components, scalar) = match keyword.as_str() {
-                    "SCALARS" => {
-                        let ty = c.token("a scalar type")?;
-                        let scalar = scalar_type(ty)
-                            .ok_or_else(|| c.error(format!("unsupported type {ty:?}")))?;
-                        let rest = c.line()?.trim().to_string();
-                        let comps = if rest.is_empty() {
-                            1
-                        } else {
-                            rest.parse()
-                                .map_err(|_| c.error(format!("bad component count {rest:?}")))?
-                        };
-                        let table = c.token("LOOKUP_TABLE")?;
-                        if !table.eq_ignore_ascii_case("LOOKUP_TABLE") {
-                            return Err(c.error(format!(
-                                "expected LOOKUP_TABLE after SCALARS, found {table:?}"
-                            )));
-                        }
-                        c.token("a lookup table name")?;
-                        (comps, scalar)
-                    }
-                    "VECTORS" | "NORMALS" => {
-                        let ty = c.token("a vector type")?;
-                        (
-                            3,
-                            scalar_type(ty)
-                                .ok_or_else(|| c.error(format!("unsupported type {ty:?}")))?,
-                        )
-                    }
-                    "TENSORS" => {
-                        let ty = c.token("a tensor type")?;
-                        (
-                            9,
-                            scalar_type(ty)
-                                .ok_or_else(|| c.error(format!("unsupported type {ty:?}")))?,
-                        )
-                    }
-                    "COLOR_SCALARS" => (c.number("a component count")?, Scalar::U8),
-                    _ => {
-                        let d: usize = c.number("a dimension")?;
-                        let ty = c.token("a type")?;
-                        (
-                            d,
-                            scalar_type(ty)
-                                .ok_or_else(|| c.error(format!("unsupported type {ty:?}")))?,
-                        )
-                    }
-                };
+            k if vtk_legacy::is_attribute(k) => {
+                let (name, components, scalar) = vtk_legacy::attribute(&mut c, &keyword)?;
                 if binary.is_some() {
                     c.finish_line();
                 }
@@ -190,18 +74,10 @@ pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
                 }
             }
             "FIELD" => {
-                c.token("a field name")?;
-                let arrays: usize = c.number("the array count")?;
+                let arrays = vtk_legacy::field(&mut c)?;
                 for _ in 0..arrays {
-                    let name = c.token("an array name")?.to_string();
-                    let components: usize = c.number("a component count")?;
-                    let tuples: usize = c.number("a tuple count")?;
-                    let ty = c.token("an array type")?;
-                    let scalar = scalar_type(ty)
-                        .ok_or_else(|| c.error(format!("unsupported type {ty:?}")))?;
-                    if binary.is_some() {
-                        c.finish_line();
-                    }
+                    let (name, components, tuples, scalar) =
+                        vtk_legacy::field_array(&mut c, binary.is_some(), "an array type", "type")?;
                     let values = c.values(components * tuples, scalar, binary)?;
                     if point_data && tuples == npoints {
                         attributes.push(Attribute {
@@ -212,14 +88,7 @@ pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
                     }
                 }
             }
-            "METADATA" => {
-                // Skip to the blank line that ends the metadata block.
-                loop {
-                    if c.pos >= c.bytes.len() || c.line()?.trim().is_empty() {
-                        break;
-                    }
-                }
-            }
+            "METADATA" => vtk_legacy::skip_metadata(&mut c)?,
             other => return Err(c.error(format!("unknown section {other:?}"))),
         }
     }
@@ -555,6 +424,45 @@ impl Scanner {
     }
 }
 
+impl Tokens for Scanner {
+    type Error = ScanError;
+
+    fn next_word(&mut self, _expected: &str) -> Scan<String> {
+        self.word()
+    }
+
+    fn next_number<T: std::str::FromStr>(&mut self, _expected: &str) -> Scan<T> {
+        self.number()
+    }
+
+    fn next_line(&mut self) -> Scan<String> {
+        self.line()
+    }
+
+    fn is_eof(&mut self) -> Scan<bool> {
+        Ok(self.peek()?.is_none())
+    }
+
+    fn block_start(&mut self, binary: bool) -> Scan<()> {
+        if binary {
+            self.finish_line()?;
+        }
+        Ok(())
+    }
+
+    fn skip_block(&mut self, count: usize, scalar: Scalar, binary: bool) -> Scan<()> {
+        self.skip_values(count, scalar, binary)
+    }
+
+    fn fail(&self, _message: String) -> ScanError {
+        ScanError::Unstreamable
+    }
+
+    fn not_vtk(&self, _first_line: &str) -> ScanError {
+        ScanError::Unstreamable
+    }
+}
+
 /// Finds where the points and the `POINT_DATA` arrays of a legacy VTK file are, following
 /// the grammar of the whole-file reader but reading no value: binary blocks are seeked
 /// over, ASCII ones skipped token by token. `Ok(None)` for what it does not follow (an
@@ -582,22 +490,8 @@ fn scan_layout(path: &Path) -> Scan<Layout> {
         pos: 0,
         line: 1,
     };
-    let version = s.line()?;
-    if !version.starts_with("# vtk DataFile Version") {
-        return Err(Unstreamable.into());
-    }
-    let new_cells = version
-        .rsplit(' ')
-        .next()
-        .and_then(|v| v.parse::<f32>().ok())
-        .is_some_and(|v| v >= 5.0);
-    s.line()?; // title
-    let binary = match s.line()?.trim().to_ascii_uppercase().as_str() {
-        "BINARY" => true,
-        "ASCII" => false,
-        _ => return Err(Unstreamable.into()),
-    };
-    let scalar_of = |ty: &str| scalar_type(ty).ok_or(Unstreamable);
+    let header = vtk_legacy::header(&mut s)?;
+    let (new_cells, binary) = (header.new_cells, header.binary);
     let mut points: Option<(usize, Block)> = None;
     let mut arrays = Vec::new();
     let mut point_data = false;
@@ -608,8 +502,7 @@ fn scan_layout(path: &Path) -> Scan<Layout> {
                 s.word()?;
             }
             "POINTS" => {
-                let n: usize = s.number()?;
-                let scalar = scalar_of(&s.word()?)?;
+                let (n, scalar) = vtk_legacy::points(&mut s, "the point type")?;
                 if points.is_some() {
                     return Err(Unstreamable.into());
                 }
@@ -622,35 +515,10 @@ fn scan_layout(path: &Path) -> Scan<Layout> {
                 points = Some((n, block));
             }
             "VERTICES" | "LINES" | "POLYGONS" | "TRIANGLE_STRIPS" | "CELLS" => {
-                let n: usize = s.number()?;
-                let size: usize = s.number()?;
-                if new_cells {
-                    for _ in 0..2 {
-                        let part = s.word()?;
-                        let scalar = scalar_of(&s.word()?)?;
-                        if binary {
-                            s.finish_line()?;
-                        }
-                        let count = if part.eq_ignore_ascii_case("OFFSETS") {
-                            n
-                        } else {
-                            size
-                        };
-                        s.skip_values(count, scalar, binary)?;
-                    }
-                } else {
-                    if binary {
-                        s.finish_line()?;
-                    }
-                    s.skip_values(size, Scalar::I32, binary)?;
-                }
+                vtk_legacy::skip_cells(&mut s, new_cells, binary)?;
             }
             "CELL_TYPES" => {
-                let n: usize = s.number()?;
-                if binary {
-                    s.finish_line()?;
-                }
-                s.skip_values(n, Scalar::I32, binary)?;
+                vtk_legacy::skip_cell_types(&mut s, binary)?;
             }
             "POINT_DATA" => {
                 let n: usize = s.number()?;
@@ -663,36 +531,8 @@ fn scan_layout(path: &Path) -> Scan<Layout> {
                 let _n: usize = s.number()?;
                 point_data = false;
             }
-            "SCALARS"
-            | "VECTORS"
-            | "NORMALS"
-            | "TENSORS"
-            | "COLOR_SCALARS"
-            | "TEXTURE_COORDINATES" => {
-                let name = s.word()?;
-                let (components, scalar) = match keyword.as_str() {
-                    "SCALARS" => {
-                        let scalar = scalar_of(&s.word()?)?;
-                        let rest = s.line()?.trim().to_string();
-                        let comps = if rest.is_empty() {
-                            1
-                        } else {
-                            rest.parse().map_err(|_| Unstreamable)?
-                        };
-                        if !s.word()?.eq_ignore_ascii_case("LOOKUP_TABLE") {
-                            return Err(Unstreamable.into());
-                        }
-                        s.word()?;
-                        (comps, scalar)
-                    }
-                    "VECTORS" | "NORMALS" => (3, scalar_of(&s.word()?)?),
-                    "TENSORS" => (9, scalar_of(&s.word()?)?),
-                    "COLOR_SCALARS" => (s.number()?, Scalar::U8),
-                    _ => {
-                        let d: usize = s.number()?;
-                        (d, scalar_of(&s.word()?)?)
-                    }
-                };
+            k if vtk_legacy::is_attribute(k) => {
+                let (name, components, scalar) = vtk_legacy::attribute(&mut s, &keyword)?;
                 if !point_data || components == 0 {
                     return Err(Unstreamable.into());
                 }
@@ -706,16 +546,10 @@ fn scan_layout(path: &Path) -> Scan<Layout> {
                 arrays.push((AttributeLayout { name, components }, block));
             }
             "FIELD" => {
-                s.word()?;
-                let n: usize = s.number()?;
+                let n = vtk_legacy::field(&mut s)?;
                 for _ in 0..n {
-                    let name = s.word()?;
-                    let components: usize = s.number()?;
-                    let tuples: usize = s.number()?;
-                    let scalar = scalar_of(&s.word()?)?;
-                    if binary {
-                        s.finish_line()?;
-                    }
+                    let (name, components, tuples, scalar) =
+                        vtk_legacy::field_array(&mut s, binary, "an array type", "type")?;
                     let block = s.block(scalar);
                     let values = components.checked_mul(tuples).ok_or(Unstreamable)?;
                     s.skip_values(values, scalar, binary)?;
@@ -727,11 +561,7 @@ fn scan_layout(path: &Path) -> Scan<Layout> {
                     }
                 }
             }
-            "METADATA" => loop {
-                if s.peek()?.is_none() || s.line()?.trim().is_empty() {
-                    break;
-                }
-            },
+            "METADATA" => vtk_legacy::skip_metadata(&mut s)?,
             _ => return Err(Unstreamable.into()),
         }
     }
