@@ -73,6 +73,15 @@ pub enum Error {
         /// What was wrong.
         message: String,
     },
+    /// A particle whose position the lattice cannot hold: not finite, or more than 2^23
+    /// cells from the origin for the cell size the particle radius gives.
+    #[error("{}{message}", path.as_ref().map(|p| format!("{}: ", p.display())).unwrap_or_default())]
+    ParticleOutOfRange {
+        /// The input, when the particles came from a file.
+        path: Option<PathBuf>,
+        /// Which particle, where, and why.
+        message: String,
+    },
     /// The input holds no particles.
     #[error("{path}: the file holds no particles")]
     EmptyInput {

@@ -5,7 +5,7 @@ use crate::archive::{ArchiveFrame, ArchiveOptions, ArchiveWriter};
 use crate::attributes::{select_attributes, AttributeSelection};
 use crate::cancel::CancelToken;
 use crate::error::{Error, Result};
-use crate::io::mesh::{write_sequence_gltf, write_surface, MeshWriteOptions};
+use crate::io::mesh::{write_sequence_gltf, write_surface, MeshFormat, MeshWriteOptions};
 use crate::io::particles::{read_particles, ParticleFormat};
 use crate::io::particles::{MappedXyz, Particles, SpooledParticles};
 use crate::mesh::TriMesh;
@@ -104,6 +104,15 @@ pub fn reconstruct_file(
 ) -> Result<FrameReport> {
     on_stage("read");
     let clock = Instant::now();
+    if input.is_dir() {
+        return Err(Error::io(
+            input,
+            std::io::Error::new(
+                std::io::ErrorKind::IsADirectory,
+                "is a directory, not a particle file",
+            ),
+        ));
+    }
     // Raw .xyz is mapped window by window; BGEO, PLY (binary or ASCII) with its vertices
     // first, and VTK whose sections a scan can follow are streamed once, positions and
     // the selected attributes, into temporary files that are then mapped the same way;
@@ -158,10 +167,21 @@ pub fn reconstruct_file(
         let progress = std::cell::RefCell::new(&mut *on_stage);
         let progress = |stage: &str| (progress.borrow_mut())(stage);
         match positions {
-            Input::Mapped(file) => reconstruct_source(file, options, &progress, cancel)?,
-            Input::Spooled(file) => reconstruct_source(file, options, &progress, cancel)?,
-            Input::Parsed(particles) => reconstruct_source(particles, options, &progress, cancel)?,
+            Input::Mapped(file) => reconstruct_source(file, options, &progress, cancel),
+            Input::Spooled(file) => reconstruct_source(file, options, &progress, cancel),
+            Input::Parsed(particles) => reconstruct_source(particles, options, &progress, cancel),
         }
+        .map_err(|e| match e {
+            // The particles came from this file.
+            Error::ParticleOutOfRange {
+                path: None,
+                message,
+            } => Error::ParticleOutOfRange {
+                path: Some(input.to_path_buf()),
+                message,
+            },
+            e => e,
+        })?
     };
     cancel.check()?;
     on_stage("write");
@@ -269,6 +289,18 @@ pub fn run_frames(
     on_stage: &mut dyn FnMut(&str),
     on_done: &mut dyn FnMut(&FrameReport),
 ) -> Result<Vec<FrameReport>> {
+    // Every output's format is known before any work.
+    for (_, out) in plan {
+        if !is_archive(out) {
+            MeshFormat::from_path(out).map_err(|_| Error::UnsupportedFormat {
+                path: out.clone(),
+                message: format!(
+                    "unknown output extension {:?}; supported: .glb, .gltf, .ply, .obj, .vtk, .mseq (archive)",
+                    out.extension().unwrap_or_default().to_string_lossy()
+                ),
+            })?;
+        }
+    }
     // A .mseq output collects every frame: appended to an existing archive, else new.
     let mut archive = match plan.first() {
         Some((_, out)) if is_archive(out) => {

@@ -73,10 +73,10 @@ enum ArchiveCommand {
         #[arg(short, long)]
         output: PathBuf,
         /// Error bound, world units.
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true)]
         error_bound_world: f64,
         /// Error bound of the meshes' vertex attributes, in each attribute's own units.
-        #[arg(long, default_value_t = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND)]
+        #[arg(allow_negative_numbers = true, long, default_value_t = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND)]
         attribute_error_bound: f64,
         /// First frame (inclusive).
         #[arg(long, allow_negative_numbers = true)]
@@ -95,13 +95,18 @@ struct ReconstructArgs {
     #[arg(short, long)]
     output: String,
     /// Particle radius r, world units (half the rest spacing).
-    #[arg(short = 'r', long)]
+    #[arg(allow_negative_numbers = true, short = 'r', long)]
     particle_radius: f32,
     /// Influence radius R, multiples of r.
-    #[arg(long, default_value_t = 4.0)]
+    #[arg(allow_negative_numbers = true, long, default_value_t = 4.0)]
     influence_radius: f32,
     /// Marching-cubes cell size h, multiples of r.
-    #[arg(short = 'c', long, default_value_t = 1.0)]
+    #[arg(
+        allow_negative_numbers = true,
+        short = 'c',
+        long,
+        default_value_t = 1.0
+    )]
     cell_size: f32,
     /// Lower eigenvalue threshold t_low of the Solenthaler concavity factor.
     #[arg(long, default_value_t = 0.4)]
@@ -120,14 +125,14 @@ struct ReconstructArgs {
     decimate: String,
     /// Error bound of decimation, multiples of r (RMS distance of a collapse to the
     /// original planes); with a fraction, whichever is reached first stops it.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     decimate_error: Option<f32>,
     /// Loop subdivision steps after decimation (0 = off).
     #[arg(long, default_value_t = 1)]
     subdivide: u32,
     /// Coverage radius c, multiples of r: particles the paper's surface would leave
     /// outside are enclosed in a ball of c·r (0 = off, the pure Solenthaler field).
-    #[arg(long, default_value_t = 0.9)]
+    #[arg(allow_negative_numbers = true, long, default_value_t = 0.9)]
     particle_coverage: f32,
     /// Iso-surface offset, multiples of r: extract where phi = offset·r, moving the surface
     /// outwards by about that much (0 = the paper's surface; 0.133 removes its inward
@@ -166,11 +171,11 @@ struct ReconstructArgs {
     #[arg(long)]
     stats: Option<PathBuf>,
     /// Error bound of a `.mseq` output, multiples of r (each coordinate within it).
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(allow_negative_numbers = true, long, default_value_t = 0.01)]
     error_bound: f64,
     /// Error bound of the attributes in a `.mseq` output, in each attribute's own units
     /// (m/s for a velocity): every value within it.
-    #[arg(long, default_value_t = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND)]
+    #[arg(allow_negative_numbers = true, long, default_value_t = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND)]
     attribute_error_bound: f64,
     /// Playback rate of a sequence written into one .glb/.gltf, frames per second.
     #[arg(long, default_value_t = 24.0)]

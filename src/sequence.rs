@@ -28,9 +28,9 @@ pub fn is_pattern(path: &str) -> bool {
     path.contains(PLACEHOLDER)
 }
 
-/// Replaces the placeholder of `pattern` with `label`.
+/// Replaces every placeholder of `pattern` with `label`.
 pub fn substitute(pattern: &str, label: &str) -> PathBuf {
-    PathBuf::from(pattern.replacen(PLACEHOLDER, label, 1))
+    PathBuf::from(pattern.replace(PLACEHOLDER, label))
 }
 
 /// The frames of an input pattern, in increasing frame order. With `start`/`end`
@@ -126,6 +126,14 @@ pub fn frames(pattern: &str, start: Option<i64>, end: Option<i64>) -> Result<Vec
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_placeholder_of_an_output_pattern_is_replaced() {
+        assert_eq!(
+            substitute("out/{}/frame_{}.ply", "0042"),
+            PathBuf::from("out/0042/frame_0042.ply")
+        );
+    }
 
     #[test]
     fn scan_sorts_numerically_and_keeps_padding() {

@@ -348,3 +348,79 @@ fn an_archived_frame_extracts_to_the_mesh_reconstruct_writes() {
     let (va, vb) = (a.signed_volume(), b.signed_volume());
     assert!((va - vb).abs() <= 1e-3 * va.abs(), "volumes {va} and {vb}");
 }
+
+/// What a new user gets wrong, and what the CLI answers: (arguments, exit code, text the
+/// error must hold, text it must not hold). No output is written in any case.
+#[test]
+fn new_user_errors_name_the_real_cause() {
+    let dir = tempfile::tempdir().unwrap();
+    let sphere = dataset("analytic/sphere.xyz");
+    let sphere = sphere.to_str().unwrap();
+    let folder = dir.path().join("frames.xyz");
+    std::fs::create_dir(&folder).unwrap();
+    let folder = folder.to_str().unwrap();
+    let out = dir.path().join("s.ply");
+    let out = out.to_str().unwrap();
+    let foo = dir.path().join("s.foo");
+    let foo = foo.to_str().unwrap();
+    let cases: [(&[&str], i32, &str, &str); 5] = [
+        // A negative radius is a bad value, not a stray argument.
+        (
+            &[sphere, "-r", "-1", "-o", out],
+            1,
+            "--particle-radius: must be a finite number > 0",
+            "-- -1",
+        ),
+        // A radius far too small for the coordinates blames the radius, not --cell-size.
+        (
+            &[sphere, "-r", "1e-9", "-o", out],
+            1,
+            "the particle radius is too small",
+            "--cell-size",
+        ),
+        (
+            &[folder, "-r", "0.025", "-o", out],
+            1,
+            "is a directory",
+            "byte offset",
+        ),
+        // An unknown output extension fails before any work and lists .mseq.
+        (
+            &[sphere, "-r", "0.025", "-o", foo],
+            1,
+            ".mseq",
+            "invalid option",
+        ),
+        // A negative iso offset is allowed.
+        (
+            &[
+                sphere,
+                "-r",
+                "0.025",
+                "--iso-offset",
+                "-0.1",
+                "-q",
+                "-o",
+                out,
+            ],
+            0,
+            "",
+            "error",
+        ),
+    ];
+    for (args, code, wanted, unwanted) in cases {
+        let result = meniscus().arg("reconstruct").args(args).output().unwrap();
+        let err = String::from_utf8_lossy(&result.stderr);
+        assert_eq!(result.status.code(), Some(code), "{args:?}: {err}");
+        assert!(err.contains(wanted), "{args:?}: {err}");
+        assert!(!err.contains(unwanted), "{args:?}: {err}");
+        if code != 0 {
+            assert!(
+                !Path::new(out).exists() && !Path::new(foo).exists(),
+                "{args:?}"
+            );
+        } else {
+            std::fs::remove_file(out).unwrap();
+        }
+    }
+}

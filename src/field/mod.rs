@@ -269,11 +269,18 @@ pub(crate) fn check_positions_from(
     }) {
         let p = positions[i];
         let i = first + i;
-        return Err(Error::InvalidOption {
-            option: "--cell-size",
-            message: format!(
-                "particle {i} at {p} is not finite or lies more than 2^23 cells from the origin"
-            ),
+        let h = options.cell_size_world();
+        return Err(Error::ParticleOutOfRange {
+            path: None,
+            message: if p.is_finite() {
+                format!(
+                    "particle {i} at {p} lies {:.3e} cells of {h:.3e} (the cell size, from the particle radius {}) from the origin; the lattice reaches 2^23 cells: the particle radius is too small for these coordinates, or the coordinates are not in the radius's units",
+                    (p.as_dvec3() * inv_h).abs().max_element(),
+                    options.particle_radius
+                )
+            } else {
+                format!("particle {i} has a non-finite coordinate {p}")
+            },
         });
     }
     Ok(())

@@ -123,7 +123,17 @@ impl MappedXyz {
     /// Opens `path` and checks its size (a whole number of 12-byte records, not empty).
     pub fn open(path: &Path) -> Result<Self> {
         let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-        let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+        let metadata = file.metadata().map_err(|e| Error::io(path, e))?;
+        if metadata.is_dir() {
+            return Err(Error::io(
+                path,
+                std::io::Error::new(
+                    std::io::ErrorKind::IsADirectory,
+                    "is a directory, not a particle file",
+                ),
+            ));
+        }
+        let len = metadata.len();
         if len == 0 {
             return Err(Error::EmptyInput {
                 path: path.to_path_buf(),
