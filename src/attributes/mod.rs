@@ -1,0 +1,244 @@
+//! Particle attributes carried to the surface (velocity for motion blur, density, any
+//! scalar or vector the input holds).
+//!
+//! **Input:** the particles' selected attributes (the payload the tile engine carries
+//! beside the positions) and the final surface. **Output:** one value per surface vertex,
+//! the normalized kernel-weighted mean of the particles within the influence radius `R`
+//! of the vertex, with the field's kernel `k(s) = max(0, (1 − s²)³)`, `s = |x − x_i| / R`:
+//!
+//! ```text
+//! a(x) = Σ_i k(|x − x_i| / R) · a_i  /  Σ_i k(|x − x_i| / R)
+//! ```
+//!
+//! evaluated at the **final** vertex positions (after decimation and subdivision), so the
+//! value is a function of the position alone: the particles within `R` are summed in the
+//! engine's canonical order (home half-block, input index) in f64, the same in every
+//! tiling and for every thread count, bit for bit. A vertex with no particle within `R`
+//! takes the value of its nearest particle (the lowest input index on a tie). An isolated
+//! particle's sphere takes its particle's value.
+//!
+//! A constant attribute is reproduced exactly (to f32 rounding); a linear one,
+//! `a(x) = A·x + b`, comes out as `A·x̄ + b` with `x̄` the kernel-weighted mean position,
+//! which lies within `R` of the vertex: the error is at most `‖A‖·R`.
+
+mod transfer;
+
+pub(crate) use transfer::transfer;
+
+/// Per-item values of one named attribute: per particle, per mesh vertex or per sphere
+/// instance, `components` floats each.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Attribute {
+    /// Name as in the input file (`velocity`, `density`, ...).
+    pub name: String,
+    /// Components per item (1 for scalars, 3 for vectors).
+    pub components: usize,
+    /// `components × items` values, item-major.
+    pub values: Vec<f32>,
+}
+
+impl Attribute {
+    /// Number of items (particles, vertices or instances) the attribute holds.
+    pub fn len(&self) -> usize {
+        self.values.len().checked_div(self.components).unwrap_or(0)
+    }
+
+    /// True when the attribute holds no item.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The values of item `i`.
+    pub fn item(&self, i: usize) -> &[f32] {
+        &self.values[i * self.components..(i + 1) * self.components]
+    }
+}
+
+/// Name and size of one attribute of a payload.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct AttributeLayout {
+    /// Name as in the input.
+    pub name: String,
+    /// Components per item.
+    pub components: usize,
+}
+
+impl AttributeLayout {
+    /// The layout of `attribute`.
+    pub fn of(attribute: &Attribute) -> Self {
+        AttributeLayout {
+            name: attribute.name.clone(),
+            components: attribute.components,
+        }
+    }
+}
+
+/// Floats per payload row of `layout`.
+pub fn payload_width(layout: &[AttributeLayout]) -> usize {
+    layout.iter().map(|a| a.components).sum()
+}
+
+/// Which point attributes of the input a run carries to the surface.
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum AttributeSelection {
+    /// The velocity, when the input has one (the first attribute named `v`, `vel` or
+    /// `velocity`, in any case), else none. The default.
+    #[default]
+    Velocity,
+    /// None: positions only.
+    None,
+    /// Every attribute the input holds.
+    All,
+    /// These, by name (exact, else the one name that matches ignoring case), in this order.
+    Names(Vec<String>),
+}
+
+impl std::str::FromStr for AttributeSelection {
+    type Err = String;
+    /// `none`, `all`, or a comma-separated list of names.
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s.trim() {
+            "none" => Ok(AttributeSelection::None),
+            "all" => Ok(AttributeSelection::All),
+            "" => Err("an empty list of attributes (use none)".into()),
+            list => {
+                let names: Vec<String> = list.split(',').map(|n| n.trim().to_string()).collect();
+                if names.iter().any(String::is_empty) {
+                    return Err(format!("an empty name in the list {list:?}"));
+                }
+                Ok(AttributeSelection::Names(names))
+            }
+        }
+    }
+}
+
+impl AttributeSelection {
+    /// True when no attribute can be selected, whatever the input holds.
+    pub fn is_none(&self) -> bool {
+        *self == AttributeSelection::None
+    }
+}
+
+/// Names the default selection takes as the velocity (compared ignoring case).
+pub const VELOCITY_NAMES: [&str; 3] = ["v", "vel", "velocity"];
+
+/// The indices into `available` (an input's attribute names, in file order) of the
+/// attributes `selection` asks for, in its order. A name the input lacks (or selected
+/// twice) is an [`crate::Error::Attribute`] naming `path` and listing the names it has.
+/// The one rule for whole-file and streaming readers.
+pub fn resolve_selection(
+    path: &std::path::Path,
+    available: &[&str],
+    selection: &AttributeSelection,
+) -> crate::Result<Vec<usize>> {
+    Ok(match selection {
+        AttributeSelection::None => Vec::new(),
+        AttributeSelection::All => (0..available.len()).collect(),
+        AttributeSelection::Velocity => available
+            .iter()
+            .position(|n| VELOCITY_NAMES.iter().any(|v| n.eq_ignore_ascii_case(v)))
+            .into_iter()
+            .collect(),
+        AttributeSelection::Names(names) => {
+            let mut wanted = Vec::with_capacity(names.len());
+            for name in names {
+                let exact = available.iter().position(|n| *n == name.as_str());
+                let folded: Vec<usize> = (0..available.len())
+                    .filter(|&k| available[k].eq_ignore_ascii_case(name))
+                    .collect();
+                let k = match (exact, folded.as_slice()) {
+                    (Some(k), _) => k,
+                    (None, [k]) => *k,
+                    _ => {
+                        return Err(crate::Error::Attribute {
+                            path: path.to_path_buf(),
+                            attribute: name.clone(),
+                            message: if available.is_empty() {
+                                "the input holds no point attributes".into()
+                            } else {
+                                format!("not in the input, which has: {}", available.join(", "))
+                            },
+                        })
+                    }
+                };
+                if wanted.contains(&k) {
+                    return Err(crate::Error::Attribute {
+                        path: path.to_path_buf(),
+                        attribute: name.clone(),
+                        message: "selected twice".into(),
+                    });
+                }
+                wanted.push(k);
+            }
+            wanted
+        }
+    })
+}
+
+/// Keeps the attributes of `particles` that `selection` asks for, in its order, after
+/// checking each: `components × particles` values, all finite. `path` names the input in
+/// errors. A name the input lacks is an error listing the names it has
+/// ([`resolve_selection`]).
+pub fn select_attributes(
+    path: &std::path::Path,
+    mut particles: crate::io::particles::Particles,
+    selection: &AttributeSelection,
+) -> crate::Result<crate::io::particles::Particles> {
+    let available: Vec<&str> = particles
+        .attributes
+        .iter()
+        .map(|a| a.name.as_str())
+        .collect();
+    let wanted = resolve_selection(path, &available, selection)?;
+    let count = particles.positions.len();
+    let mut columns: Vec<Option<Attribute>> = std::mem::take(&mut particles.attributes)
+        .into_iter()
+        .map(Some)
+        .collect();
+    for k in wanted {
+        let a = columns[k].take().expect("each selected once");
+        check_attribute(path, &a, count)?;
+        particles.attributes.push(a);
+    }
+    Ok(particles)
+}
+
+/// The error for the non-finite `value` of `attribute` at `particle` of `path`, as
+/// [`check_attribute`] reports it.
+pub fn non_finite_attribute(
+    path: &std::path::Path,
+    attribute: &str,
+    particle: usize,
+    value: f32,
+) -> crate::Error {
+    crate::Error::Attribute {
+        path: path.to_path_buf(),
+        attribute: attribute.to_string(),
+        message: format!("particle {particle} has a non-finite value {value}"),
+    }
+}
+
+/// Checks that `a` holds `count` items of at least one component, all finite.
+pub fn check_attribute(path: &std::path::Path, a: &Attribute, count: usize) -> crate::Result<()> {
+    let fail = |message: String| crate::Error::Attribute {
+        path: path.to_path_buf(),
+        attribute: a.name.clone(),
+        message,
+    };
+    if a.components == 0 || a.values.len() != a.components * count {
+        return Err(fail(format!(
+            "{} values of {} components for {count} particles",
+            a.values.len(),
+            a.components
+        )));
+    }
+    if let Some(v) = a.values.iter().position(|v| !v.is_finite()) {
+        return Err(non_finite_attribute(
+            path,
+            &a.name,
+            v / a.components,
+            a.values[v],
+        ));
+    }
+    Ok(())
+}
