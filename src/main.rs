@@ -291,6 +291,9 @@ fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<()
             for (n, why) in &v.damaged {
                 println!("frame {n}: DAMAGED: {why}");
             }
+            for why in &v.damage {
+                println!("DAMAGED: {why}");
+            }
             println!(
                 "{} frames good, {} damaged{}{}",
                 v.good.len(),
@@ -309,11 +312,12 @@ fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<()
                     String::new()
                 }
             );
-            if !v.damaged.is_empty() {
+            if !v.is_clean() {
                 return Err(format!(
-                    "{}: {} damaged frame(s)",
+                    "{}: damaged: {} damaged frame(s), {} other problem(s)",
                     file.display(),
-                    v.damaged.len()
+                    v.damaged.len(),
+                    v.damage.len()
                 ));
             }
         }

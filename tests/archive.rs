@@ -349,7 +349,15 @@ fn truncation_and_bit_flips_are_detected() {
             assert!(r.recovered_by_scan());
             assert_eq!(r.frames().len(), k, "cut at {cut}");
             let report = r.verify();
-            assert!(report.damaged.is_empty() && report.good.len() == k);
+            assert_eq!(report.good.len(), k);
+            // The missing index is damage; a record cut in its payload names its frame.
+            assert!(!report.is_clean(), "cut at {cut}");
+            let cut_frame = report.damaged.iter().map(|d| d.0).collect::<Vec<_>>();
+            if cut == offset as usize + 200 {
+                assert_eq!(cut_frame, [frames[k].0], "cut at {cut}");
+            } else {
+                assert!(cut_frame.is_empty(), "cut at {cut}");
+            }
         }
     }
     // A bit flip in each frame's payload: that frame is reported by number, the others
@@ -378,7 +386,10 @@ fn truncation_and_bit_flips_are_detected() {
     damaged[offsets[2] as usize + 5] ^= 1;
     std::fs::write(&flip_path, &damaged).unwrap();
     let r = ArchiveReader::open(&flip_path).unwrap();
-    assert!(r.frames().len() >= 2);
+    assert_eq!(r.frames().len(), 2);
+    let report = r.verify();
+    assert_eq!(report.damaged.len(), 1);
+    assert_eq!(report.damaged[0].0, frames[2].0);
     // Not an archive at all.
     std::fs::write(&flip_path, b"hello").unwrap();
     assert!(ArchiveReader::open(&flip_path).is_err());
@@ -1060,4 +1071,317 @@ fn velocities_of_the_shipped_frame_25() {
         8.0 * (sizes[1] - sizes[0]) as f64 / vertices as f64
     );
     assert!(sizes[1] > sizes[0]);
+}
+
+/// The frame as `archive extract` writes it.
+fn extracted(r: &ArchiveReader, number: i64, dir: &Path) -> Vec<u8> {
+    let path = dir.join(format!("x{number}.obj"));
+    let surface = r.read_surface(number).unwrap();
+    meniscus::io::mesh::write_surface(&path, &surface, &Default::default()).unwrap();
+    std::fs::read(&path).unwrap()
+}
+
+#[test]
+fn a_damaged_record_header_costs_only_its_frame_and_appends_lose_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mseq");
+    let frames = frames();
+    write_archive(&path, &frames[..5]);
+    let r = ArchiveReader::open(&path).unwrap();
+    let before: Vec<Vec<u8>> = frames[..5]
+        .iter()
+        .map(|(n, _)| extracted(&r, *n, dir.path()))
+        .collect();
+    let third = r.frames()[2].clone();
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes[third.offset as usize + 17] ^= 0x08; // the triangle count
+    std::fs::write(&path, &bytes).unwrap();
+    let check = |expect_new: bool| {
+        let r = ArchiveReader::open(&path).unwrap();
+        for (k, (n, _)) in frames[..5].iter().enumerate() {
+            if k == 2 {
+                let err = r.read_frame(*n).unwrap_err().to_string();
+                assert!(
+                    err.contains(&format!("frame {n}")) && err.contains("header"),
+                    "{err}"
+                );
+            } else {
+                assert_eq!(extracted(&r, *n, dir.path()), before[k], "frame {n}");
+            }
+        }
+        let report = r.verify();
+        assert!(!report.is_clean());
+        assert_eq!(report.damaged.len(), 1, "{report:?}");
+        assert_eq!(report.damaged[0].0, third.number);
+        assert_eq!(report.good.len(), if expect_new { 5 } else { 4 });
+        r
+    };
+    check(false);
+    // Appending goes after the last record and keeps the damaged one where it is.
+    let mut w = ArchiveWriter::open_append(&path, &ArchiveOptions::new(BOUND)).unwrap();
+    w.append_frame(frames[5].0, &archive_frame(&frames[5].1))
+        .unwrap();
+    w.finish().unwrap();
+    let r = check(true);
+    let mut alone = dir.path().join("alone.mseq");
+    write_archive(&alone, &frames[5..]);
+    let a = ArchiveReader::open(&alone).unwrap();
+    assert_eq!(
+        extracted(&r, frames[5].0, dir.path()),
+        extracted(&a, frames[5].0, dir.path())
+    );
+    // Without the index the scan finds the records after the damaged one.
+    let mut cut = std::fs::read(&path).unwrap();
+    cut.truncate(
+        r.frames()
+            .last()
+            .map(|f| f.offset + 48 + f.payload_bytes)
+            .unwrap() as usize,
+    );
+    alone.set_file_name("noindex.mseq");
+    std::fs::write(&alone, &cut).unwrap();
+    let s = ArchiveReader::open(&alone).unwrap();
+    assert!(s.recovered_by_scan());
+    assert_eq!(s.frames().len(), 5);
+    let report = s.verify();
+    assert_eq!(report.good.len(), 5);
+    assert!(
+        report.damage.iter().any(|d| d.contains("damaged record")),
+        "{report:?}"
+    );
+    // The CLI exits non-zero.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_meniscus"))
+        .args(["archive", "verify"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains(&format!("frame {}: DAMAGED", third.number))
+    );
+}
+
+#[test]
+fn truncation_anywhere_is_damage_and_appends_keep_every_complete_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mseq");
+    let frames = frames();
+    write_archive(&path, &frames[..4]);
+    let bytes = std::fs::read(&path).unwrap();
+    let r = ArchiveReader::open(&path).unwrap();
+    let infos = r.frames().to_vec();
+    let before: Vec<Vec<u8>> = infos
+        .iter()
+        .map(|f| extracted(&r, f.number, dir.path()))
+        .collect();
+    let cut_path = dir.path().join("cut.mseq");
+    for sixteenth in 1..16 {
+        let cut = bytes.len() * sixteenth / 16;
+        std::fs::write(&cut_path, &bytes[..cut]).unwrap();
+        let r = ArchiveReader::open(&cut_path).unwrap();
+        assert!(!r.verify().is_clean(), "cut at {cut}");
+        let complete: Vec<usize> = (0..infos.len())
+            .filter(|&k| (infos[k].offset + 48 + infos[k].payload_bytes) as usize <= cut)
+            .collect();
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_meniscus"))
+            .args(["archive", "verify"])
+            .arg(&cut_path)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "cut at {cut}");
+        let mut w = ArchiveWriter::open_append(&cut_path, &ArchiveOptions::new(BOUND)).unwrap();
+        w.append_frame(frames[5].0, &archive_frame(&frames[5].1))
+            .unwrap();
+        w.finish().unwrap();
+        let r = ArchiveReader::open(&cut_path).unwrap();
+        let report = r.verify();
+        assert!(report.is_clean(), "cut at {cut}: {report:?}");
+        assert_eq!(report.good.len(), complete.len() + 1, "cut at {cut}");
+        for &k in &complete {
+            assert_eq!(extracted(&r, infos[k].number, dir.path()), before[k]);
+        }
+    }
+}
+
+#[test]
+fn a_record_length_that_wraps_the_scan_position_does_not_loop() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("tiny.mseq");
+    let mut bytes = Vec::new();
+    bytes.extend_from_slice(b"MNSCMSEQ");
+    bytes.extend_from_slice(&3u32.to_le_bytes());
+    bytes.extend_from_slice(&0u32.to_le_bytes());
+    let mut h = Vec::new();
+    h.extend_from_slice(b"FRAM");
+    h.extend_from_slice(&0i64.to_le_bytes());
+    h.extend_from_slice(&0u32.to_le_bytes());
+    h.extend_from_slice(&0u32.to_le_bytes());
+    h.extend_from_slice(&1e-3f64.to_le_bytes());
+    // 16 + 48 + this = 16 modulo 2^64: the next record would start where this one does.
+    h.extend_from_slice(&(u64::MAX - 47).to_le_bytes());
+    h.extend_from_slice(&0u32.to_le_bytes());
+    h.extend_from_slice(&0u32.to_le_bytes());
+    let crc = crc32fast::hash(&h);
+    h.extend_from_slice(&crc.to_le_bytes());
+    bytes.extend_from_slice(&h);
+    assert_eq!(bytes.len(), 64);
+    std::fs::write(&path, &bytes).unwrap();
+    let r = ArchiveReader::open(&path).unwrap();
+    assert!(r.frames().is_empty());
+    let report = r.verify();
+    assert!(!report.is_clean());
+    assert_eq!(report.damaged.len(), 1, "{report:?}");
+    assert!(ArchiveWriter::open_append(&path, &ArchiveOptions::new(BOUND)).is_ok());
+}
+
+/// An archive of one record (no index) with a hand-made payload and header fields.
+fn hostile_archive(
+    dir: &Path,
+    payload: &[u8],
+    vertices: u32,
+    triangles: u32,
+    step: f64,
+) -> PathBuf {
+    let mut bytes = Vec::new();
+    bytes.extend_from_slice(b"MNSCMSEQ");
+    bytes.extend_from_slice(&3u32.to_le_bytes());
+    bytes.extend_from_slice(&0u32.to_le_bytes());
+    let mut h = Vec::new();
+    h.extend_from_slice(b"FRAM");
+    h.extend_from_slice(&0i64.to_le_bytes());
+    h.extend_from_slice(&vertices.to_le_bytes());
+    h.extend_from_slice(&triangles.to_le_bytes());
+    h.extend_from_slice(&step.to_le_bytes());
+    h.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+    h.extend_from_slice(&crc32fast::hash(payload).to_le_bytes());
+    h.extend_from_slice(&0u32.to_le_bytes());
+    let crc = crc32fast::hash(&h);
+    h.extend_from_slice(&crc.to_le_bytes());
+    bytes.extend_from_slice(&h);
+    bytes.extend_from_slice(payload);
+    let path = dir.join("hostile.mseq");
+    std::fs::write(&path, &bytes).unwrap();
+    path
+}
+
+fn varints(values: &[u64]) -> Vec<u8> {
+    let mut out = Vec::new();
+    for &v in values {
+        let mut v = v;
+        while v >= 0x80 {
+            out.push((v as u8) | 0x80);
+            v >>= 7;
+        }
+        out.push(v as u8);
+    }
+    out
+}
+
+/// The frame is refused as damaged, by `read_frame` and `verify`, with `what` in the
+/// message.
+fn assert_refused(path: &Path, what: &str) {
+    let r = ArchiveReader::open(path).unwrap();
+    let err = r.read_frame(0).unwrap_err().to_string();
+    assert!(err.contains("frame 0") && err.contains(what), "{err}");
+    let report = r.verify();
+    assert_eq!(report.damaged.len(), 1, "{report:?}");
+    assert!(report.good.is_empty());
+}
+
+#[test]
+fn hostile_record_headers_are_errors_before_any_allocation() {
+    let dir = tempfile::tempdir().unwrap();
+    // A real frame with its step replaced: NaN, 1e300, negative, zero.
+    let path = dir.path().join("real.mseq");
+    let mut w = ArchiveWriter::create(&path, &ArchiveOptions::new(1e-3)).unwrap();
+    w.append(0, &icosphere(1, 1.0)).unwrap();
+    w.finish().unwrap();
+    let good = std::fs::read(&path).unwrap();
+    for step in [f64::NAN, 1e300, -2e-3, 0.0, f64::INFINITY] {
+        let mut bytes = good.clone();
+        bytes[16 + 20..16 + 28].copy_from_slice(&step.to_le_bytes());
+        let crc = crc32fast::hash(&bytes[16..16 + 44]);
+        bytes[16 + 44..16 + 48].copy_from_slice(&crc.to_le_bytes());
+        std::fs::write(&path, &bytes).unwrap();
+        assert_refused(&path, "quantization step");
+    }
+    // Counts far beyond what the payload holds, with and without a zstd content size.
+    let raw = varints(&[0, 0, 4_000_000_000, 4_000_000_000, 0, 0, 0, 0]);
+    let stated = zstd::bulk::compress(&raw, 3).unwrap();
+    let path = hostile_archive(dir.path(), &stated, u32::MAX, u32::MAX, 2e-3);
+    assert_refused(&path, "cannot fit");
+    let unstated = zstd::stream::encode_all(&raw[..], 3).unwrap();
+    assert!(zstd::zstd_safe::get_frame_content_size(&unstated)
+        .unwrap()
+        .is_none());
+    let path = hostile_archive(dir.path(), &unstated, u32::MAX, u32::MAX, 2e-3);
+    assert_refused(&path, "cannot fit");
+    // A plain mesh (version-1 layout inside) asking for five Loop steps.
+    let raw = varints(&[5, 0, 3, 1, 0, 0, 0, 0]);
+    let path = hostile_archive(
+        dir.path(),
+        &zstd::bulk::compress(&raw, 3).unwrap(),
+        3 * 4u32.pow(5),
+        4u32.pow(5),
+        2e-3,
+    );
+    assert_refused(&path, "subdivision levels");
+    // The writer refuses such a frame instead of storing it.
+    let mut w =
+        ArchiveWriter::create(&dir.path().join("w.mseq"), &ArchiveOptions::new(1e-3)).unwrap();
+    let mesh = icosphere(0, 1.0);
+    let frame = ArchiveFrame {
+        fluid: &mesh,
+        subdivision_levels: 5,
+        spheres: &SphereInstances::default(),
+    };
+    let err = w.append_frame(0, &frame).unwrap_err().to_string();
+    assert!(
+        err.contains("frame 0") && err.contains("subdivision levels"),
+        "{err}"
+    );
+    // An error bound whose step a coordinate cannot be decoded with.
+    assert!(
+        ArchiveWriter::create(&dir.path().join("x.mseq"), &ArchiveOptions::new(1e300)).is_err()
+    );
+}
+
+#[test]
+fn appending_with_another_error_bound_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mseq");
+    let mut w = ArchiveWriter::create(&path, &ArchiveOptions::new(1e-3)).unwrap();
+    w.append(0, &icosphere(1, 1.0)).unwrap();
+    w.finish().unwrap();
+    let before = std::fs::read(&path).unwrap();
+    let err = ArchiveWriter::open_append(&path, &ArchiveOptions::new(2e-3))
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(
+        err.contains("0.002") && err.contains("0.001") && err.contains("run.mseq"),
+        "{err}"
+    );
+    assert!(!err.contains("--"), "names no flag: {err}");
+    assert_eq!(std::fs::read(&path).unwrap(), before);
+    let mut w = ArchiveWriter::open_append(&path, &ArchiveOptions::new(1e-3)).unwrap();
+    w.append(1, &icosphere(1, 1.0)).unwrap();
+    w.finish().unwrap();
+    assert_eq!(ArchiveReader::open(&path).unwrap().verify().good, [0, 1]);
+}
+
+#[test]
+fn a_new_archive_is_written_only_when_its_first_frame_is() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mseq");
+    let w = ArchiveWriter::create(&path, &ArchiveOptions::new(1e-3)).unwrap();
+    drop(w);
+    assert!(!path.exists());
+    // finish makes an archive without frames.
+    ArchiveWriter::create(&path, &ArchiveOptions::new(1e-3))
+        .unwrap()
+        .finish()
+        .unwrap();
+    let r = ArchiveReader::open(&path).unwrap();
+    assert!(r.frames().is_empty() && r.verify().is_clean());
 }

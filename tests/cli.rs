@@ -424,3 +424,30 @@ fn new_user_errors_name_the_real_cause() {
         }
     }
 }
+
+#[test]
+fn a_failed_run_leaves_no_empty_archive() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("frame_1.xyz");
+    std::fs::write(&input, [0u8; 13]).unwrap();
+    let archive = dir.path().join("run.mseq");
+    let output = meniscus()
+        .args([
+            "reconstruct",
+            input.to_str().unwrap(),
+            "-r",
+            "0.025",
+            "-q",
+            "-o",
+        ])
+        .arg(&archive)
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    assert!(
+        String::from_utf8_lossy(&output.stderr).contains("multiple of 12"),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(!archive.exists(), "no archive is left behind");
+}

@@ -101,8 +101,10 @@ pub(crate) fn read_descriptor(payload: &[u8], pos: &mut usize) -> Result<Descrip
     let p = &mut 0usize;
     let bound = take(bytes, p, 8).ok_or("attribute error bound missing")?;
     let error_bound = f64::from_le_bytes(bound.try_into().expect("8 bytes"));
-    if !(error_bound.is_finite() && error_bound > 0.0) {
-        return Err(format!("attribute error bound {error_bound} is not > 0"));
+    if !(error_bound.is_finite() && error_bound > 0.0 && 2.0 * error_bound <= f32::MAX as f64) {
+        return Err(format!(
+            "attribute error bound {error_bound} is not a positive finite bound"
+        ));
     }
     // Each attribute takes at least three bytes.
     let count = get_varint(bytes, p).ok_or("attribute count missing")?;

@@ -393,7 +393,27 @@ pub(crate) fn decode_v1(
 /// An upper bound of the stream bytes of a mesh (varints of at most 5 bytes per vertex
 /// code and 10 per coordinate residual).
 pub(crate) fn raw_capacity(vertices: usize, triangles: usize) -> usize {
-    triangles * 8 + vertices * 30 + 64
+    triangles
+        .saturating_mul(8)
+        .saturating_add(vertices.saturating_mul(30))
+        .saturating_add(64)
+}
+
+/// The most bytes one byte of zstd frame decompresses to (a block of at most 128 KiB
+/// needs at least a 3-byte header and a byte of content): a bound on the decompressed
+/// size from the bytes present, whatever a header claims.
+const ZSTD_MAX_RATIO: usize = 1 << 16;
+
+/// Checks counts of a mesh against the `bytes` of streams left to code it, before
+/// anything is sized by them: every vertex has three position residuals of at least a
+/// byte, every triangle at least one flag or vertex-code byte.
+pub(crate) fn check_counts(vertices: usize, triangles: usize, bytes: usize) -> Result<(), String> {
+    if vertices > bytes / 3 || triangles > bytes {
+        return Err(format!(
+            "{vertices} vertices and {triangles} triangles cannot fit in the {bytes} bytes that code them"
+        ));
+    }
+    Ok(())
 }
 
 /// zstd decompression of at most `capacity` bytes. The buffer is sized by the frame's
@@ -404,6 +424,12 @@ pub(crate) fn decompress(payload: &[u8], capacity: usize) -> Result<Vec<u8>, Str
         static CONTEXT: std::cell::RefCell<Option<zstd::bulk::Decompressor<'static>>> =
             const { std::cell::RefCell::new(None) };
     }
+    let capacity = capacity.min(
+        payload
+            .len()
+            .saturating_mul(ZSTD_MAX_RATIO)
+            .saturating_add(1024),
+    );
     let size = match zstd::zstd_safe::get_frame_content_size(payload) {
         Ok(Some(n)) if n > capacity as u64 => {
             return Err(format!(
@@ -450,6 +476,8 @@ pub(crate) fn decode_streams(
     step: f64,
 ) -> Result<TriMesh, String> {
     let [flags, codes, residual_bytes] = split_streams(raw, pos)?;
+    check_counts(vertices, 0, residual_bytes.len())?;
+    check_counts(0, triangles, flags.len() + codes.len())?;
     let (mut fpos, mut cpos) = (0usize, 0usize);
     let mut numbering = Numbering {
         next: 0,

@@ -30,8 +30,8 @@
 
 use super::attributes::{self, Descriptor};
 use super::codec::{
-    decode_streams, decompress, encode_streams, get_varint, put_varint, raw_capacity, read_count,
-    unzigzag, zigzag, HalfEdges,
+    check_counts, decode_streams, decompress, encode_streams, get_varint, put_varint, raw_capacity,
+    read_count, unzigzag, zigzag, HalfEdges,
 };
 use super::parts::decode_streams_subdivided;
 use super::parts::{decode_parts_subdivided, encode_parts, part_count};
@@ -213,12 +213,18 @@ pub(crate) fn decode_frame(
     let raw = decompress(payload, raw_capacity(vertices, triangles))?;
     let pos = &mut 0usize;
     let (nv, nt) = (vertices as u64, triangles as u64);
-    let levels = read_count(&raw, pos, "subdivision levels", 16)? as u32;
+    let levels = read_count(
+        &raw,
+        pos,
+        "subdivision levels",
+        super::MAX_SUBDIVISION_LEVELS as u64,
+    )? as u32;
     let shape = *raw.get(*pos).ok_or("fluid shape flag missing")?;
     *pos += 1;
     let fluid_vertices = read_count(&raw, pos, "fluid vertex count", nv)?;
     let fluid_triangles = read_count(&raw, pos, "fluid triangle count", nt)?;
     let (v, t) = (fluid_vertices, fluid_triangles);
+    check_counts(v, t, raw.len() - *pos)?;
     // `fused`: the first Loop step ran while decoding.
     let (mut fluid, remaining_levels, fused) = match (shape, levels) {
         // The first Loop step while decoding, the parts in parallel ...
@@ -252,6 +258,13 @@ pub(crate) fn decode_frame(
         let half = step / 2.0;
         let tv = read_count(&raw, pos, "sphere template vertex count", nv)?;
         let tt = read_count(&raw, pos, "sphere template triangle count", nt)?;
+        // Three coordinates of at least a byte each per centre.
+        if count > (raw.len() - *pos) / 3 {
+            return Err(format!(
+                "{count} sphere centres cannot fit in the {} bytes left",
+                raw.len() - *pos
+            ));
+        }
         spheres.template = decode_streams(&raw, pos, tv, tt, half)?;
         spheres.centers.reserve(count);
         let mut q = [0i64; 3];

@@ -160,6 +160,8 @@ pub(crate) fn traverse<'a>(
     step: f64,
 ) -> Result<State<'a>, String> {
     let [flags, codes, residuals] = split_streams(raw, pos)?;
+    super::codec::check_counts(vertices, 0, residuals.len())?;
+    super::codec::check_counts(0, triangles, flags.len() + codes.len())?;
     let mut st = State {
         codes,
         cpos: 0,

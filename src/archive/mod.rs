@@ -65,6 +65,12 @@ const RECORD_MAGIC: &[u8; 4] = b"FRAM";
 const RECORD_HEADER_LEN: usize = 48;
 const INDEX_MAGIC: &[u8; 4] = b"INDX";
 const TRAILER_MAGIC: &[u8; 8] = b"MSEQEND!";
+/// The most Loop steps a frame may ask its reader to run (each multiplies the triangles
+/// by 4): more is refused before anything is subdivided.
+pub const MAX_SUBDIVISION_LEVELS: u32 = 4;
+/// The largest quantization step (of positions or attributes): twice the error bound
+/// must be finite and decode lattice coordinates to finite `f32`s.
+const MAX_STEP: f64 = f32::MAX as f64;
 
 /// Options of a new archive.
 #[derive(Clone, Debug, PartialEq)]
@@ -108,10 +114,10 @@ impl ArchiveOptions {
             ("--error-bound", self.error_bound),
             ("--attribute-error-bound", self.attribute_error_bound),
         ] {
-            if !(value.is_finite() && value > 0.0) {
+            if !(value.is_finite() && value > 0.0 && 2.0 * value <= MAX_STEP) {
                 return Err(Error::InvalidOption {
                     option,
-                    message: format!("must be > 0, got {value}"),
+                    message: format!("must be > 0 and at most {}, got {value}", MAX_STEP / 2.0),
                 });
             }
         }
@@ -172,6 +178,16 @@ pub struct VerifyReport {
     pub recovered_by_scan: bool,
     /// Bytes after the last complete record that belong to no frame.
     pub trailing_bytes: u64,
+    /// Damage that no frame number can be given to: bytes between records that are no
+    /// complete record, a missing index, an index that disagrees with the records.
+    pub damage: Vec<String>,
+}
+
+impl VerifyReport {
+    /// True when every frame decodes and nothing else in the file is damaged or missing.
+    pub fn is_clean(&self) -> bool {
+        self.damaged.is_empty() && self.damage.is_empty() && self.trailing_bytes == 0
+    }
 }
 
 fn archive_error(path: &Path, frame: Option<i64>, message: impl Into<String>) -> Error {
@@ -182,6 +198,7 @@ fn archive_error(path: &Path, frame: Option<i64>, message: impl Into<String>) ->
     Error::parse(path, location, message)
 }
 
+#[derive(Clone)]
 struct RecordHeader {
     number: i64,
     vertices: u32,
@@ -229,6 +246,87 @@ impl RecordHeader {
     }
 }
 
+/// What kind of damage [`ArchiveReader::open`] found outside the frames' payloads.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum DamageKind {
+    /// A record in the middle whose header is damaged; later records were found again.
+    /// Appending after the last record loses nothing.
+    Record,
+    /// Bytes after the last complete record that are the start of a record or of an
+    /// index cut off by an interrupted write: appending may cut them.
+    CutTail,
+    /// Bytes after the last complete record that are not a cut-off record (a damaged
+    /// record at the end): appending would cut them, so it is refused.
+    Tail,
+    /// The index disagrees with the records: appending (which rewrites the index from
+    /// what was read) is refused.
+    Index,
+    /// No index (an unfinished or truncated archive): the records were scanned.
+    NoIndex,
+}
+
+#[derive(Clone, Debug)]
+struct Damage {
+    kind: DamageKind,
+    /// The frame, when the index or a complete record header names it.
+    frame: Option<i64>,
+    /// Record offset, for an index entry whose record header is damaged.
+    offset: Option<u64>,
+    message: String,
+}
+
+/// A complete record (valid header, payload within `limit`) at `pos`: its header and end.
+fn record_at(bytes: &[u8], pos: usize, limit: usize) -> Option<(RecordHeader, usize)> {
+    let header_end = pos.checked_add(RECORD_HEADER_LEN)?;
+    if header_end > limit {
+        return None;
+    }
+    let h = RecordHeader::parse(bytes.get(pos..header_end)?)?;
+    let end = header_end.checked_add(usize::try_from(h.payload_len).ok()?)?;
+    (end <= limit).then_some((h, end))
+}
+
+enum Span {
+    Record(usize, RecordHeader),
+    /// Bytes `start..end` hold no complete record.
+    Damaged(usize, usize),
+}
+
+/// Walks the records in `HEADER_LEN..limit`. Past bytes that are not a complete record
+/// it resynchronises at the next record magic whose header checksum holds and whose
+/// payload is complete, so one damaged record costs only its own frame. The position
+/// only ever moves forward.
+fn scan_records(bytes: &[u8], limit: usize) -> Vec<Span> {
+    let mut spans = Vec::new();
+    let mut pos = HEADER_LEN as usize;
+    while pos < limit {
+        if let Some((h, end)) = record_at(bytes, pos, limit) {
+            spans.push(Span::Record(pos, h));
+            pos = end;
+            continue;
+        }
+        let next = (pos + 1..limit)
+            .find(|&p| {
+                bytes[p..limit].starts_with(RECORD_MAGIC) && record_at(bytes, p, limit).is_some()
+            })
+            .unwrap_or(limit);
+        spans.push(Span::Damaged(pos, next));
+        pos = next;
+    }
+    spans
+}
+
+/// What a damaged record header at `pos` claims, for messages.
+fn claimed_frame(bytes: &[u8], pos: usize) -> String {
+    match bytes.get(pos..pos + 12) {
+        Some(b) if &b[0..4] == RECORD_MAGIC => format!(
+            " (its header, unverified, says frame {})",
+            i64::from_le_bytes(b[4..12].try_into().expect("8 bytes"))
+        ),
+        _ => String::new(),
+    }
+}
+
 /// Reads an archive.
 pub struct ArchiveReader {
     path: PathBuf,
@@ -239,12 +337,16 @@ pub struct ArchiveReader {
     crcs: Vec<u32>,
     flags: Vec<u32>,
     recovered_by_scan: bool,
+    /// Where appending starts: the index offset, or the end of the last complete record.
     data_end: u64,
+    /// Damage found while opening (records, tail, index).
+    damage: Vec<Damage>,
 }
 
 impl ArchiveReader {
-    /// Opens an archive: through its index, or by scanning its records when the index is
-    /// missing or damaged (an interrupted append).
+    /// Opens an archive: through its index when that is valid (damaged records are then
+    /// reported by the frame number the index gives them), else by scanning its records
+    /// (an interrupted append), resynchronising past damaged ones.
     pub fn open(path: &Path) -> Result<ArchiveReader> {
         let mut bytes = Vec::new();
         File::open(path)
@@ -275,83 +377,220 @@ impl ArchiveReader {
             flags: Vec::new(),
             recovered_by_scan: false,
             data_end: HEADER_LEN,
+            damage: Vec::new(),
         };
-        if !reader.read_index() {
-            reader.scan();
+        match reader.read_index() {
+            Some((index_offset, entries)) => reader.use_index(index_offset, &entries),
+            None => reader.scan(),
         }
         Ok(reader)
     }
 
-    /// Reads the index through the trailer; false when there is none or it is damaged.
-    fn read_index(&mut self) -> bool {
+    /// The index through the trailer: its offset and its (frame, record offset) entries;
+    /// `None` when there is none or it is damaged.
+    fn read_index(&self) -> Option<(usize, Vec<(i64, u64)>)> {
         let b = &self.bytes;
         if b.len() < HEADER_LEN as usize + 16 || &b[b.len() - 8..] != TRAILER_MAGIC {
-            return false;
+            return None;
         }
         let index_offset =
-            u64::from_le_bytes(b[b.len() - 16..b.len() - 8].try_into().expect("8 bytes")) as usize;
+            u64::from_le_bytes(b[b.len() - 16..b.len() - 8].try_into().expect("8 bytes"));
+        let index_offset = usize::try_from(index_offset).ok()?;
         if index_offset < HEADER_LEN as usize
-            || index_offset + 16 > b.len() - 16
+            || index_offset.checked_add(16)? > b.len() - 16
             || &b[index_offset..index_offset + 4] != INDEX_MAGIC
         {
-            return false;
+            return None;
         }
         let count = u64::from_le_bytes(
             b[index_offset + 4..index_offset + 12]
                 .try_into()
                 .expect("8 bytes"),
-        ) as usize;
-        let entries_end = index_offset + 12 + count.saturating_mul(16);
-        if entries_end + 4 != b.len() - 16 {
-            return false;
+        );
+        let entries_end = usize::try_from(count)
+            .ok()?
+            .checked_mul(16)?
+            .checked_add(index_offset + 12)?;
+        if entries_end.checked_add(4)? != b.len() - 16 {
+            return None;
         }
         let crc = u32::from_le_bytes(b[entries_end..entries_end + 4].try_into().expect("4 bytes"));
         if crc != crc32fast::hash(&b[index_offset..entries_end]) {
-            return false;
+            return None;
         }
-        let mut frames = Vec::with_capacity(count);
-        let mut crcs = Vec::with_capacity(count);
-        let mut flags = Vec::with_capacity(count);
-        for k in 0..count {
-            let e = index_offset + 12 + 16 * k;
-            let offset = u64::from_le_bytes(b[e + 8..e + 16].try_into().expect("8 bytes")) as usize;
-            let Some(h) = b
-                .get(offset..offset + RECORD_HEADER_LEN)
-                .and_then(RecordHeader::parse)
-            else {
-                return false;
-            };
-            frames.push(FrameInfo::of(&h, offset, b));
-            crcs.push(h.payload_crc);
-            flags.push(h.flags);
-        }
-        self.frames = frames;
-        self.crcs = crcs;
-        self.flags = flags;
-        self.data_end = index_offset as u64;
-        true
+        let entries = b[index_offset + 12..entries_end]
+            .chunks_exact(16)
+            .map(|e| {
+                (
+                    i64::from_le_bytes(e[0..8].try_into().expect("8 bytes")),
+                    u64::from_le_bytes(e[8..16].try_into().expect("8 bytes")),
+                )
+            })
+            .collect();
+        Some((index_offset, entries))
     }
 
-    /// Walks the records from the start; stops at the first record whose header is
-    /// damaged or whose payload is cut off.
+    fn push_frame(&mut self, h: &RecordHeader, offset: usize) {
+        self.frames.push(FrameInfo::of(h, offset, &self.bytes));
+        self.crcs.push(h.payload_crc);
+        self.flags.push(h.flags);
+    }
+
+    /// Takes the frames from a valid index and checks it against the records before it.
+    fn use_index(&mut self, index_offset: usize, entries: &[(i64, u64)]) {
+        let spans = scan_records(&self.bytes, index_offset);
+        let mut indexed = std::collections::HashSet::new();
+        for &(number, offset) in entries {
+            indexed.insert(offset);
+            let found = usize::try_from(offset).ok().and_then(|o| {
+                spans.iter().find_map(|s| match s {
+                    Span::Record(p, h) if *p == o => Some((o, h)),
+                    _ => None,
+                })
+            });
+            match found {
+                Some((o, h)) if h.number == number => {
+                    let h = h.clone();
+                    self.push_frame(&h, o);
+                }
+                Some((_, h)) => self.damage.push(Damage {
+                    kind: DamageKind::Index,
+                    frame: Some(number),
+                    offset: None,
+                    message: format!(
+                        "the index lists this frame at offset {offset}, where the record is frame {} (index disagrees with records)",
+                        h.number
+                    ),
+                }),
+                None => {
+                    let at_damaged = spans
+                        .iter()
+                        .any(|s| matches!(s, Span::Damaged(p, _) if *p as u64 == offset));
+                    self.damage.push(if at_damaged {
+                        Damage {
+                            kind: DamageKind::Record,
+                            frame: Some(number),
+                            offset: Some(offset),
+                            message: format!(
+                                "record header at offset {offset} is damaged (checksum mismatch or cut off)"
+                            ),
+                        }
+                    } else {
+                        Damage {
+                            kind: DamageKind::Index,
+                            frame: Some(number),
+                            offset: None,
+                            message: format!(
+                                "the index lists this frame at offset {offset}, where no record starts (index disagrees with records)"
+                            ),
+                        }
+                    });
+                }
+            }
+        }
+        for s in &spans {
+            match s {
+                Span::Record(p, h) if !indexed.contains(&(*p as u64)) => {
+                    self.damage.push(Damage {
+                        kind: DamageKind::Index,
+                        frame: Some(h.number),
+                        offset: None,
+                        message: format!(
+                            "the record at offset {p} is not in the index (index disagrees with records)"
+                        ),
+                    })
+                }
+                Span::Damaged(p, end) if !indexed.contains(&(*p as u64)) => {
+                    self.damage.push(Damage {
+                        kind: DamageKind::Record,
+                        frame: None,
+                        offset: None,
+                        message: format!(
+                            "bytes {p}..{end} belong to no frame: a damaged record{}",
+                            claimed_frame(&self.bytes, *p)
+                        ),
+                    })
+                }
+                _ => {}
+            }
+        }
+        self.data_end = index_offset as u64;
+    }
+
+    /// Without an index: keeps every complete record, resynchronising past damaged ones.
     fn scan(&mut self) {
         self.recovered_by_scan = true;
-        let mut pos = HEADER_LEN as usize;
-        while let Some(h) = self
-            .bytes
-            .get(pos..pos + RECORD_HEADER_LEN)
-            .and_then(RecordHeader::parse)
-        {
-            let end = pos + RECORD_HEADER_LEN + h.payload_len as usize;
-            if end > self.bytes.len() {
-                break;
+        let limit = self.bytes.len();
+        let spans = scan_records(&self.bytes, limit);
+        self.data_end = HEADER_LEN;
+        self.damage.push(Damage {
+            kind: DamageKind::NoIndex,
+            frame: None,
+            offset: None,
+            message: "no valid index: the archive was not finished (interrupted write) or is \
+                      truncated; its frames were recovered by scanning"
+                .to_string(),
+        });
+        for s in spans {
+            match s {
+                Span::Record(p, h) => {
+                    self.push_frame(&h, p);
+                    self.data_end = (p + RECORD_HEADER_LEN) as u64 + h.payload_len;
+                }
+                Span::Damaged(p, end) if end < limit => self.damage.push(Damage {
+                    kind: DamageKind::Record,
+                    frame: None,
+                    offset: None,
+                    message: format!(
+                        "bytes {p}..{end} belong to no frame: a damaged record{}",
+                        claimed_frame(&self.bytes, p)
+                    ),
+                }),
+                Span::Damaged(p, _) => {
+                    let tail = &self.bytes[p..];
+                    let header = tail.get(..RECORD_HEADER_LEN).and_then(RecordHeader::parse);
+                    let (kind, frame, message) = if let Some(h) = header {
+                        (
+                            DamageKind::CutTail,
+                            Some(h.number),
+                            format!(
+                                "record at offset {p} cut off: its payload needs {} bytes, {} are present (truncated archive)",
+                                h.payload_len,
+                                tail.len() - RECORD_HEADER_LEN
+                            ),
+                        )
+                    } else if tail.starts_with(INDEX_MAGIC)
+                        || (tail.len() < RECORD_HEADER_LEN
+                            && RECORD_MAGIC.starts_with(&tail[..tail.len().min(4)]))
+                    {
+                        (
+                            DamageKind::CutTail,
+                            None,
+                            format!(
+                                "{} trailing bytes at offset {p}: an incomplete record or index (truncated archive)",
+                                tail.len()
+                            ),
+                        )
+                    } else {
+                        (
+                            DamageKind::Tail,
+                            None,
+                            format!(
+                                "{} trailing bytes at offset {p} belong to no frame: a damaged record{}",
+                                tail.len(),
+                                claimed_frame(&self.bytes, p)
+                            ),
+                        )
+                    };
+                    self.damage.push(Damage {
+                        kind,
+                        frame,
+                        offset: None,
+                        message,
+                    });
+                }
             }
-            self.frames.push(FrameInfo::of(&h, pos, &self.bytes));
-            self.crcs.push(h.payload_crc);
-            self.flags.push(h.flags);
-            pos = end;
         }
-        self.data_end = pos as u64;
     }
 
     /// The frames, in file order.
@@ -392,7 +631,12 @@ impl ArchiveReader {
             .iter()
             .position(|f| f.number == number)
             .ok_or_else(|| {
-                archive_error(&self.path, Some(number), "no such frame in the archive")
+                let why = self
+                    .damage
+                    .iter()
+                    .find(|d| d.frame == Some(number))
+                    .map_or("no such frame in the archive", |d| d.message.as_str());
+                archive_error(&self.path, Some(number), why)
             })?;
         self.decode(k)
     }
@@ -400,9 +644,10 @@ impl ArchiveReader {
     fn decode(&self, k: usize) -> Result<Surface> {
         let f = &self.frames[k];
         let start = f.offset as usize + RECORD_HEADER_LEN;
-        let payload = self
-            .bytes
-            .get(start..start + f.payload_bytes as usize)
+        let payload = usize::try_from(f.payload_bytes)
+            .ok()
+            .and_then(|len| start.checked_add(len))
+            .and_then(|end| self.bytes.get(start..end))
             .ok_or_else(|| {
                 archive_error(
                     &self.path,
@@ -415,6 +660,16 @@ impl ArchiveReader {
                 &self.path,
                 Some(f.number),
                 "checksum mismatch: the frame is damaged",
+            ));
+        }
+        if !(f.step.is_finite() && f.step > 0.0 && f.step <= MAX_STEP) {
+            return Err(archive_error(
+                &self.path,
+                Some(f.number),
+                format!(
+                    "quantization step {} in the record header is not a positive finite step (damaged record)",
+                    f.step
+                ),
             ));
         }
         let (vertices, triangles) = (f.vertices as usize, f.triangles as usize);
@@ -511,6 +766,12 @@ impl ArchiveReader {
                 Some(e) => report.damaged.push((f.number, e)),
             }
         }
+        for d in &self.damage {
+            match d.frame {
+                Some(n) => report.damaged.push((n, d.message.clone())),
+                None => report.damage.push(d.message.clone()),
+            }
+        }
         if self.recovered_by_scan {
             report.trailing_bytes = self.bytes.len() as u64 - self.data_end;
         }
@@ -522,25 +783,24 @@ impl ArchiveReader {
 pub struct ArchiveWriter {
     path: PathBuf,
     version: u32,
-    file: File,
+    /// `None` for a new archive until its first frame is encoded (or `finish`): a run
+    /// that fails before then leaves no file.
+    file: Option<File>,
     options: ArchiveOptions,
     index: Vec<(i64, u64)>,
     end: u64,
 }
 
 impl ArchiveWriter {
-    /// Creates a new archive (replacing any file at `path`).
+    /// Creates a new archive (replacing any file at `path`). The file is written when
+    /// the first frame is ready (or by `finish` for an archive without frames), so an
+    /// archive whose first frame fails is never left behind, empty.
     pub fn create(path: &Path, options: &ArchiveOptions) -> Result<ArchiveWriter> {
         options.check()?;
-        let mut file = File::create(path).map_err(|e| Error::io(path, e))?;
-        let mut header = [0u8; HEADER_LEN as usize];
-        header[0..8].copy_from_slice(MAGIC);
-        header[8..12].copy_from_slice(&VERSION.to_le_bytes());
-        file.write_all(&header).map_err(|e| Error::io(path, e))?;
         Ok(ArchiveWriter {
             path: path.to_path_buf(),
             version: VERSION,
-            file,
+            file: None,
             options: options.clone(),
             index: Vec::new(),
             end: HEADER_LEN,
@@ -554,33 +814,90 @@ impl ArchiveWriter {
         options.check()?;
         let reader = ArchiveReader::open(path)?;
         let report = reader.verify();
-        if let Some((n, why)) = report.damaged.first() {
+        // A frame whose payload is damaged, an index that disagrees with the records, or
+        // bytes at the end that appending would cut and that are not a cut-off record:
+        // refused, so that nothing is lost. Damaged record headers in the middle stay
+        // where they are (appending goes after the last record) and stay reported.
+        // The frames' own damage comes first in the report, the rest after.
+        let frame_damage =
+            report.damaged.len() - reader.damage.iter().filter(|d| d.frame.is_some()).count();
+        let refusal = report.damaged[..frame_damage]
+            .first()
+            .map(|(n, why)| (Some(*n), why.clone()))
+            .or_else(|| {
+                reader
+                    .damage
+                    .iter()
+                    .find(|d| matches!(d.kind, DamageKind::Index | DamageKind::Tail))
+                    .map(|d| (d.frame, d.message.clone()))
+            });
+        if let Some((n, why)) = refusal {
             return Err(archive_error(
                 path,
-                Some(*n),
+                n,
                 format!("refusing to append to a damaged archive: {why}"),
+            ));
+        }
+        // One error bound for all frames: the archive lists one, and a frame quantized
+        // more coarsely than the others would break what the archive promises.
+        let step = 2.0 * options.error_bound;
+        if let Some(f) = reader.frames.iter().find(|f| f.step != step) {
+            return Err(archive_error(
+                path,
+                Some(f.number),
+                format!(
+                    "refusing to append frames with error bound {} to an archive whose frames have error bound {}",
+                    options.error_bound,
+                    f.step / 2.0
+                ),
             ));
         }
         let file = OpenOptions::new()
             .write(true)
             .open(path)
             .map_err(|e| Error::io(path, e))?;
-        // Drop the old index (and any incomplete record): everything before stays.
+        // Drop the old index (and any cut-off record): everything before stays.
         file.set_len(reader.data_end)
             .map_err(|e| Error::io(path, e))?;
+        // Records whose header is damaged keep their index entries, so that they stay
+        // reported by frame number.
+        let mut index: Vec<(i64, u64)> =
+            reader.frames.iter().map(|f| (f.number, f.offset)).collect();
+        index.extend(
+            reader
+                .damage
+                .iter()
+                .filter_map(|d| Some((d.frame?, d.offset?))),
+        );
+        index.sort_by_key(|e| e.1);
         let mut writer = ArchiveWriter {
             path: path.to_path_buf(),
             version: reader.version,
-            file,
+            file: Some(file),
             options: options.clone(),
-            index: reader.frames.iter().map(|f| (f.number, f.offset)).collect(),
+            index,
             end: reader.data_end,
         };
+        let end = writer.end;
         writer
-            .file
-            .seek(SeekFrom::Start(writer.end))
+            .file()?
+            .seek(SeekFrom::Start(end))
             .map_err(|e| Error::io(path, e))?;
         Ok(writer)
+    }
+
+    /// The open file; a new archive's is created here, with its header.
+    fn file(&mut self) -> Result<&mut File> {
+        if self.file.is_none() {
+            let mut file = File::create(&self.path).map_err(|e| Error::io(&self.path, e))?;
+            let mut header = [0u8; HEADER_LEN as usize];
+            header[0..8].copy_from_slice(MAGIC);
+            header[8..12].copy_from_slice(&self.version.to_le_bytes());
+            file.write_all(&header)
+                .map_err(|e| Error::io(&self.path, e))?;
+            self.file = Some(file);
+        }
+        Ok(self.file.as_mut().expect("created above"))
     }
 
     /// Frame numbers already in the archive.
@@ -616,6 +933,16 @@ impl ArchiveWriter {
                 "the archive already holds this frame",
             ));
         }
+        if frame.subdivision_levels > MAX_SUBDIVISION_LEVELS {
+            return Err(archive_error(
+                &self.path,
+                Some(number),
+                format!(
+                    "{} subdivision levels; an archive stores at most {MAX_SUBDIVISION_LEVELS}",
+                    frame.subdivision_levels
+                ),
+            ));
+        }
         let step = 2.0 * self.options.error_bound;
         let level = self.options.zstd_level;
         let with_attributes = frame::has_attributes(frame);
@@ -648,11 +975,13 @@ impl ArchiveWriter {
                 ));
             }
             if self.version < ATTRIBUTES_VERSION {
-                self.file
-                    .seek(SeekFrom::Start(8))
-                    .and_then(|_| self.file.write_all(&ATTRIBUTES_VERSION.to_le_bytes()))
-                    .and_then(|_| self.file.seek(SeekFrom::Start(self.end)))
-                    .map_err(|e| Error::io(&self.path, e))?;
+                // A file not yet written gets the version in its header when it is.
+                if let Some(file) = self.file.as_mut() {
+                    file.seek(SeekFrom::Start(8))
+                        .and_then(|_| file.write_all(&ATTRIBUTES_VERSION.to_le_bytes()))
+                        .and_then(|_| file.seek(SeekFrom::Start(self.end)))
+                        .map_err(|e| Error::io(&self.path, e))?;
+                }
                 self.version = ATTRIBUTES_VERSION;
             }
         }
@@ -696,9 +1025,9 @@ impl ArchiveWriter {
             payload_crc: crc32fast::hash(&payload),
             flags: encoded.flags,
         };
-        self.file
-            .write_all(&header.to_bytes())
-            .and_then(|_| self.file.write_all(&payload))
+        let file = self.file()?;
+        file.write_all(&header.to_bytes())
+            .and_then(|_| file.write_all(&payload))
             .map_err(|e| Error::io(&self.path, e))?;
         self.index.push((number, self.end));
         let bytes = (RECORD_HEADER_LEN + payload.len()) as u64;
@@ -719,9 +1048,9 @@ impl ArchiveWriter {
         index.extend_from_slice(&crc.to_le_bytes());
         index.extend_from_slice(&self.end.to_le_bytes());
         index.extend_from_slice(TRAILER_MAGIC);
-        self.file
-            .write_all(&index)
-            .and_then(|_| self.file.sync_all())
+        let file = self.file()?;
+        file.write_all(&index)
+            .and_then(|_| file.sync_all())
             .map_err(|e| Error::io(&self.path, e))
     }
 }
