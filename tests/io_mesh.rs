@@ -499,3 +499,127 @@ fn glb_with_short_attribute() -> Vec<u8> {
     out.extend_from_slice(&bin);
     out
 }
+
+#[test]
+fn a_ply_mesh_claiming_more_faces_than_bytes_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut b = b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1000000000000000000\nproperty list uchar int vertex_indices\nend_header\n".to_vec();
+    b.extend_from_slice(&[0u8; 36]);
+    b.push(3);
+    for i in 0..3i32 {
+        b.extend_from_slice(&i.to_le_bytes());
+    }
+    let path = dir.path().join("faces.ply");
+    std::fs::write(&path, &b).unwrap();
+    let e = read_mesh(&path).expect_err("10^18 faces").to_string();
+    assert!(e.contains("faces.ply") && e.contains("\"face\""), "{e}");
+    // The same file with its true count reads.
+    let text = String::from_utf8_lossy(&b).replace("face 1000000000000000000", "face 1");
+    let fixed = [
+        &text.as_bytes()[..text.find("end_header\n").unwrap() + 11],
+        &b[b.len() - 49..],
+    ]
+    .concat();
+    std::fs::write(&path, fixed).unwrap();
+    assert_eq!(read_mesh(&path).unwrap().triangles, vec![[0, 1, 2]]);
+}
+
+/// A deterministic generator (xorshift), so that every run mutates the same way.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+}
+
+#[test]
+fn mutated_mesh_files_are_read_or_rejected_never_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = Surface {
+        fluid: icosphere(0, 1.0),
+        spheres: SphereInstances {
+            template: icosphere(0, 0.1),
+            centers: vec![Vec3::new(3.0, 0.0, 0.0)],
+            attributes: Vec::new(),
+        },
+    };
+    let mut bases = Vec::new();
+    for name in ["m.ply", "m.obj", "m.gltf", "m.glb", "m.vtk"] {
+        let p = dir.path().join(name);
+        write_surface(&p, &s, &MeshWriteOptions::default()).unwrap();
+        bases.push((name, std::fs::read(&p).unwrap()));
+    }
+    let mut rng = Rng(0x2545_f491_4f6c_dd1d);
+    for round in 0..2500 {
+        let (name, base) = &bases[round % bases.len()];
+        let mut b = base.clone();
+        match rng.below(4) {
+            0 => {
+                for _ in 0..1 + rng.below(4) {
+                    let i = rng.below(b.len());
+                    b[i] ^= 1 << rng.below(8);
+                }
+            }
+            1 => b.truncate(rng.below(b.len())),
+            2 => {
+                let i = rng.below(b.len());
+                b[i] = rng.next() as u8;
+            }
+            _ => {
+                let digits: Vec<usize> = (0..b.len()).filter(|&i| b[i].is_ascii_digit()).collect();
+                if !digits.is_empty() {
+                    let start = digits[rng.below(digits.len())];
+                    let end = (start..b.len())
+                        .find(|&i| !b[i].is_ascii_digit())
+                        .unwrap_or(b.len());
+                    let huge = [
+                        "18446744073709551615",
+                        "4294967295",
+                        "999999999999",
+                        "1000000000000000000",
+                    ][rng.below(4)];
+                    b.splice(start..end, huge.bytes());
+                }
+            }
+        }
+        let path = dir.path().join(name);
+        std::fs::write(&path, &b).unwrap();
+        match std::panic::catch_unwind(|| read_mesh(&path)) {
+            Ok(Ok(_)) => {}
+            Ok(Err(e)) => assert!(e.to_string().contains(name), "{name}: {e}"),
+            Err(_) => {
+                let keep = std::env::temp_dir().join(format!("meniscus-crash-{round}-{name}"));
+                std::fs::write(&keep, &b).unwrap();
+                panic!(
+                    "round {round}: reading a mutated {name} panicked (kept as {})",
+                    keep.display()
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_gltf_whose_position_accessor_index_is_out_of_range_is_an_error() {
+    // Found by the mutation test: the gltf crate's validation panicked on it.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.gltf");
+    write_surface(&path, &surface(), &MeshWriteOptions::default()).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains("\"POSITION\":0"), "{}", &text[..200]);
+    std::fs::write(
+        &path,
+        text.replacen("\"POSITION\":0", "\"POSITION\":4294967295", 1),
+    )
+    .unwrap();
+    let e = read_mesh(&path)
+        .expect_err("out-of-range accessor")
+        .to_string();
+    assert!(e.contains("m.gltf") && e.contains("glTF"), "{e}");
+}

@@ -903,3 +903,248 @@ fn a_cancelled_stream_removes_its_files() {
         assert!(entries(&temp).is_empty(), "left {:?}", entries(&temp));
     }
 }
+
+// ---- Hostile inputs: counts from a header are bounded by the bytes that follow. ----
+
+/// The error of reading `bytes` as `name`: must be an error (not a panic, not an abort
+/// from a huge reservation) that names the file.
+fn hostile(name: &str, bytes: &[u8]) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(dir.path(), name, bytes);
+    let e = read_particles(&path, None).expect_err(name).to_string();
+    assert!(e.contains(name), "{e}");
+    e
+}
+
+fn ply_with(head: &str, data: &[u8]) -> Vec<u8> {
+    let mut b = format!("ply\nformat binary_little_endian 1.0\n{head}end_header\n").into_bytes();
+    b.extend_from_slice(data);
+    b
+}
+
+#[test]
+fn ply_counts_beyond_the_file_are_errors() {
+    let props = "property float x\nproperty float y\nproperty float z\n";
+    // 4·10^11 vertices in a tiny file (used to reserve 4 TB).
+    let e = hostile(
+        "big.ply",
+        &ply_with(&format!("element vertex 400000000000\n{props}"), &[0; 24]),
+    );
+    assert!(e.contains("only 24 bytes follow the header"), "{e}");
+    // 2^64 − 1 (used to panic on capacity overflow).
+    let e = hostile(
+        "max.ply",
+        &ply_with(
+            &format!("element vertex 18446744073709551615\n{props}"),
+            &[0; 24],
+        ),
+    );
+    assert!(e.contains("\"vertex\""), "{e}");
+    // An element without properties and a huge count (used to loop forever).
+    let e = hostile(
+        "empty.ply",
+        &ply_with(
+            &format!("element junk 18446744073709551615\nelement vertex 1\n{props}"),
+            &[0; 12],
+        ),
+    );
+    assert!(e.contains("\"junk\""), "{e}");
+    // ASCII: at least one byte per value.
+    let e = hostile(
+        "ascii.ply",
+        format!("ply\nformat ascii 1.0\nelement vertex 100000000000\n{props}end_header\n1 2 3\n")
+            .as_bytes(),
+    );
+    assert!(e.contains("100000000000 rows"), "{e}");
+    // Two elements that each fit but together do not.
+    hostile(
+        "sum.ply",
+        &ply_with(
+            &format!("element vertex 2\n{props}element vertex2 2\n{props}"),
+            &[0; 36],
+        ),
+    );
+}
+
+/// A BGEO header with one point per `npoints` and `nattr` float attributes of 65 535
+/// components each: records of 262 KB.
+fn bgeo_wide(npoints: i32, nattr: i32) -> Vec<u8> {
+    let mut b = b"BgeoV".to_vec();
+    for v in [5, npoints, 0, 0, 0, nattr, 0, 0, 0] {
+        b.extend_from_slice(&v.to_be_bytes());
+    }
+    for k in 0..nattr {
+        b.extend_from_slice(&1u16.to_be_bytes());
+        b.push(b'a' + k as u8);
+        b.extend_from_slice(&u16::MAX.to_be_bytes());
+        b.extend_from_slice(&0i32.to_be_bytes());
+        b.extend_from_slice(&vec![0u8; 4 * u16::MAX as usize]);
+    }
+    b
+}
+
+#[test]
+fn bgeo_reserves_nothing_from_its_header_count() {
+    use std::io::Write;
+    // 2^31 − 1 points of 2 MB records in a 2 KB gzip file (used to ask for 137 GB).
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
+    gz.write_all(&bgeo_wide(i32::MAX, 8)).unwrap();
+    let gz = gz.finish().unwrap();
+    assert!(gz.len() < 8192, "{}", gz.len());
+    let e = hostile("wide.bgeo.gz", &gz);
+    assert!(e.contains("truncated while reading points 0.."), "{e}");
+    // Plain file, one wide attribute.
+    let e = hostile("wide.bgeo", &bgeo_wide(i32::MAX, 1));
+    assert!(e.contains("truncated while reading points"), "{e}");
+}
+
+#[test]
+fn vtk_point_counts_that_overflow_or_exceed_the_file_are_errors() {
+    let head = "# vtk DataFile Version 3.0\nx\nASCII\nDATASET POLYDATA\n";
+    // 3·n overflows usize (used to be read as 1 particle).
+    let e = hostile(
+        "over.vtk",
+        format!("{head}POINTS 6148914691236517206 float\n1 2 3\n").as_bytes(),
+    );
+    assert!(e.contains("overflows"), "{e}");
+    // A count beyond the bytes left (ASCII and binary).
+    hostile(
+        "big.vtk",
+        format!("{head}POINTS 100000000000 float\n1 2 3\n").as_bytes(),
+    );
+    hostile(
+        "bin.vtk",
+        b"# vtk DataFile Version 3.0\nx\nBINARY\nDATASET POLYDATA\nPOINTS 100000000000 float\n\0\0\0\0\0\0\0\0\0\0\0\0",
+    );
+}
+
+#[test]
+fn text_renamed_xyz_is_an_error() {
+    let text = "1.5 2.25 -3e-2\n".repeat(12); // 180 bytes: a multiple of 12
+    assert_eq!(text.len() % 12, 0);
+    let e = hostile("text.xyz", text.as_bytes());
+    assert!(e.contains("looks like text"), "{e}");
+    // Real floats still read, even ones whose bytes are partly ASCII.
+    let dir = tempfile::tempdir().unwrap();
+    let mut bytes = Vec::new();
+    for v in [1.0f32, 2.0, 3.0, f32::from_le_bytes(*b"1234"), 0.5, -0.25] {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    let p = read_particles(&write(dir.path(), "ok.xyz", &bytes), None).unwrap();
+    assert_eq!(p.positions.len(), 2);
+}
+
+/// A deterministic generator (xorshift), so that every run mutates the same way.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+}
+
+/// A mutated copy of `base`: flipped bytes, a truncation, or a number in the text
+/// replaced by a huge one.
+fn mutate(rng: &mut Rng, base: &[u8]) -> Vec<u8> {
+    let mut b = base.to_vec();
+    match rng.below(4) {
+        0 => {
+            for _ in 0..1 + rng.below(4) {
+                let i = rng.below(b.len());
+                b[i] ^= 1 << rng.below(8);
+            }
+        }
+        1 => b.truncate(rng.below(b.len())),
+        2 => {
+            let i = rng.below(b.len());
+            b[i] = rng.next() as u8;
+        }
+        _ => {
+            // Overwrite a run of ASCII digits with a huge number.
+            let digits: Vec<usize> = (0..b.len()).filter(|&i| b[i].is_ascii_digit()).collect();
+            if !digits.is_empty() {
+                let start = digits[rng.below(digits.len())];
+                let end = (start..b.len())
+                    .find(|&i| !b[i].is_ascii_digit())
+                    .unwrap_or(b.len());
+                let huge = [
+                    "18446744073709551615",
+                    "4294967295",
+                    "999999999999",
+                    "6148914691236517206",
+                    "2147483647",
+                ][rng.below(5)];
+                b.splice(start..end, huge.bytes());
+            } else if b.len() >= 8 {
+                // Binary header fields: a big-endian i32 of 2^31 − 1.
+                let i = rng.below(b.len() - 4);
+                b[i..i + 4].copy_from_slice(&i32::MAX.to_be_bytes());
+            }
+        }
+    }
+    b
+}
+
+#[test]
+fn mutated_particle_files_are_read_or_rejected_never_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut small = sample();
+    small.positions.truncate(6);
+    for a in &mut small.attributes {
+        a.values.truncate(6 * a.components);
+    }
+    let mut bases: Vec<(&str, Vec<u8>)> = Vec::new();
+    for (name, format) in [
+        ("b.ply", ParticleFormat::Ply),
+        ("b.vtk", ParticleFormat::Vtk),
+        ("b.xyz", ParticleFormat::Xyz),
+    ] {
+        let p = dir.path().join(name);
+        write_particles(&p, &small, format).unwrap();
+        bases.push((name, std::fs::read(&p).unwrap()));
+    }
+    bases.push((
+        "a.ply",
+        b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nproperty float density\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0 1\n1 0 0 2\n0 1 0 3\n3 0 1 2\n".to_vec(),
+    ));
+    bases.push((
+        "a.vtk",
+        b"# vtk DataFile Version 3.0\nx\nASCII\nDATASET POLYDATA\nPOINTS 3 float\n0 0 0 1 0 0 0 1 0\nVERTICES 3 6\n1 0\n1 1\n1 2\nPOINT_DATA 3\nSCALARS density float 1\nLOOKUP_TABLE default\n1 2 3\nFIELD f 1\nv 3 3 float\n1 2 3 4 5 6 7 8 9\n".to_vec(),
+    ));
+    let positions: Vec<Vec3> = small.positions.clone();
+    let plain = bgeo_bytes(&positions);
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    std::io::Write::write_all(&mut gz, &plain).unwrap();
+    bases.push(("b.bgeo", plain));
+    bases.push(("g.bgeo", gz.finish().unwrap()));
+    for (name, base) in &bases {
+        let path = dir.path().join(name);
+        std::fs::write(&path, base).unwrap();
+        read_particles(&path, None).unwrap_or_else(|e| panic!("{name}: {e}"));
+    }
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    for round in 0..3000 {
+        let (name, base) = &bases[round % bases.len()];
+        let bytes = mutate(&mut rng, base);
+        let path = dir.path().join(name);
+        std::fs::write(&path, &bytes).unwrap();
+        let result = std::panic::catch_unwind(|| read_particles(&path, None));
+        match result {
+            Ok(Ok(_)) => {}
+            Ok(Err(e)) => assert!(e.to_string().contains(name), "{name}: {e}"),
+            Err(_) => {
+                let keep = std::env::temp_dir().join(format!("meniscus-crash-{round}-{name}"));
+                std::fs::write(&keep, &bytes).unwrap();
+                panic!(
+                    "round {round}: reading a mutated {name} panicked (kept as {})",
+                    keep.display()
+                );
+            }
+        }
+    }
+}

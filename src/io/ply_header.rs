@@ -131,3 +131,48 @@ pub(crate) fn skip_row(c: &mut Cursor, element: &PlyElement, binary: Option<bool
     }
     Ok(())
 }
+
+/// Checks, before anything is reserved or looped over, that the elements' counts fit in the
+/// bytes after the header (`c` at the first data byte): every binary row takes at least
+/// the sizes of its scalars and list-length prefixes, every ASCII value at least one byte.
+/// An element without properties may not claim more rows than there are bytes left.
+pub(crate) fn check_counts(c: &Cursor, header: &PlyHeader) -> Result<()> {
+    let left = c.bytes.len().saturating_sub(c.pos);
+    let mut need: usize = 0;
+    for element in &header.elements {
+        let row: usize = match header.binary {
+            Some(_) => element
+                .properties
+                .iter()
+                .map(|p| p.list_count.unwrap_or(p.scalar).size())
+                .sum(),
+            None => element.properties.len(),
+        };
+        let bytes = if row == 0 {
+            (element.count > left).then_some(usize::MAX)
+        } else {
+            element.count.checked_mul(row)
+        };
+        need = bytes.and_then(|b| need.checked_add(b)).ok_or_else(|| {
+            Error::parse(
+                c.path,
+                "header",
+                format!(
+                    "element {:?} claims {} rows, more than the {left} bytes after the header can hold",
+                    element.name, element.count
+                ),
+            )
+        })?;
+        if need > left {
+            return Err(Error::parse(
+                c.path,
+                "header",
+                format!(
+                    "truncated: element {:?} claims {} rows of at least {row} bytes each, but only {left} bytes follow the header",
+                    element.name, element.count
+                ),
+            ));
+        }
+    }
+    Ok(())
+}

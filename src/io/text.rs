@@ -269,7 +269,9 @@ impl<'a> Cursor<'a> {
                 Ok(out)
             }
             None => {
-                let mut out = Vec::with_capacity(count.min(1 << 24));
+                // Every ASCII value takes at least one byte: reserve no more than that.
+                let left = self.bytes.len().saturating_sub(self.pos);
+                let mut out = Vec::with_capacity(count.min(left).min(1 << 24));
                 for _ in 0..count {
                     let token = self.token("a number")?;
                     let v: f64 = token

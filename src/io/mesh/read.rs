@@ -58,6 +58,7 @@ pub fn read_mesh(path: &Path) -> Result<TriMesh> {
 fn read_ply(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
     let mut c = Cursor::new(path, bytes);
     let header = ply_header::parse(&mut c)?;
+    ply_header::check_counts(&c, &header)?;
     let binary = header.binary;
     let mut mesh = TriMesh::default();
     for element in &header.elements {
@@ -200,7 +201,11 @@ fn read_obj(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
 
 fn read_gltf(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
     let bad = |m: String| Error::parse(path, "glTF", m);
-    let (doc, buffers, _) = gltf::import_slice(bytes).map_err(|e| bad(e.to_string()))?;
+    // The gltf crate's validation indexes with unchecked accessor indices and panics on
+    // some malformed documents: such a document is an error, not a crash.
+    let imported = std::panic::catch_unwind(|| gltf::import_slice(bytes))
+        .map_err(|_| bad("malformed document (an index out of range)".into()))?;
+    let (doc, buffers, _) = imported.map_err(|e| bad(e.to_string()))?;
     let mut mesh = TriMesh::default();
     let scene = doc
         .default_scene()

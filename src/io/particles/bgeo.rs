@@ -18,6 +18,9 @@ use std::path::Path;
 /// Points decoded per chunk by the streaming parser.
 const CHUNK_POINTS: usize = 1 << 16;
 
+/// Most bytes of records buffered per chunk.
+const CHUNK_BYTES: usize = 1 << 24;
+
 /// The decompressed byte stream with its offset, for error locations.
 struct Stream<'a> {
     path: &'a Path,
@@ -44,6 +47,30 @@ impl Stream<'_> {
             )
         })?;
         self.pos += buf.len() as u64;
+        Ok(())
+    }
+    /// Appends `n` bytes to `buf`, which grows only as the bytes arrive (a count from a
+    /// header reserves nothing).
+    fn fill_growing(&mut self, buf: &mut Vec<u8>, n: usize, what: &str) -> Result<()> {
+        let at = self.pos;
+        let got = (&mut self.inner)
+            .take(n as u64)
+            .read_to_end(buf)
+            .map_err(|e| {
+                Error::parse(
+                    self.path,
+                    format!("byte offset {at} (decompressed)"),
+                    format!("cannot read {what}: {e}"),
+                )
+            })?;
+        if got < n {
+            return Err(Error::parse(
+                self.path,
+                format!("byte offset {at} (decompressed)"),
+                format!("truncated while reading {what}: need {n} bytes, the stream ends first"),
+            ));
+        }
+        self.pos += n as u64;
         Ok(())
     }
     fn bytes(&mut self, n: usize, what: &str) -> Result<Vec<u8>> {
@@ -162,18 +189,23 @@ fn parse<'a, R: BufRead + 'a>(
     let fields: Vec<(usize, usize, bool)> = chosen.iter().map(|&k| at[k]).collect();
     let layout: Vec<AttributeLayout> = chosen.iter().map(|&k| declared[k].clone()).collect();
     let f = |b: &[u8]| f32::from_be_bytes(b.try_into().expect("4 bytes"));
-    let mut records = vec![0u8; CHUNK_POINTS.min(npoints) * stride];
-    let mut chunk: Vec<Vec3> = Vec::with_capacity(CHUNK_POINTS.min(npoints));
+    // Nothing is reserved from the header's count: a chunk holds at most `CHUNK_BYTES`
+    // (or one record), and the buffers grow only as records arrive.
+    let per_chunk = CHUNK_POINTS.min((CHUNK_BYTES / stride).max(1));
+    let mut records: Vec<u8> = Vec::new();
+    let mut chunk: Vec<Vec3> = Vec::new();
     let mut payload: Vec<f32> = Vec::new();
     let mut first = 0;
     while first < npoints {
-        let count = CHUNK_POINTS.min(npoints - first);
+        let count = per_chunk.min(npoints - first);
         let start = r.pos;
-        let data = &mut records[..count * stride];
-        r.fill(
-            data,
+        records.clear();
+        r.fill_growing(
+            &mut records,
+            count * stride,
             &format!("points {first}..{} of {stride} bytes", first + count),
         )?;
+        let data = &records[..];
         chunk.clear();
         payload.clear();
         for (k, rec) in data.chunks_exact(stride).enumerate() {

@@ -16,6 +16,7 @@ use std::path::Path;
 pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
     let mut c = Cursor::new(path, bytes);
     let header = ply_header::parse(&mut c)?;
+    ply_header::check_counts(&c, &header)?;
     let binary = header.binary;
     let mut positions = Vec::new();
     let mut attributes: Vec<Attribute> = Vec::new();

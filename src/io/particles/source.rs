@@ -148,6 +148,18 @@ impl MappedXyz {
                 ),
             ));
         }
+        // A text file renamed .xyz: its first bytes (up to 64) are all digits, blanks,
+        // signs, dots and exponents, which raw floats practically never are.
+        let mut head = Vec::with_capacity(64);
+        std::io::Read::read_to_end(&mut std::io::Read::take(&file, 64), &mut head)
+            .map_err(|e| Error::io(path, e))?;
+        if head.iter().all(|b| b" \t\r\n+-.eE0123456789".contains(b)) {
+            return Err(Error::parse(
+                path,
+                "byte offset 0",
+                "looks like text, not raw little-endian f32 triples (.xyz is binary)",
+            ));
+        }
         Ok(MappedXyz {
             path: path.to_path_buf(),
             file,

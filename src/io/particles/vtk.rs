@@ -32,7 +32,12 @@ pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
                 if binary.is_some() {
                     c.finish_line();
                 }
-                let v = c.values(n * 3, scalar, binary)?;
+                let v = c.values(
+                    n.checked_mul(3)
+                        .ok_or_else(|| c.error(format!("the point count {n} overflows")))?,
+                    scalar,
+                    binary,
+                )?;
                 npoints = n;
                 positions = Some(
                     v.chunks_exact(3)
@@ -63,7 +68,13 @@ pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
                     c.finish_line();
                 }
                 if point_data {
-                    let values = c.values(npoints * components, scalar, binary)?;
+                    let values = c.values(
+                        npoints
+                            .checked_mul(components)
+                            .ok_or_else(|| c.error("value count overflows"))?,
+                        scalar,
+                        binary,
+                    )?;
                     attributes.push(Attribute {
                         name,
                         components,
@@ -78,7 +89,13 @@ pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
                 for _ in 0..arrays {
                     let (name, components, tuples, scalar) =
                         vtk_legacy::field_array(&mut c, binary.is_some(), "an array type", "type")?;
-                    let values = c.values(components * tuples, scalar, binary)?;
+                    let values = c.values(
+                        components
+                            .checked_mul(tuples)
+                            .ok_or_else(|| c.error("value count overflows"))?,
+                        scalar,
+                        binary,
+                    )?;
                     if point_data && tuples == npoints {
                         attributes.push(Attribute {
                             name,
