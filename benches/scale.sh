@@ -10,7 +10,9 @@
 # Budgets per scene: the default (half the available memory) and, for 4M and more, the
 # issue's targets (512MiB for 4M, 2GiB for 16M and 32M). At 4M the scene is also built
 # with the velocity of frame 25's VTK (a binary PLY, carried to the surface as the CLI
-# does by default) and run with the default budget and 1GiB. Each run writes a fresh
+# does by default) and run with the default budget and 1GiB, and as a violent splash
+# (`tile_scene ... splash`: 1.4 times the surface per particle, 27k isolated particles)
+# under 512MiB, 1GiB and 2GiB, like the plain scene. Each run writes a fresh
 # output after a `sync`. Needs python3 for the summary.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -22,10 +24,11 @@ FRAME_VELOCITY=datasets/dambreak_small/ParticleData_Fluid_25.vtk
 WORK=$(mktemp -d "${TMPDIR:-/tmp}/meniscus-scale.XXXXXX")
 trap 'rm -rf "$WORK"' EXIT
 
-run() { # copies budget [velocity]
-    local copies=$1 budget=$2 scene="$WORK/scene_$1.xyz" frame=$FRAME
+run() { # copies budget [velocity|splash]
+    local copies=$1 budget=$2 scene="$WORK/scene_$1.xyz" frame=$FRAME splash=()
     if [ "${3:-}" = velocity ]; then scene="$WORK/scene_$1_velocity.ply" frame=$FRAME_VELOCITY; fi
-    [ -f "$scene" ] || target/release/examples/tile_scene "$frame" "$copies" "$scene" >/dev/null
+    if [ "${3:-}" = splash ]; then scene="$WORK/scene_$1_splash.xyz" splash=(splash); fi
+    [ -f "$scene" ] || target/release/examples/tile_scene "$frame" "$copies" "$scene" "${splash[@]}" >/dev/null
     local args=(reconstruct "$scene" -r 0.012 -o "$WORK/out.ply" --stats "$WORK/stats.json" -q)
     [ "$budget" != default ] && args+=(--memory-budget "$budget")
     # Every run writes a fresh file with the previous runs' output flushed: replacing a
@@ -46,7 +49,7 @@ rss = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", t).group(1))
 r = json.load(open(f"{work}/stats.json"))["frames"][0]["reconstruction"]
 tiles = r["tiles"]
 layout = f"{tiles['tiles']} x {tiles['tile_blocks'] * 8} cells" if tiles["tile_blocks"] else "untiled"
-print(f"| {r['particles']:>10}{' + velocity' if extra else ''} | {budget:>8} | {layout:>16} "
+print(f"| {r['particles']:>10}{' + ' + extra if extra else ''} | {budget:>8} | {layout:>16} "
       f"| {wall:>8} | {rss:8.0f} MiB | {r['marching_cubes_triangles']:>10} -> {r['fluid_triangles']:>10} |")
 PY
 }
@@ -55,7 +58,12 @@ echo "| particles | budget | tiles | wall | peak RSS | MC -> final triangles |"
 for copies in ${SCALE_COPIES:-24 96 384 768}; do
     run "$copies" default
     case $copies in
-        96) run "$copies" 512MiB; run "$copies" default velocity; run "$copies" 1GiB velocity ;;
+        96)
+            for budget in 512MiB 1GiB 2GiB; do run "$copies" "$budget"; done
+            run "$copies" default velocity
+            run "$copies" 1GiB velocity
+            for budget in 512MiB 1GiB 2GiB; do run "$copies" "$budget" splash; done
+            ;;
         384 | 768) run "$copies" 2GiB ;;
     esac
 done

@@ -27,7 +27,7 @@ use crate::mesh::{SphereInstances, Surface};
 use crate::neighbors::find_isolated;
 use crate::subdivision::{subdivide, SubdivideOptions};
 use crate::tiles::{
-    output_bytes_per_particle, plan_tiles, run_tiles, ParticleStore, StitchSink, TileOptions,
+    output_bytes_per_triangle, plan_tiles, run_tiles, ParticleStore, StitchSink, TileOptions,
     TileSink, TileStats,
 };
 use glam::Vec3;
@@ -190,7 +190,7 @@ pub fn reconstruct_source<S: ParticleSource>(
         &source,
         &options.field,
         &options.tiles,
-        output_bytes_per_particle(
+        output_bytes_per_triangle(
             decimating.map(|d| d.target_reduction.unwrap_or(0.8)),
             options.subdivide.levels,
         ),

@@ -1,22 +1,40 @@
-//! The memory model of a tiled run: how much a run needs, per particle, at each phase,
-//! and the tile size that fits a budget (`choose_tile_blocks`). Calibrated on copies of
-//! `dambreak_small` frame 25 (1M to 32M particles, `benches/scale.sh`); within about 10 %
-//! there, and an underestimate for scenes with much more surface per particle.
+//! The memory model of a tiled run: how much a run needs at each phase, and the tile size
+//! that fits a budget (`choose_tile_blocks`). The particles cost per particle; the field
+//! and the surface cost per block the particles populate and per triangle to come, which
+//! the counting pass estimates from the populated blocks on the surface of the fluid
+//! ([`SceneShape`]): a splash has far more surface per particle than a resting tank.
+//! Calibrated on copies of `dambreak_small` frame 25 (1M to 32M particles,
+//! `benches/scale.sh`) and on the same frame thrown into a splash (`tile_scene … splash`):
+//! within about 10 % there, above the measured peaks.
 
 use super::plan::tile_origin;
 use crate::error::{Error, Result};
 use crate::grid::{BlockKey, BLOCK_EDGE};
 use hashbrown::HashMap;
 
-/// Peak memory of an untiled run with full post-processing, bytes per particle (4M
-/// particles of `dambreak_small` copies: 720 MB, on top of [`BASE_BYTES`]).
-pub(crate) const UNTILED_BYTES_PER_PARTICLE: u64 = 170;
+/// Peak memory of an untiled run (field and marching cubes over the whole frame), bytes
+/// per particle: positions, the sorted copy, neighbour lists and indices. With
+/// [`FIELD_BYTES_PER_POPULATED_BLOCK`] and [`SURFACE_BYTES_PER_TRIANGLE`] this put the 4M
+/// scene at 884 MiB (measured 833) and its splash at 1097 MiB (measured 1054).
+pub(crate) const UNTILED_BYTES_PER_PARTICLE: u64 = 56;
+/// Field blocks of an untiled run, bytes per populated block: 1.6 blocks of 2 KiB in the
+/// narrow band per populated block (1.59 in the 4M scene, 1.58 in its splash).
+pub(crate) const FIELD_BYTES_PER_POPULATED_BLOCK: u64 = 3400;
+/// Block surfaces and the stitched mesh of an untiled run, bytes per marching-cubes
+/// triangle (23 measured on the 4M scene, 26 on its splash).
+pub(crate) const SURFACE_BYTES_PER_TRIANGLE: f64 = 25.0;
 /// Peak memory of one tile, bytes per particle it loads (own and ghost): particles,
-/// neighbour grid, field blocks, block surfaces and the tile's decimation state.
+/// neighbour grid, field blocks, block surfaces and the tile's decimation state, in a
+/// scene with [`PARTICLES_PER_SURFACE_BLOCK`]; scaled up where a scene has more surface
+/// per particle (its splash: 1.4 × as much surface, ≈ 750 B per particle measured in its
+/// densest 64-block tile).
 pub(crate) const TILE_BYTES_PER_PARTICLE: u64 = 600;
-/// Marching-cubes triangles per particle of a fluid body at h = r (`dambreak_small`:
-/// 2.67).
-pub(crate) const MC_TRIANGLES_PER_PARTICLE: f64 = 2.7;
+/// Particles per surface block of the scene [`TILE_BYTES_PER_PARTICLE`] was measured on
+/// (50.2 in the 4M scene, 35.6 in its splash).
+pub(crate) const PARTICLES_PER_SURFACE_BLOCK: f64 = 50.0;
+/// Marching-cubes triangles per populated block on the fluid's surface (one with an
+/// unpopulated block among its 26 neighbours): 134 in the 4M scene, 129 in its splash.
+pub(crate) const MC_TRIANGLES_PER_SURFACE_BLOCK: f64 = 140.0;
 /// Peak working set of one Loop step, bytes per input triangle (the input's triangles,
 /// side → edge indices, the output mesh; measured 104 on 32M particles, 134 on 4M where
 /// heap left over from the tiles counts more). 110 put the 32M scene's whole-run estimate
@@ -27,6 +45,10 @@ pub(crate) const MC_TRIANGLES_PER_PARTICLE: f64 = 2.7;
 pub(crate) const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 110.0;
 /// Memory of the process before any particle (code, thread stacks, allocator), bytes.
 pub(crate) const BASE_BYTES: u64 = 64 << 20;
+/// What the tiles leave in memory under the post-processing, beyond the surface (the
+/// allocator's free heap, the isolated centres, the plan): 62–94 MiB measured after the
+/// 4M scene's tiles.
+pub(crate) const POST_TILES_BYTES: u64 = 96 << 20;
 /// Bytes per particle of a tile's particles loaded with a payload of `w` floats for the
 /// attribute stage, on top of `4·w` (records and rows read back, positions and indices,
 /// home half-blocks, the sort order, the sorted copy).
@@ -35,14 +57,61 @@ pub(crate) const ATTRIBUTE_TILE_BYTES_PER_PARTICLE: u64 = 76;
 /// 24 for position and normal).
 pub(crate) const MESH_BYTES_PER_TRIANGLE: f64 = 24.0;
 
+/// What the counting pass knows of a frame's surface before any field value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct SceneShape {
+    /// Particles in the frame.
+    pub particles: u64,
+    /// Blocks holding at least one particle.
+    pub populated_blocks: u64,
+    /// Populated blocks with an unpopulated block among their 26 neighbours.
+    pub surface_blocks: u64,
+}
+
+impl SceneShape {
+    /// The shape of the particles counted per home block.
+    pub(crate) fn of(block_counts: &HashMap<BlockKey, u64>) -> SceneShape {
+        let surface_blocks = block_counts
+            .keys()
+            .filter(|b| {
+                (-1..=1).any(|dz| {
+                    (-1..=1).any(|dy| {
+                        (-1..=1).any(|dx| {
+                            !block_counts.contains_key(&[b[0] + dx, b[1] + dy, b[2] + dz])
+                        })
+                    })
+                })
+            })
+            .count() as u64;
+        SceneShape {
+            particles: block_counts.values().sum(),
+            populated_blocks: block_counts.len() as u64,
+            surface_blocks,
+        }
+    }
+
+    /// Marching-cubes triangles to expect.
+    pub(crate) fn marching_cubes_triangles(&self) -> f64 {
+        self.surface_blocks as f64 * MC_TRIANGLES_PER_SURFACE_BLOCK
+    }
+
+    /// Peak memory of field and marching cubes over the whole frame at once, bytes.
+    fn untiled_bytes(&self) -> u64 {
+        BASE_BYTES
+            + self.particles * UNTILED_BYTES_PER_PARTICLE
+            + self.populated_blocks * FIELD_BYTES_PER_POPULATED_BLOCK
+            + (self.marching_cubes_triangles() * SURFACE_BYTES_PER_TRIANGLE) as u64
+    }
+}
+
 /// Memory the surface needs after the tiles (the post-processing's peak), bytes per
-/// particle, for decimation removing `reduction` of the triangles (`None`: no
-/// decimation; an error-bounded run counts as 0.8) and `subdivide_levels` Loop steps.
-pub(crate) fn output_bytes_per_particle(reduction: Option<f32>, subdivide_levels: u32) -> u64 {
-    let mut triangles = MC_TRIANGLES_PER_PARTICLE;
+/// marching-cubes triangle, for decimation removing `reduction` of the triangles (`None`:
+/// no decimation; an error-bounded run counts as 0.8) and `subdivide_levels` Loop steps.
+pub(crate) fn output_bytes_per_triangle(reduction: Option<f32>, subdivide_levels: u32) -> f64 {
+    let mut triangles = 1.0;
     // Without decimation the block surfaces (≈ 20 B per triangle) and the stitched mesh
     // (≈ 18 B) exist together.
-    let mut peak = match reduction {
+    let mut peak: f64 = match reduction {
         None => triangles * 38.0,
         Some(f) => {
             triangles *= 1.0 - f.clamp(0.0, 1.0) as f64;
@@ -53,15 +122,14 @@ pub(crate) fn output_bytes_per_particle(reduction: Option<f32>, subdivide_levels
         peak = peak.max(triangles * SUBDIVISION_BYTES_PER_INPUT_TRIANGLE);
         triangles *= 4.0;
     }
-    peak.max(triangles * MESH_BYTES_PER_TRIANGLE).ceil() as u64
+    peak.max(triangles * MESH_BYTES_PER_TRIANGLE)
 }
 
 /// Picks the tile edge in blocks (`None`: one tile) and estimates the run's peak memory.
 pub(super) fn choose_tile_blocks(
     block_counts: &HashMap<BlockKey, u64>,
-    particles: u64,
     reach: i32,
-    output_bytes_per_particle: u64,
+    output_bytes_per_triangle: f64,
     payload_width: usize,
     decimated_in_tiles: bool,
     options: &super::TileOptions,
@@ -71,17 +139,20 @@ pub(super) fn choose_tile_blocks(
     // A payload costs, untiled, the particles kept in memory to the attribute stage (12
     // bytes of position and 4 per float); tiled, the densest tile's particles loaded with
     // their payload next to the finished surface.
+    let shape = SceneShape::of(block_counts);
+    let particles = shape.particles;
+    let triangles = shape.marching_cubes_triangles();
     let payload = 4 * payload_width as u64;
-    let kept = if payload > 0 { 12 + payload } else { 0 };
-    let output = BASE_BYTES + particles * output_bytes_per_particle;
+    let kept = if payload > 0 { 12 + 2 * payload } else { 0 };
+    let output = BASE_BYTES + POST_TILES_BYTES + (triangles * output_bytes_per_triangle) as u64;
     let produced = BASE_BYTES
-        + particles
+        + (triangles
             * if decimated_in_tiles {
-                (MC_TRIANGLES_PER_PARTICLE * 0.2 * MESH_BYTES_PER_TRIANGLE) as u64
+                0.2 * MESH_BYTES_PER_TRIANGLE
             } else {
-                (MC_TRIANGLES_PER_PARTICLE * 20.0) as u64
-            };
-    let untiled = BASE_BYTES + particles * (UNTILED_BYTES_PER_PARTICLE + kept);
+                20.0
+            }) as u64;
+    let untiled = shape.untiled_bytes().max(output) + particles * kept;
     // Zone 2 of a tile reaches 2·reach + 1 blocks below its own blocks and 2·reach + 2
     // above (see the module docs). Exact particle count of the fullest zone 2: every
     // populated block adds its count to each tile whose zone 2 holds it.
@@ -102,7 +173,11 @@ pub(super) fn choose_tile_blocks(
         }
         zone.values().copied().max().unwrap_or(0)
     };
-    let tile_estimate = |t: i32| densest_zone(t) * TILE_BYTES_PER_PARTICLE;
+    let surface_factor = (shape.surface_blocks as f64 * PARTICLES_PER_SURFACE_BLOCK
+        / particles.max(1) as f64)
+        .max(1.0);
+    let tile_bytes_per_particle = (TILE_BYTES_PER_PARTICLE as f64 * surface_factor) as u64;
+    let tile_estimate = |t: i32| densest_zone(t) * tile_bytes_per_particle;
     // The whole tiled run: tiles over what they produced, or the surface after them with
     // the attribute stage's tile.
     let tiled_estimate = |t: i32| -> u64 {
@@ -119,7 +194,8 @@ pub(super) fn choose_tile_blocks(
             return Err(Error::MemoryBudget {
                 budget_mib: mib(budget),
                 message: format!(
-                    "the process and the surface of {particles} particles need ≈ {} MiB after the tiles (decimation and subdivision); raise --memory-budget, or use --subdivide 0",
+                    "the process and the surface of {particles} particles (≈ {:.1} M triangles before decimation) need ≈ {} MiB after the tiles (decimation and subdivision): a larger budget or fewer subdivision steps would fit",
+                    triangles / 1e6,
                     mib(output)
                 ),
             });
@@ -134,7 +210,7 @@ pub(super) fn choose_tile_blocks(
                     return Err(Error::MemoryBudget {
                         budget_mib: mib(budget),
                         message: format!(
-                            "tiles of {cells} cells need ≈ {} MiB (densest tile ≈ {} MiB, the process and the surface so far ≈ {} MiB); use a smaller --tile-size or a larger --memory-budget",
+                            "tiles of {cells} cells need ≈ {} MiB (densest tile ≈ {} MiB, the process and the surface so far ≈ {} MiB): smaller tiles or a larger budget would fit",
                             mib(estimate),
                             mib(tile_estimate(t)),
                             mib(produced)
@@ -206,4 +282,70 @@ pub fn default_memory_budget() -> Option<u64> {
     let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
     let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kib * 1024 / 2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tiles::TileOptions;
+
+    /// `n`³ populated blocks of `per_block` particles each, spaced `gap` blocks apart.
+    fn lattice(n: i32, gap: i32, per_block: u64) -> HashMap<BlockKey, u64> {
+        let mut counts = HashMap::new();
+        for z in 0..n {
+            for y in 0..n {
+                for x in 0..n {
+                    counts.insert([x * gap, y * gap, z * gap], per_block);
+                }
+            }
+        }
+        counts
+    }
+
+    #[test]
+    fn surface_blocks_are_the_populated_blocks_with_an_empty_neighbour() {
+        let solid = SceneShape::of(&lattice(6, 1, 10));
+        assert_eq!(solid.particles, 2160);
+        assert_eq!(solid.populated_blocks, 216);
+        assert_eq!(solid.surface_blocks, 216 - 4 * 4 * 4);
+        // Blocks touching only along an edge or a corner still count as neighbours.
+        let mut diagonal = HashMap::new();
+        diagonal.insert([0, 0, 0], 1);
+        diagonal.insert([1, 1, 1], 1);
+        assert_eq!(SceneShape::of(&diagonal).surface_blocks, 2);
+        let spray = SceneShape::of(&lattice(6, 2, 10));
+        assert_eq!(spray.surface_blocks, 216);
+        assert!(spray.marching_cubes_triangles() > solid.marching_cubes_triangles());
+    }
+
+    #[test]
+    fn a_scene_with_more_surface_per_particle_is_planned_with_more_memory() {
+        // The same particles as one solid body and as spray: the spray has every block on
+        // its surface, so it needs more memory untiled and is tiled under a budget the
+        // body runs untiled in.
+        let body = lattice(24, 1, 64);
+        let spray = lattice(24, 3, 64);
+        let output = output_bytes_per_triangle(Some(0.8), 0);
+        let plan = |counts: &HashMap<BlockKey, u64>, budget: Option<u64>| {
+            let options = TileOptions {
+                memory_budget_bytes: budget,
+                ..TileOptions::default()
+            };
+            choose_tile_blocks(counts, 1, output, 0, true, &options)
+        };
+        let (body_tiles, body_bytes) = plan(&body, None).unwrap();
+        let (spray_tiles, spray_bytes) = plan(&spray, None).unwrap();
+        assert_eq!((body_tiles, spray_tiles), (None, None));
+        assert!(spray_bytes > body_bytes + body_bytes / 10);
+        let between = (body_bytes + spray_bytes) / 2;
+        let (body_tiles, body_estimate) = plan(&body, Some(between)).unwrap();
+        assert_eq!(body_tiles, None);
+        assert!(body_estimate <= between);
+        let (spray_tiles, spray_estimate) = plan(&spray, Some(between)).unwrap();
+        assert!(
+            spray_tiles.is_some(),
+            "the spray is tiled under {between} bytes"
+        );
+        assert!(spray_estimate <= between);
+    }
 }

@@ -41,8 +41,9 @@
 //!
 //! **Memory budget.** [`TileOptions::memory_budget_bytes`] picks the tile size (the largest
 //! power-of-two number of blocks whose densest tile fits next to the expected output) or
-//! refuses, before any work, a run whose smallest tile cannot fit. The estimate is a
-//! per-particle model calibrated on real frames ([`budget`]). An untiled run whose
+//! refuses, before any work, a run whose smallest tile cannot fit. The estimate counts the
+//! particles, the blocks they populate and the triangles the populated blocks on the
+//! fluid's surface will carry, calibrated on a real frame and a splash of it ([`budget`]). An untiled run whose
 //! estimate leaves a quarter of it spare keeps the buffers it frees for reuse, in a
 //! program that allows it ([`TileStats::kept_freed_memory`]): 9–11 % more peak memory,
 //! fewer fresh pages.
@@ -69,7 +70,7 @@ use crate::io::particles::ParticleSource;
 use crate::marching_cubes::{march_blocks, stitch, BlockSurface, MarchingCubesStats};
 use crate::mesh::TriMesh;
 use crate::neighbors::find_isolated_sorted;
-pub(crate) use budget::output_bytes_per_particle;
+pub(crate) use budget::output_bytes_per_triangle;
 pub use budget::{default_memory_budget, parse_memory_size};
 use glam::Vec3;
 pub(crate) use plan::{plan_tiles, TilePlan};
