@@ -344,6 +344,24 @@ pub struct ArchiveReader {
 }
 
 impl ArchiveReader {
+    /// Refuses to add `numbers` when the archive holds any of them:
+    /// [`Error::FramesExist`] names those it holds (in the order of `numbers`).
+    pub fn check_new_frames(&self, numbers: &[i64]) -> Result<()> {
+        let held: Vec<i64> = numbers
+            .iter()
+            .copied()
+            .filter(|n| self.frames.iter().any(|f| f.number == *n))
+            .collect();
+        if held.is_empty() {
+            return Ok(());
+        }
+        Err(Error::FramesExist {
+            path: self.path.clone(),
+            frames: held,
+            planned: numbers.len(),
+        })
+    }
+
     /// Opens an archive: through its index when that is valid (damaged records are then
     /// reported by the frame number the index gives them), else by scanning its records
     /// (an interrupted append), resynchronising past damaged ones.
