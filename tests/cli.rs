@@ -349,6 +349,10 @@ fn an_archived_frame_extracts_to_the_mesh_reconstruct_writes() {
     assert!((va - vb).abs() <= 1e-3 * va.abs(), "volumes {va} and {vb}");
 }
 
+/// A row of the error table: arguments, exit code, fragments stderr must hold, fragments
+/// it must not hold.
+type Case<'a> = (Vec<&'a str>, i32, Vec<&'a str>, Vec<&'a str>);
+
 /// What a user gets wrong, and what the CLI answers: one table of (arguments, exit code,
 /// fragments stderr must hold, fragments it must not hold). Exit codes: 0 done, 1 a file
 /// or its content, 2 an option or argument. Errors name the cause and the input, and
@@ -385,7 +389,7 @@ fn new_user_errors_name_the_real_cause() {
     let anim = path("anim.glb");
     let fresh = path("fresh.mseq");
     let r = ["-r", "0.025"];
-    let cases: Vec<(Vec<&str>, i32, Vec<&str>, Vec<&str>)> = vec![
+    let cases: Vec<Case> = vec![
         // Files and their content: exit 1, naming the file.
         (
             vec!["reconstruct", &missing, "-o", &out],
