@@ -5,6 +5,7 @@ use clap::parser::ValueSource;
 use clap::{ArgMatches, Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use meniscus::archive::{ArchiveOptions, ArchiveReader, ArchiveWriter};
+use meniscus::attributes::AttributeSelection;
 use meniscus::decimation::DecimateOptions;
 use meniscus::io::mesh::read_mesh;
 use meniscus::io::mesh::MeshWriteOptions;
@@ -516,7 +517,7 @@ fn reconstruct(
         Some(list) => list
             .parse()
             .map_err(|e| Failure::option("--attributes", e))?,
-        None => meniscus::attributes::AttributeSelection::default(),
+        None => AttributeSelection::default(),
     };
     let error_bound = args.error_bound.unwrap_or(ARCHIVE_ERROR * radius(args));
     let plan = plan_frames(&args.input, &args.output, args.start, args.end)?;
@@ -619,12 +620,23 @@ fn ineffective_options(
     args: &ReconstructArgs,
     given: &ArgMatches,
     plan: &[(meniscus::sequence::Frame, PathBuf)],
-    attributes: &meniscus::attributes::AttributeSelection,
+    attributes: &AttributeSelection,
 ) -> Vec<String> {
     let given = |id: &str| given.value_source(id) == Some(ValueSource::CommandLine);
     let kind = output_kind(plan);
     let output = &args.output;
     let mut warnings = Vec::new();
+    // Raw .xyz holds no attributes (a list of names is an error when it is read).
+    let raw_positions = args
+        .input_format
+        .or_else(|| {
+            let (frame, _) = plan.first()?;
+            ParticleFormat::from_path(&frame.input).ok()
+        })
+        .is_some_and(|f| f == ParticleFormat::Xyz);
+    if raw_positions && *attributes == AttributeSelection::All {
+        warnings.push("--attributes all has no effect: raw .xyz input holds positions only".into());
+    }
     if kind != OutputKind::Archive {
         for (id, option) in [
             ("error_bound", "--error-bound"),
@@ -637,13 +649,18 @@ fn ineffective_options(
             }
         }
     } else {
-        if given("attribute_error_bound")
-            && *attributes == meniscus::attributes::AttributeSelection::None
-        {
-            warnings.push(
-                "--attribute-error-bound has no effect: --attributes none carries no attributes"
-                    .into(),
-            );
+        if given("attribute_error_bound") {
+            if *attributes == AttributeSelection::None {
+                warnings.push(
+                    "--attribute-error-bound has no effect: --attributes none carries no attributes"
+                        .into(),
+                );
+            } else if raw_positions {
+                warnings.push(
+                    "--attribute-error-bound has no effect: raw .xyz input holds positions only"
+                        .into(),
+                );
+            }
         }
         if given("no_normals") {
             warnings.push(format!(

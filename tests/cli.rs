@@ -388,6 +388,7 @@ fn new_user_errors_name_the_real_cause() {
     let packed = path("packed.mseq");
     let anim = path("anim.glb");
     let fresh = path("fresh.mseq");
+    let fresh2 = path("fresh2.mseq");
     let r = ["-r", "0.025"];
     let cases: Vec<Case> = vec![
         // Files and their content: exit 1, naming the file.
@@ -484,6 +485,13 @@ fn new_user_errors_name_the_real_cause() {
             2,
             vec!["--particle-radius: must be a finite number > 0"],
             vec!["-- -1", "unexpected argument"],
+        ),
+        // Cells too small for the influence radius: the pair is named, either may be set.
+        (
+            vec!["reconstruct", sphere, "-c", "0.05", "-o", &out],
+            2,
+            vec!["--influence-radius/--cell-size", "64 cells of 0.05 r"],
+            vec![],
         ),
         // An unknown output extension fails before any work and lists .mseq.
         (
@@ -599,6 +607,25 @@ fn new_user_errors_name_the_real_cause() {
             vec!["reconstruct", sphere, "-q", "--no-normals", "-o", &fresh],
             0,
             vec!["warning: --no-normals has no effect", "fresh.mseq"],
+            vec!["error:"],
+        ),
+        (
+            vec![
+                "reconstruct",
+                sphere,
+                "-q",
+                "--attributes",
+                "all",
+                "--attribute-error-bound",
+                "0.01",
+                "-o",
+                &fresh2,
+            ],
+            0,
+            vec![
+                "warning: --attributes all has no effect: raw .xyz",
+                "warning: --attribute-error-bound has no effect: raw .xyz",
+            ],
             vec!["error:"],
         ),
         // Options that do take effect draw no warning.
