@@ -82,6 +82,17 @@ pub enum Error {
         /// Which particle, where, and why.
         message: String,
     },
+    /// Frames a run would add to an archive that already holds them (refused before the
+    /// archive is touched; [`crate::job::JobOptions::skip_existing`] skips them instead).
+    #[error("{}: already holds {}", path.display(), held_frames(frames, *planned))]
+    FramesExist {
+        /// The archive.
+        path: PathBuf,
+        /// The frames of the run it holds, in the run's order.
+        frames: Vec<i64>,
+        /// How many frames the run has.
+        planned: usize,
+    },
     /// The input holds no particles.
     #[error("{path}: the file holds no particles")]
     EmptyInput {
@@ -110,5 +121,61 @@ impl Error {
             location: location.into(),
             message: message.into(),
         }
+    }
+}
+
+/// "frame 3", "frames 1, 6 and 13 (all 3 frames of this run)"; the first ten of a long
+/// list.
+fn held_frames(frames: &[i64], planned: usize) -> String {
+    const SHOWN: usize = 10;
+    let names: Vec<String> = frames.iter().take(SHOWN).map(|n| n.to_string()).collect();
+    let list = match names.split_last() {
+        // The count follows.
+        _ if frames.len() > SHOWN => format!("{}, …", names.join(", ")),
+        Some((last, rest)) if !rest.is_empty() => format!("{} and {last}", rest.join(", ")),
+        _ => names.join(""),
+    };
+    let noun = if frames.len() == 1 { "frame" } else { "frames" };
+    let of = if frames.len() == planned && planned > 1 {
+        format!(" (all {planned} frames of this run)")
+    } else if planned > frames.len() {
+        format!(" ({} of the {planned} frames of this run)", frames.len())
+    } else {
+        String::new()
+    };
+    format!("{noun} {list}{of}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_exist_names_the_frames_it_holds() {
+        let e = |frames: Vec<i64>, planned| {
+            Error::FramesExist {
+                path: "run.mseq".into(),
+                frames,
+                planned,
+            }
+            .to_string()
+        };
+        assert_eq!(e(vec![0], 1), "run.mseq: already holds frame 0");
+        assert_eq!(
+            e(vec![1, 6, 13], 3),
+            "run.mseq: already holds frames 1, 6 and 13 (all 3 frames of this run)"
+        );
+        assert_eq!(
+            e(vec![6], 3),
+            "run.mseq: already holds frame 6 (1 of the 3 frames of this run)"
+        );
+        let long = e((0..25).collect(), 30);
+        assert!(
+            long.ends_with(
+                "frames 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, … (25 of the 30 frames of this run)"
+            ),
+            "{long}"
+        );
+        assert!(!long.contains("--"), "names no flag: {long}");
     }
 }

@@ -1,7 +1,7 @@
 //! File-level jobs: read a particle file, reconstruct, write the surface; and whole
 //! sequences of frames. The CLI is a thin layer over [`run_frames`].
 
-use crate::archive::{ArchiveFrame, ArchiveOptions, ArchiveWriter};
+use crate::archive::{ArchiveFrame, ArchiveOptions, ArchiveReader, ArchiveWriter};
 use crate::attributes::{select_attributes, AttributeSelection};
 use crate::cancel::CancelToken;
 use crate::error::{Error, Result};
@@ -238,6 +238,14 @@ pub fn plan_frames(
     start: Option<i64>,
     end: Option<i64>,
 ) -> Result<Vec<(Frame, PathBuf)>> {
+    if sequence::is_pattern(output) && is_archive(Path::new(output)) {
+        return Err(Error::InvalidOption {
+            option: "--output",
+            message: format!(
+                "{output:?}: one .mseq archive holds the whole sequence; name it without {{}}"
+            ),
+        });
+    }
     match (sequence::is_pattern(input), sequence::is_pattern(output)) {
         (true, true) => Ok(sequence::frames(input, start, end)?
             .into_iter()
@@ -279,17 +287,34 @@ pub fn plan_frames(
     }
 }
 
-/// Runs every planned frame in order; stops at the first error. `on_frame` is called
-/// before each frame with its index in the plan, `on_stage` at each phase.
-pub fn run_frames(
-    plan: &[(Frame, PathBuf)],
-    options: &ReconstructOptions,
-    job: &JobOptions,
-    on_frame: &mut dyn FnMut(usize, &Frame),
-    on_stage: &mut dyn FnMut(&str),
-    on_done: &mut dyn FnMut(&FrameReport),
-) -> Result<Vec<FrameReport>> {
-    // Every output's format is known before any work.
+/// How the frames of a plan are written.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputKind {
+    /// Each frame to its own mesh file (a single file is one of these).
+    Files,
+    /// Every frame into one `.mseq` archive, appended when it exists.
+    Archive,
+    /// The frames of a `{}` pattern collected into one animated `.glb`/`.gltf`, written
+    /// whole at the end.
+    AnimatedGltf,
+}
+
+/// How [`run_frames`] writes the frames of `plan`.
+pub fn output_kind(plan: &[(Frame, PathBuf)]) -> OutputKind {
+    match plan.first() {
+        Some((_, out)) if is_archive(out) => OutputKind::Archive,
+        Some((f, out))
+            if !f.label.is_empty() && is_gltf(out) && plan.iter().all(|(_, o)| o == out) =>
+        {
+            OutputKind::AnimatedGltf
+        }
+        _ => OutputKind::Files,
+    }
+}
+
+/// Checks that every output of `plan` has a format [`run_frames`] writes (before any
+/// work).
+pub fn check_outputs(plan: &[(Frame, PathBuf)]) -> Result<()> {
     for (_, out) in plan {
         if !is_archive(out) {
             MeshFormat::from_path(out).map_err(|_| Error::UnsupportedFormat {
@@ -301,9 +326,40 @@ pub fn run_frames(
             })?;
         }
     }
+    Ok(())
+}
+
+/// Runs every planned frame in order; stops at the first error. `on_frame` is called
+/// before each frame with its index in the plan, `on_stage` at each phase.
+pub fn run_frames(
+    plan: &[(Frame, PathBuf)],
+    options: &ReconstructOptions,
+    job: &JobOptions,
+    on_frame: &mut dyn FnMut(usize, &Frame),
+    on_stage: &mut dyn FnMut(&str),
+    on_done: &mut dyn FnMut(&FrameReport),
+) -> Result<Vec<FrameReport>> {
+    check_outputs(plan)?;
+    let kind = output_kind(plan);
     // A .mseq output collects every frame: appended to an existing archive, else new.
     let mut archive = match plan.first() {
-        Some((_, out)) if is_archive(out) => {
+        Some((_, out)) if kind == OutputKind::Archive => {
+            if let Some((_, other)) = plan.iter().find(|(_, o)| o != out) {
+                return Err(Error::InvalidOption {
+                    option: "--output",
+                    message: format!(
+                        "one .mseq archive holds the whole sequence, not {} and {}",
+                        out.display(),
+                        other.display()
+                    ),
+                });
+            }
+            // Frames the archive holds are refused before it is touched, unless they
+            // are to be skipped.
+            if out.exists() && !job.skip_existing {
+                let numbers: Vec<i64> = plan.iter().map(|(f, _)| f.number).collect();
+                ArchiveReader::open(out)?.check_new_frames(&numbers)?;
+            }
             if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
                 std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
             }
@@ -324,9 +380,7 @@ pub fn run_frames(
         .map(|a| a.frame_numbers())
         .unwrap_or_default();
     // A pattern written into one .glb/.gltf: frames are kept and written together.
-    let sequence_gltf = plan.first().is_some_and(|(f, out)| {
-        !f.label.is_empty() && is_gltf(out) && plan.iter().all(|(_, o)| o == out)
-    });
+    let sequence_gltf = kind == OutputKind::AnimatedGltf;
     let mut collected: Vec<TriMesh> = Vec::new();
     let mut reports = Vec::with_capacity(plan.len());
     for (i, (frame, output)) in plan.iter().enumerate() {
@@ -336,16 +390,6 @@ pub fn run_frames(
             Some(_) => archived.contains(&frame.number),
             None => !sequence_gltf && output.exists(),
         };
-        if archive.is_some() && exists && !job.skip_existing {
-            return Err(Error::InvalidOption {
-                option: "--skip-existing",
-                message: format!(
-                    "{} already holds frame {}; pass --skip-existing to resume",
-                    output.display(),
-                    frame.number
-                ),
-            });
-        }
         let report = if job.skip_existing && exists {
             FrameReport {
                 frame: frame.number,

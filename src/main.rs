@@ -1,21 +1,29 @@
 //! The `meniscus` command line: argument parsing, progress display and reports. All
 //! reconstruction logic lives in the library.
 
-use clap::{Args, Parser, Subcommand};
+use clap::parser::ValueSource;
+use clap::{ArgMatches, Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use meniscus::archive::{ArchiveOptions, ArchiveReader, ArchiveWriter};
+use meniscus::attributes::AttributeSelection;
 use meniscus::decimation::DecimateOptions;
 use meniscus::io::mesh::read_mesh;
 use meniscus::io::mesh::MeshWriteOptions;
 use meniscus::io::particles::ParticleFormat;
-use meniscus::job::{peak_rss_bytes, plan_frames, run_frames, FrameReport, JobOptions};
+use meniscus::job::{
+    check_outputs, output_kind, peak_rss_bytes, plan_frames, run_frames, FrameReport, JobOptions,
+    OutputKind,
+};
 use meniscus::pipeline::ReconstructOptions;
 
-/// Error bound of `--decimate adaptive`, multiples of r.
-const ADAPTIVE_ERROR: f32 = 0.1;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
+
+/// Error bound of `--decimate adaptive`, multiples of r.
+const ADAPTIVE_ERROR: f32 = 0.1;
+/// Default error bound of a `.mseq` output of `reconstruct`, multiples of r.
+const ARCHIVE_ERROR: f64 = 0.01;
 
 #[derive(Parser)]
 #[command(
@@ -72,9 +80,10 @@ enum ArchiveCommand {
         /// The archive to create or append to.
         #[arg(short, long)]
         output: PathBuf,
-        /// Error bound, world units.
-        #[arg(long, allow_negative_numbers = true)]
-        error_bound_world: f64,
+        /// Error bound, world units (each coordinate within it), as `archive info` prints
+        /// it; appending needs the archive's own. Required: meshes carry no particle radius.
+        #[arg(long, allow_negative_numbers = true, alias = "error-bound-world")]
+        error_bound: f64,
         /// Error bound of the meshes' vertex attributes, in each attribute's own units.
         #[arg(allow_negative_numbers = true, long, default_value_t = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND)]
         attribute_error_bound: f64,
@@ -144,8 +153,10 @@ struct ReconstructArgs {
     /// marching-cubes mesh does not depend on it.
     #[arg(long)]
     tile_size: Option<u32>,
-    /// Memory the run may use (`512MiB`, `2GiB`); default half the available memory.
-    /// Picks the tile size; a run whose smallest tile cannot fit fails before any work.
+    /// Memory the run may use: `512MiB`, `2GiB` (powers of 2), `2GB` (powers of 10) or
+    /// plain bytes; a bare `2g` or `512M` is refused as ambiguous. Default half the
+    /// available memory. Picks the tile size; a run whose smallest tile cannot fit fails
+    /// before any work.
     #[arg(long)]
     memory_budget: Option<String>,
     /// Directory for the spill file of a tiled run (default: the system's temporary
@@ -161,7 +172,8 @@ struct ReconstructArgs {
     /// Last frame of a sequence (inclusive).
     #[arg(long, allow_negative_numbers = true)]
     end: Option<i64>,
-    /// Skip frames whose output already exists.
+    /// Skip frames whose output already exists, or that the `.mseq` output holds (the
+    /// others are appended).
     #[arg(long)]
     skip_existing: bool,
     /// Worker threads (default: all cores). Output does not depend on it.
@@ -170,14 +182,16 @@ struct ReconstructArgs {
     /// Write per-frame, per-stage statistics as JSON to this file.
     #[arg(long)]
     stats: Option<PathBuf>,
-    /// Error bound of a `.mseq` output, multiples of r (each coordinate within it).
-    #[arg(allow_negative_numbers = true, long, default_value_t = 0.01)]
-    error_bound: f64,
+    /// Error bound of a `.mseq` output, world units (each coordinate within it), as
+    /// `archive info` prints it and `archive pack` takes it; appending needs the
+    /// archive's own. Default 0.01 × the particle radius.
+    #[arg(allow_negative_numbers = true, long)]
+    error_bound: Option<f64>,
     /// Error bound of the attributes in a `.mseq` output, in each attribute's own units
     /// (m/s for a velocity): every value within it.
     #[arg(allow_negative_numbers = true, long, default_value_t = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND)]
     attribute_error_bound: f64,
-    /// Playback rate of a sequence written into one .glb/.gltf, frames per second.
+    /// Playback rate of a `{}` sequence written into one .glb/.gltf, frames per second.
     #[arg(long, default_value_t = 24.0)]
     fps: f32,
     /// Point attributes carried to the surface: a comma-separated list of names
@@ -193,9 +207,34 @@ struct ReconstructArgs {
     quiet: bool,
 }
 
+/// Why a command failed: what it prints and its exit code.
+enum Failure {
+    /// An option or argument that cannot work (exit 2, as clap's own usage errors).
+    Usage(String),
+    /// A file, its content, or the run itself (exit 1).
+    Run(String),
+}
+
+impl Failure {
+    /// An option the user gave, with a value that cannot work.
+    fn option(option: &str, message: impl std::fmt::Display) -> Self {
+        Failure::Usage(format!("invalid option {option}: {message}"))
+    }
+}
+
+impl From<meniscus::Error> for Failure {
+    fn from(e: meniscus::Error) -> Self {
+        match e {
+            meniscus::Error::InvalidOption { .. } => Failure::Usage(e.to_string()),
+            e => Failure::Run(e.to_string()),
+        }
+    }
+}
+
 fn main() -> ExitCode {
     meniscus::tune_allocator();
-    let cli = Cli::parse();
+    let matches = Cli::command().get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     // Ctrl-C: the first stops the run at the next tile or stage (temporary files are
     // removed, no partial output is left); a second one exits at once.
     let cancel = meniscus::CancelToken::new();
@@ -207,7 +246,12 @@ fn main() -> ExitCode {
         eprintln!("\ninterrupted: stopping at the next tile or stage (Ctrl-C again to quit now)");
     });
     let result = match cli.command {
-        Command::Reconstruct(args) => reconstruct(&args, &cancel),
+        Command::Reconstruct(args) => {
+            let given = matches
+                .subcommand_matches("reconstruct")
+                .expect("the reconstruct subcommand");
+            reconstruct(&args, given, &cancel)
+        }
         Command::Archive(command) => archive(command, &cancel),
     };
     if result.is_err() && cancel.is_cancelled() {
@@ -217,22 +261,28 @@ fn main() -> ExitCode {
     report(result)
 }
 
-fn report(result: Result<(), String>) -> ExitCode {
+fn report(result: Result<(), Failure>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(message) => {
+        Err(Failure::Usage(message)) => {
+            eprintln!("error: {message}");
+            ExitCode::from(2)
+        }
+        Err(Failure::Run(message)) => {
             eprintln!("error: {message}");
             ExitCode::FAILURE
         }
     }
 }
 
-fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<(), String> {
-    let text = |e: meniscus::Error| e.to_string();
+fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<(), Failure> {
+    let text = Failure::from;
     match command {
         ArchiveCommand::Info { file } => {
             let r = ArchiveReader::open(&file).map_err(text)?;
-            let bytes = std::fs::metadata(&file).map_err(|e| e.to_string())?.len();
+            let bytes = std::fs::metadata(&file)
+                .map_err(|e| text(meniscus::Error::io(&file, e)))?
+                .len();
             let triangles: u64 = r.frames().iter().map(|f| f.triangles as u64).sum();
             println!(
                 "{}: {} frames, {} triangles, {} bytes, {:.3} bytes/triangle{}",
@@ -313,12 +363,12 @@ fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<()
                 }
             );
             if !v.is_clean() {
-                return Err(format!(
+                return Err(Failure::Run(format!(
                     "{}: damaged: {} damaged frame(s), {} other problem(s)",
                     file.display(),
                     v.damaged.len(),
                     v.damage.len()
-                ));
+                )));
             }
         }
         ArchiveCommand::Extract {
@@ -343,7 +393,7 @@ fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<()
         ArchiveCommand::Pack {
             input,
             output,
-            error_bound_world,
+            error_bound,
             attribute_error_bound,
             start,
             end,
@@ -351,9 +401,14 @@ fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<()
             let frames = meniscus::sequence::frames(&input, start, end).map_err(text)?;
             let options = ArchiveOptions {
                 attribute_error_bound,
-                ..ArchiveOptions::new(error_bound_world)
+                ..ArchiveOptions::new(error_bound)
             };
             let mut w = if output.exists() {
+                // Frames it holds are refused before it is touched.
+                let numbers: Vec<i64> = frames.iter().map(|f| f.number).collect();
+                ArchiveReader::open(&output)
+                    .and_then(|r| r.check_new_frames(&numbers))
+                    .map_err(text)?;
                 ArchiveWriter::open_append(&output, &options)
             } else {
                 ArchiveWriter::create(&output, &options)
@@ -370,17 +425,19 @@ fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<()
     Ok(())
 }
 
-fn parse_level(value: &str, option: &str) -> Result<Option<u32>, String> {
+fn parse_level(value: &str, option: &str) -> Result<Option<u32>, Failure> {
     match value {
         "off" | "none" => Ok(None),
-        v => v
-            .parse()
-            .map(Some)
-            .map_err(|_| format!("{option} takes a level (0, 1, 2, ...) or `off`, got {v:?}")),
+        v => v.parse().map(Some).map_err(|_| {
+            Failure::option(
+                option,
+                format!("takes a level (0, 1, 2, ...) or `off`, got {v:?}"),
+            )
+        }),
     }
 }
 
-fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, String> {
+fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, Failure> {
     let mut options = ReconstructOptions::new(args.particle_radius);
     options.field.influence_radius = args.influence_radius;
     options.field.cell_size = args.cell_size;
@@ -393,7 +450,7 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, String> {
     options.tiles.memory_budget_bytes = match &args.memory_budget {
         Some(text) => Some(
             meniscus::tiles::parse_memory_size(text)
-                .map_err(|e| format!("--memory-budget: {e}"))?,
+                .map_err(|e| Failure::option("--memory-budget", e))?,
         ),
         None => meniscus::tiles::default_memory_budget(),
     };
@@ -403,8 +460,9 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, String> {
     let error = args.decimate_error.map(|e| e * r);
     if let Some(e) = args.decimate_error {
         if !(e.is_finite() && e > 0.0) {
-            return Err(format!(
-                "--decimate-error must be > 0 (multiples of r), got {e}"
+            return Err(Failure::option(
+                "--decimate-error",
+                format!("must be > 0 (multiples of r), got {e}"),
             ));
         }
     }
@@ -420,7 +478,14 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, String> {
                 .parse()
                 .ok()
                 .filter(|f: &f32| (0.0..1.0).contains(f))
-                .ok_or_else(|| format!("--decimate takes a fraction in [0, 1), `adaptive` or `off`, got {fraction:?}"))?;
+                .ok_or_else(|| {
+                    Failure::option(
+                        "--decimate",
+                        format!(
+                            "takes a fraction in [0, 1), `adaptive` or `off`, got {fraction:?}"
+                        ),
+                    )
+                })?;
             Some(DecimateOptions {
                 target_reduction: Some(f),
                 max_error: error,
@@ -428,23 +493,44 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, String> {
             })
         }
     };
-    options.field.validate().map_err(|e| e.to_string())?;
+    options.field.validate()?;
     Ok(options)
 }
 
-fn reconstruct(args: &ReconstructArgs, cancel: &meniscus::CancelToken) -> Result<(), String> {
+fn reconstruct(
+    args: &ReconstructArgs,
+    given: &ArgMatches,
+    cancel: &meniscus::CancelToken,
+) -> Result<(), Failure> {
+    // Options first, then the frames: usage errors (exit 2) before any file is read.
+    if args.threads == Some(0) {
+        return Err(Failure::option("--threads", "must be at least 1, got 0"));
+    }
+    if !(args.fps.is_finite() && args.fps > 0.0) {
+        return Err(Failure::option(
+            "--fps",
+            format!("must be > 0 (frames per second), got {}", args.fps),
+        ));
+    }
+    let options = options_from(args)?;
+    let attributes = match &args.attributes {
+        Some(list) => list
+            .parse()
+            .map_err(|e| Failure::option("--attributes", e))?,
+        None => AttributeSelection::default(),
+    };
+    let error_bound = args.error_bound.unwrap_or(ARCHIVE_ERROR * radius(args));
+    let plan = plan_frames(&args.input, &args.output, args.start, args.end)?;
+    check_outputs(&plan).map_err(|e| Failure::Usage(e.to_string()))?;
+    for warning in ineffective_options(args, given, &plan, &attributes) {
+        eprintln!("warning: {warning}");
+    }
     if let Some(threads) = args.threads {
-        if threads == 0 {
-            return Err("--threads must be at least 1".into());
-        }
         rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build_global()
-            .map_err(|e| e.to_string())?;
+            .map_err(|e| Failure::Run(e.to_string()))?;
     }
-    let options = options_from(args)?;
-    let plan =
-        plan_frames(&args.input, &args.output, args.start, args.end).map_err(|e| e.to_string())?;
     let job = JobOptions {
         input_format: args.input_format,
         write: MeshWriteOptions {
@@ -452,20 +538,12 @@ fn reconstruct(args: &ReconstructArgs, cancel: &meniscus::CancelToken) -> Result
             ..MeshWriteOptions::default()
         },
         skip_existing: args.skip_existing,
-        archive_error_bound: args.error_bound * args.particle_radius as f64,
+        archive_error_bound: error_bound,
         archive_attribute_error_bound: args.attribute_error_bound,
         fps: args.fps,
-        attributes: match &args.attributes {
-            Some(list) => list
-                .parse()
-                .map_err(|e| format!("invalid option --attributes: {e}"))?,
-            None => meniscus::attributes::AttributeSelection::default(),
-        },
+        attributes,
         cancel: cancel.clone(),
     };
-    if !(args.fps.is_finite() && args.fps > 0.0) {
-        return Err(format!("--fps must be > 0, got {}", args.fps));
-    }
     let bar = if args.quiet {
         ProgressBar::hidden()
     } else {
@@ -506,7 +584,12 @@ fn reconstruct(args: &ReconstructArgs, cancel: &meniscus::CancelToken) -> Result
         },
     );
     bar.finish_and_clear();
-    let reports = result.map_err(|e| e.to_string())?;
+    let reports = result.map_err(|e| match e {
+        meniscus::Error::FramesExist { .. } => Failure::Run(format!(
+            "{e}\nhint: --skip-existing skips the frames the archive holds and appends the others"
+        )),
+        e => e.into(),
+    })?;
     let total = clock.elapsed().as_secs_f64();
     if !args.quiet {
         summarize(&reports, total);
@@ -518,10 +601,107 @@ fn reconstruct(args: &ReconstructArgs, cancel: &meniscus::CancelToken) -> Result
             "total_seconds": total,
             "peak_rss_bytes": peak_rss_bytes(),
         });
-        let text = serde_json::to_string_pretty(&json).map_err(|e| e.to_string())?;
-        std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))?;
+        let text = serde_json::to_string_pretty(&json).map_err(|e| Failure::Run(e.to_string()))?;
+        std::fs::write(path, text).map_err(|e| Failure::from(meniscus::Error::io(path, e)))?;
     }
     Ok(())
+}
+
+/// The particle radius as the user wrote it (0.025, not the f32's 0.02500000037…), so
+/// that the default error bound is the round number `archive info` then prints.
+fn radius(args: &ReconstructArgs) -> f64 {
+    let r = args.particle_radius;
+    r.to_string().parse().unwrap_or(r as f64)
+}
+
+/// Options the user gave that the chosen output makes pointless, each with the reason;
+/// the run proceeds without them.
+fn ineffective_options(
+    args: &ReconstructArgs,
+    given: &ArgMatches,
+    plan: &[(meniscus::sequence::Frame, PathBuf)],
+    attributes: &AttributeSelection,
+) -> Vec<String> {
+    let given = |id: &str| given.value_source(id) == Some(ValueSource::CommandLine);
+    let kind = output_kind(plan);
+    let output = &args.output;
+    let mut warnings = Vec::new();
+    // Raw .xyz holds no attributes (a list of names is an error when it is read).
+    let raw_positions = args
+        .input_format
+        .or_else(|| {
+            let (frame, _) = plan.first()?;
+            ParticleFormat::from_path(&frame.input).ok()
+        })
+        .is_some_and(|f| f == ParticleFormat::Xyz);
+    if raw_positions && *attributes == AttributeSelection::All {
+        warnings.push("--attributes all has no effect: raw .xyz input holds positions only".into());
+    }
+    if kind != OutputKind::Archive {
+        for (id, option) in [
+            ("error_bound", "--error-bound"),
+            ("attribute_error_bound", "--attribute-error-bound"),
+        ] {
+            if given(id) {
+                warnings.push(format!(
+                    "{option} has no effect: it quantizes a .mseq archive, and {output:?} is not one"
+                ));
+            }
+        }
+    } else {
+        if given("attribute_error_bound") {
+            if *attributes == AttributeSelection::None {
+                warnings.push(
+                    "--attribute-error-bound has no effect: --attributes none carries no attributes"
+                        .into(),
+                );
+            } else if raw_positions {
+                warnings.push(
+                    "--attribute-error-bound has no effect: raw .xyz input holds positions only"
+                        .into(),
+                );
+            }
+        }
+        if given("no_normals") {
+            warnings.push(format!(
+                "--no-normals has no effect: {output:?} stores no normals (they are computed when frames are extracted)"
+            ));
+        }
+        // An error bound of world units given as multiples of r (as it once was).
+        if let Some(bound) = args.error_bound {
+            let r = radius(args);
+            if bound > 0.1 * r {
+                warnings.push(format!(
+                    "--error-bound is in world units: {bound} is {:.3} × the particle radius (default {} = {ARCHIVE_ERROR} r)",
+                    bound / r,
+                    ARCHIVE_ERROR * r
+                ));
+            }
+        }
+    }
+    if given("fps") {
+        match kind {
+            OutputKind::AnimatedGltf if plan.len() == 1 => warnings.push(format!(
+                "--fps has no effect: {output:?} holds a single frame, which does not play"
+            )),
+            OutputKind::AnimatedGltf => {}
+            _ => warnings.push(format!(
+                "--fps has no effect: only a {{}} sequence written into one .glb/.gltf is animated, and {output:?} is not one"
+            )),
+        }
+    }
+    if given("skip_existing") && kind == OutputKind::AnimatedGltf {
+        warnings.push(format!(
+            "--skip-existing has no effect: {output:?} holds the whole sequence and is written whole"
+        ));
+    }
+    if given("decimate_error") && matches!(args.decimate.as_str(), "off" | "none" | "0") {
+        warnings.push(format!(
+            "--decimate-error has no effect: decimation is off (--decimate {})",
+            args.decimate
+        ));
+    }
+    warnings
 }
 
 fn summarize(reports: &[FrameReport], total: f64) {

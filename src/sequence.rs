@@ -115,10 +115,13 @@ pub fn frames(pattern: &str, start: Option<i64>, end: Option<i64>) -> Result<Vec
     }
     found.sort_by(|a, b| (a.number, &a.label).cmp(&(b.number, &b.label)));
     if found.is_empty() {
-        return Err(invalid(format!(
-            "no file in {} matches {file_name:?}",
-            dir.display()
-        )));
+        return Err(Error::io(
+            path,
+            std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                format!("no file in {} matches the pattern", dir.display()),
+            ),
+        ));
     }
     Ok(found)
 }

@@ -1368,6 +1368,16 @@ fn appending_with_another_error_bound_is_refused() {
     w.append(1, &icosphere(1, 1.0)).unwrap();
     w.finish().unwrap();
     assert_eq!(ArchiveReader::open(&path).unwrap().verify().good, [0, 1]);
+    // The same bound in world units computed another way (0.04 × an f32 radius, as
+    // reconstruct's default is) appends, and the new frame keeps the archive's step.
+    let computed = 0.04 * 0.025f32 as f64;
+    assert_ne!(computed, 1e-3);
+    let mut w = ArchiveWriter::open_append(&path, &ArchiveOptions::new(computed)).unwrap();
+    w.append(2, &icosphere(1, 1.0)).unwrap();
+    w.finish().unwrap();
+    let r = ArchiveReader::open(&path).unwrap();
+    assert!(r.frames().iter().all(|f| f.step == 2e-3), "one step");
+    assert_eq!(r.verify().good, [0, 1, 2]);
 }
 
 #[test]

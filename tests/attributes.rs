@@ -242,8 +242,14 @@ fn meniscus() -> Command {
     Command::new(env!("CARGO_BIN_EXE_meniscus"))
 }
 
-/// Runs the CLI expecting a failure; returns stderr after checking that no output exists.
+/// Runs the CLI expecting a failure of a file or its content (exit 1); returns stderr
+/// after checking that no output exists.
 fn fails(args: &[&str], input: &Path, out: &Path) -> String {
+    fails_with(1, args, input, out)
+}
+
+/// [`fails`] with exit code `code` (2: an option that cannot work).
+fn fails_with(code: i32, args: &[&str], input: &Path, out: &Path) -> String {
     let result = meniscus()
         .arg("reconstruct")
         .arg(input)
@@ -252,7 +258,7 @@ fn fails(args: &[&str], input: &Path, out: &Path) -> String {
         .arg(out)
         .output()
         .unwrap();
-    assert_eq!(result.status.code(), Some(1), "{args:?}");
+    assert_eq!(result.status.code(), Some(code), "{args:?}");
     assert!(!out.exists(), "{args:?} left {}", out.display());
     String::from_utf8_lossy(&result.stderr).into_owned()
 }
@@ -277,8 +283,8 @@ fn bad_attributes_are_clear_errors_naming_the_file_and_attribute() {
     let xyz = dataset("dambreak_small/ParticleData_Fluid_25.xyz");
     let err = fails(&["-r", "0.012", "--attributes", "velocity"], &xyz, &out);
     assert!(err.contains("no point attributes"), "{err}");
-    // An empty list.
-    let err = fails(&["-r", "0.012", "--attributes", "velocity,"], &vtk, &out);
+    // An empty list: an option that cannot work.
+    let err = fails_with(2, &["-r", "0.012", "--attributes", "velocity,"], &vtk, &out);
     assert!(err.contains("--attributes"), "{err}");
     // NaN in an attribute.
     let mut particles = read_particles(&vtk, None).unwrap();

@@ -235,7 +235,7 @@ fn archives_collect_a_sequence_and_extract_frames() {
         &pattern,
         "-o",
         packed.to_str().unwrap(),
-        "--error-bound-world",
+        "--error-bound",
         "0.0005",
     ]);
     assert!(ok, "{err}");
@@ -349,80 +349,418 @@ fn an_archived_frame_extracts_to_the_mesh_reconstruct_writes() {
     assert!((va - vb).abs() <= 1e-3 * va.abs(), "volumes {va} and {vb}");
 }
 
-/// What a new user gets wrong, and what the CLI answers: (arguments, exit code, text the
-/// error must hold, text it must not hold). No output is written in any case.
+/// A row of the error table: arguments, exit code, fragments stderr must hold, fragments
+/// it must not hold.
+type Case<'a> = (Vec<&'a str>, i32, Vec<&'a str>, Vec<&'a str>);
+
+/// What a user gets wrong, and what the CLI answers: one table of (arguments, exit code,
+/// fragments stderr must hold, fragments it must not hold). Exit codes: 0 done, 1 a file
+/// or its content, 2 an option or argument. Errors name the cause and the input, and
+/// never an option the user did not give; warnings name the option that has no effect.
 #[test]
 fn new_user_errors_name_the_real_cause() {
     let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let path = |name: &str| d.join(name).to_str().unwrap().to_string();
     let sphere = dataset("analytic/sphere.xyz");
     let sphere = sphere.to_str().unwrap();
-    let folder = dir.path().join("frames.xyz");
-    std::fs::create_dir(&folder).unwrap();
-    let folder = folder.to_str().unwrap();
-    let out = dir.path().join("s.ply");
-    let out = out.to_str().unwrap();
-    let foo = dir.path().join("s.foo");
-    let foo = foo.to_str().unwrap();
-    let cases: [(&[&str], i32, &str, &str); 5] = [
-        // A negative radius is a bad value, not a stray argument.
+    std::fs::create_dir(d.join("frames.xyz")).unwrap();
+    let folder = path("frames.xyz");
+    let missing = path("missing.xyz");
+    // Text saved as .xyz (a multiple of 12 bytes, so only the content gives it away).
+    std::fs::write(d.join("junk.xyz"), "0.5 1.5 2.5\n0.5 1.5 2.5\n").unwrap();
+    let junk = path("junk.xyz");
+    let out = path("s.ply");
+    let foo = path("s.foo");
+    // A one-frame sequence, and an archive holding the sphere as frame 0.
+    std::fs::create_dir(d.join("seq")).unwrap();
+    std::fs::copy(sphere, d.join("seq/f_1.xyz")).unwrap();
+    let seq = path("seq/f_{}.xyz");
+    let archive = path("run.mseq");
+    let (ok, err) = run(&["reconstruct", sphere, "-r", "0.025", "-q", "-o", &archive]);
+    assert!(ok, "{err}");
+    let mut bytes = std::fs::read(&archive).unwrap();
+    let n = bytes.len();
+    bytes[n / 2] ^= 0x55;
+    std::fs::write(d.join("damaged.mseq"), &bytes).unwrap();
+    let damaged = path("damaged.mseq");
+    let meshes = path("mesh_{}.ply");
+    let packed = path("packed.mseq");
+    let anim = path("anim.glb");
+    let fresh = path("fresh.mseq");
+    let fresh2 = path("fresh2.mseq");
+    let r = ["-r", "0.025"];
+    let cases: Vec<Case> = vec![
+        // Files and their content: exit 1, naming the file.
         (
-            &[sphere, "-r", "-1", "-o", out],
+            vec!["reconstruct", &missing, "-o", &out],
             1,
-            "--particle-radius: must be a finite number > 0",
-            "-- -1",
+            vec!["missing.xyz", "No such file"],
+            vec!["invalid option", "--particle-radius"],
+        ),
+        (
+            vec!["reconstruct", &folder, "-o", &out],
+            1,
+            vec!["frames.xyz", "is a directory"],
+            vec!["byte offset", "invalid option"],
+        ),
+        (
+            vec!["reconstruct", &junk, "-o", &out],
+            1,
+            vec!["junk.xyz", "looks like text"],
+            vec!["invalid option", "--particle-radius", "--input-format"],
         ),
         // A radius far too small for the coordinates blames the radius, not --cell-size.
         (
-            &[sphere, "-r", "1e-9", "-o", out],
+            vec!["reconstruct", sphere, "-r", "1e-9", "-o", &out],
             1,
-            "the particle radius is too small",
-            "--cell-size",
+            vec!["sphere.xyz", "the particle radius is too small"],
+            vec!["--cell-size", "invalid option"],
         ),
         (
-            &[folder, "-r", "0.025", "-o", out],
+            vec!["reconstruct", sphere, "--attributes", "nosuch", "-o", &out],
             1,
-            "is a directory",
-            "byte offset",
+            vec!["sphere.xyz", "\"nosuch\""],
+            vec!["invalid option"],
+        ),
+        // Re-running into an archive: the frames it holds, and a hint, not blame.
+        (
+            vec!["reconstruct", sphere, "-o", &archive],
+            1,
+            vec![
+                "run.mseq: already holds frame 0",
+                "hint: --skip-existing skips",
+            ],
+            vec!["invalid option"],
+        ),
+        (
+            vec!["archive", "verify", &damaged],
+            1,
+            vec!["damaged.mseq", "damaged"],
+            vec!["invalid option"],
+        ),
+        (
+            vec![
+                "archive",
+                "pack",
+                &meshes,
+                "-o",
+                &packed,
+                "--error-bound",
+                "1e-4",
+                "--start",
+                "1",
+                "--end",
+                "1",
+            ],
+            1,
+            vec!["mesh_1.ply", "frame 1 of the range 1..=1 is missing"],
+            vec!["invalid option"],
+        ),
+        // The old option name still runs.
+        (
+            vec![
+                "archive",
+                "pack",
+                &meshes,
+                "-o",
+                &packed,
+                "--error-bound-world",
+                "1e-4",
+            ],
+            1,
+            vec!["mesh_{}.ply", "no file", "matches"],
+            vec!["invalid option"],
+        ),
+        // Options: exit 2, naming the option given.
+        (
+            vec!["reconstruct", sphere, "-r", "0", "-o", &out],
+            2,
+            vec!["--particle-radius", "must be a finite number > 0, got 0"],
+            vec!["--cell-size", "--influence-radius"],
+        ),
+        // A negative radius is a bad value, not a stray argument.
+        (
+            vec!["reconstruct", sphere, "-r", "-1", "-o", &out],
+            2,
+            vec!["--particle-radius: must be a finite number > 0"],
+            vec!["-- -1", "unexpected argument"],
+        ),
+        // Cells too small for the influence radius: the pair is named, either may be set.
+        (
+            vec!["reconstruct", sphere, "-c", "0.05", "-o", &out],
+            2,
+            vec!["--influence-radius/--cell-size", "64 cells of 0.05 r"],
+            vec![],
         ),
         // An unknown output extension fails before any work and lists .mseq.
         (
-            &[sphere, "-r", "0.025", "-o", foo],
-            1,
-            ".mseq",
-            "invalid option",
+            vec!["reconstruct", sphere, "-o", &foo],
+            2,
+            vec!["s.foo", "unknown output extension", ".mseq"],
+            vec!["invalid option"],
+        ),
+        (
+            vec!["reconstruct", sphere, "--decimate", "2", "-o", &out],
+            2,
+            vec!["--decimate", "fraction", "\"2\""],
+            vec!["--decimate-error"],
+        ),
+        (
+            vec!["reconstruct", sphere, "--memory-budget", "2g", "-o", &out],
+            2,
+            vec![
+                "--memory-budget",
+                "\"2g\" is ambiguous: write 2GiB (2^30 bytes) or 2GB (10^9 bytes)",
+            ],
+            vec!["--tile-size"],
+        ),
+        (
+            vec![
+                "reconstruct",
+                sphere,
+                "--memory-budget",
+                "2 parsecs",
+                "-o",
+                &out,
+            ],
+            2,
+            vec!["--memory-budget", "unknown size unit \"parsecs\""],
+            vec!["--tile-size"],
+        ),
+        (
+            vec!["reconstruct", sphere, "--threads", "0", "-o", &out],
+            2,
+            vec!["--threads", "at least 1"],
+            vec![],
+        ),
+        (
+            vec![
+                "reconstruct",
+                sphere,
+                "--attributes",
+                "velocity,",
+                "-o",
+                &out,
+            ],
+            2,
+            vec!["--attributes", "empty name"],
+            vec![],
+        ),
+        (
+            vec!["reconstruct", sphere, "--fps", "0", "-o", &out],
+            2,
+            vec!["--fps", "got 0"],
+            vec![],
+        ),
+        (
+            vec!["reconstruct", &seq, "-o", "o_{}.mseq"],
+            2,
+            vec!["o_{}.mseq", "one .mseq archive holds the whole sequence"],
+            vec![],
+        ),
+        // Options without effect: a warning naming the option and why; the run goes on.
+        (
+            vec![
+                "reconstruct",
+                sphere,
+                "-q",
+                "--error-bound",
+                "1e-4",
+                "--attribute-error-bound",
+                "0.01",
+                "--fps",
+                "30",
+                "-o",
+                &out,
+            ],
+            0,
+            vec![
+                "warning: --error-bound has no effect",
+                "warning: --attribute-error-bound has no effect",
+                "warning: --fps has no effect",
+                "s.ply",
+            ],
+            vec!["error:"],
+        ),
+        (
+            vec![
+                "reconstruct",
+                &seq,
+                "-q",
+                "--fps",
+                "10",
+                "--skip-existing",
+                "-o",
+                &anim,
+            ],
+            0,
+            vec![
+                "warning: --fps has no effect: \"",
+                "anim.glb\" holds a single frame",
+                "warning: --skip-existing has no effect",
+                "written whole",
+            ],
+            vec!["error:"],
+        ),
+        (
+            vec!["reconstruct", sphere, "-q", "--no-normals", "-o", &fresh],
+            0,
+            vec!["warning: --no-normals has no effect", "fresh.mseq"],
+            vec!["error:"],
+        ),
+        (
+            vec![
+                "reconstruct",
+                sphere,
+                "-q",
+                "--attributes",
+                "all",
+                "--attribute-error-bound",
+                "0.01",
+                "-o",
+                &fresh2,
+            ],
+            0,
+            vec![
+                "warning: --attributes all has no effect: raw .xyz",
+                "warning: --attribute-error-bound has no effect: raw .xyz",
+            ],
+            vec!["error:"],
+        ),
+        // Options that do take effect draw no warning.
+        (
+            vec![
+                "reconstruct",
+                sphere,
+                "-q",
+                "--error-bound",
+                "0.00025",
+                "--skip-existing",
+                "-o",
+                &archive,
+            ],
+            0,
+            vec![],
+            vec!["warning", "error:"],
         ),
         // A negative iso offset is allowed.
         (
-            &[
+            vec![
+                "reconstruct",
                 sphere,
-                "-r",
-                "0.025",
                 "--iso-offset",
                 "-0.1",
                 "-q",
                 "-o",
-                out,
+                &out,
             ],
             0,
-            "",
-            "error",
+            vec![],
+            vec!["error", "warning"],
         ),
     ];
     for (args, code, wanted, unwanted) in cases {
-        let result = meniscus().arg("reconstruct").args(args).output().unwrap();
+        let mut command = meniscus();
+        command.args(&args);
+        if args[0] == "reconstruct" && !args.contains(&"-r") {
+            command.args(r);
+        }
+        let result = command.output().unwrap();
         let err = String::from_utf8_lossy(&result.stderr);
         assert_eq!(result.status.code(), Some(code), "{args:?}: {err}");
-        assert!(err.contains(wanted), "{args:?}: {err}");
-        assert!(!err.contains(unwanted), "{args:?}: {err}");
+        for w in wanted {
+            assert!(err.contains(w), "{args:?}: wanted {w:?} in {err}");
+        }
+        for u in unwanted {
+            assert!(!err.contains(u), "{args:?}: unwanted {u:?} in {err}");
+        }
         if code != 0 {
             assert!(
-                !Path::new(out).exists() && !Path::new(foo).exists(),
-                "{args:?}"
+                !Path::new(&out).exists()
+                    && !Path::new(&foo).exists()
+                    && !Path::new(&packed).exists(),
+                "{args:?}: no output on failure"
             );
-        } else {
-            std::fs::remove_file(out).unwrap();
+        } else if Path::new(&out).exists() {
+            std::fs::remove_file(&out).unwrap();
         }
     }
+    // The run that skipped frame 0 left the archive as it was, and whole.
+    let out = meniscus()
+        .args(["archive", "verify", &archive])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    // The help says how sizes are read.
+    let help = meniscus().args(["reconstruct", "--help"]).output().unwrap();
+    let help = String::from_utf8_lossy(&help.stdout);
+    assert!(
+        help.contains("ambiguous") && help.contains("powers of 10"),
+        "{help}"
+    );
+}
+
+/// A second run over an archive's frames is refused before the archive is touched; with
+/// --skip-existing those frames are skipped and the new ones appended.
+#[test]
+fn rerunning_into_an_archive_names_its_frames_and_leaves_it_intact() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("seq")).unwrap();
+    let sphere = dataset("analytic/sphere.xyz");
+    for k in [1, 2, 3] {
+        std::fs::copy(&sphere, dir.path().join(format!("seq/f_{k}.xyz"))).unwrap();
+    }
+    let input = format!("{}/seq/f_{{}}.xyz", dir.path().display());
+    let archive = dir.path().join("run.mseq");
+    let a = archive.to_str().unwrap();
+    let reconstruct = |extra: &[&str]| {
+        let out = meniscus()
+            .args(["reconstruct", &input, "-r", "0.025", "-o", a])
+            .args(extra)
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, err) = reconstruct(&["-q", "--end", "2"]);
+    assert_eq!(code, Some(0), "{err}");
+    let before = std::fs::read(&archive).unwrap();
+    let (code, err) = reconstruct(&["-q"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains("run.mseq: already holds frames 1 and 2 (2 of the 3 frames of this run)"),
+        "{err}"
+    );
+    assert!(err.contains("hint: --skip-existing"), "{err}");
+    assert!(!err.contains("invalid option"), "{err}");
+    assert_eq!(
+        std::fs::read(&archive).unwrap(),
+        before,
+        "archive untouched"
+    );
+    // The default bound (0.01 r) in world units, given explicitly, appends.
+    let (code, err) = reconstruct(&["--skip-existing", "--error-bound", "0.00025"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("1 frame(s) reconstructed, 2 skipped"), "{err}");
+    let info = meniscus().args(["archive", "info", a]).output().unwrap();
+    let info = String::from_utf8_lossy(&info.stdout);
+    assert!(
+        info.contains("3 frames") && info.contains("error bound 0.00025 (world units)"),
+        "{info}"
+    );
+    // Another bound is refused, in world units.
+    std::fs::remove_file(dir.path().join("seq/f_3.xyz")).unwrap();
+    std::fs::copy(&sphere, dir.path().join("seq/f_4.xyz")).unwrap();
+    let (code, err) = reconstruct(&["-q", "--skip-existing", "--error-bound", "0.001"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("0.001") && err.contains("0.00025"), "{err}");
 }
 
 #[test]

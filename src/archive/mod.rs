@@ -344,6 +344,24 @@ pub struct ArchiveReader {
 }
 
 impl ArchiveReader {
+    /// Refuses to add `numbers` when the archive holds any of them:
+    /// [`Error::FramesExist`] names those it holds (in the order of `numbers`).
+    pub fn check_new_frames(&self, numbers: &[i64]) -> Result<()> {
+        let held: Vec<i64> = numbers
+            .iter()
+            .copied()
+            .filter(|n| self.frames.iter().any(|f| f.number == *n))
+            .collect();
+        if held.is_empty() {
+            return Ok(());
+        }
+        Err(Error::FramesExist {
+            path: self.path.clone(),
+            frames: held,
+            planned: numbers.len(),
+        })
+    }
+
     /// Opens an archive: through its index when that is valid (damaged records are then
     /// reported by the frame number the index gives them), else by scanning its records
     /// (an interrupted append), resynchronising past damaged ones.
@@ -840,8 +858,12 @@ impl ArchiveWriter {
         }
         // One error bound for all frames: the archive lists one, and a frame quantized
         // more coarsely than the others would break what the archive promises.
+        // Compared in world units, to a relative 1e-6: a bound given as text (`2.5e-4`)
+        // and one computed from an f32 radius (0.01 × 0.025) are the same bound; the
+        // archive's own step is then used, so that its frames keep exactly one.
         let step = 2.0 * options.error_bound;
-        if let Some(f) = reader.frames.iter().find(|f| f.step != step) {
+        let same = |s: f64| (s - step).abs() <= 1e-6 * s.abs().max(step.abs());
+        if let Some(f) = reader.frames.iter().find(|f| !same(f.step)) {
             return Err(archive_error(
                 path,
                 Some(f.number),
@@ -870,11 +892,15 @@ impl ArchiveWriter {
                 .filter_map(|d| Some((d.frame?, d.offset?))),
         );
         index.sort_by_key(|e| e.1);
+        let mut options = options.clone();
+        if let Some(f) = reader.frames.first() {
+            options.error_bound = f.step / 2.0;
+        }
         let mut writer = ArchiveWriter {
             path: path.to_path_buf(),
             version: reader.version,
             file: Some(file),
-            options: options.clone(),
+            options,
             index,
             end: reader.data_end,
         };

@@ -129,11 +129,12 @@ impl FieldOptions {
                 message: format!("must be > 0 (multiples of r), got {}", self.cell_size),
             });
         }
+        // Either one may be the one the user set: the pair is named.
         if self.influence_radius / self.cell_size > 64.0 {
             return Err(Error::InvalidOption {
-                option: "--influence-radius",
+                option: "--influence-radius/--cell-size",
                 message: format!(
-                    "R = {} r spans more than 64 cells of {} r; raise --cell-size",
+                    "the influence radius R = {} r spans more than 64 cells of {} r: a smaller R or larger cells",
                     self.influence_radius, self.cell_size
                 ),
             });

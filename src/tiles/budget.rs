@@ -245,30 +245,52 @@ pub(super) fn choose_tile_blocks(
     }
 }
 
-/// Parses a memory size: a number with an optional unit `B`, `KiB`, `MiB`, `GiB`, `TiB`
-/// (powers of 1024; `K`, `M`, `G`, `T`, `KB`, `MB`, `GB`, `TB` are read the same way).
+/// Parses a memory size: a number (digits, optionally a fraction) with an optional
+/// unit. Plain digits are bytes (`B` may be written); `KiB`, `MiB`, `GiB`, `TiB` are
+/// powers of two (2^10 … 2^40 bytes), `kB`, `MB`, `GB`, `TB` powers of ten (10^3 …
+/// 10^12). Units are read regardless of case, spaces before them are allowed. A bare `k`,
+/// `m`, `g` or `t` could mean either and is refused with both readings offered.
 pub fn parse_memory_size(text: &str) -> std::result::Result<u64, String> {
     let t = text.trim();
     let split = t
         .find(|c: char| !(c.is_ascii_digit() || c == '.'))
         .unwrap_or(t.len());
     let (number, unit) = t.split_at(split);
-    let value: f64 = number
-        .parse()
-        .map_err(|_| format!("{text:?} is not a size like 512MiB or 2GiB"))?;
-    let scale: u64 = match unit.trim().to_ascii_lowercase().as_str() {
-        "" | "b" => 1,
-        "k" | "kb" | "kib" => 1 << 10,
-        "m" | "mb" | "mib" => 1 << 20,
-        "g" | "gb" | "gib" => 1 << 30,
-        "t" | "tb" | "tib" => 1 << 40,
-        other => {
+    let unit = unit.trim();
+    let value: f64 = number.parse().map_err(|_| {
+        format!("{text:?} is not a size like 512MiB, 2GiB (powers of 2) or 2GB (powers of 10)")
+    })?;
+    let scale: f64 = match unit.to_ascii_lowercase().as_str() {
+        "" | "b" => 1.0,
+        "kib" => 1024.0,
+        "mib" => (1u64 << 20) as f64,
+        "gib" => (1u64 << 30) as f64,
+        "tib" => (1u64 << 40) as f64,
+        "kb" => 1e3,
+        "mb" => 1e6,
+        "gb" => 1e9,
+        "tb" => 1e12,
+        "k" | "m" | "g" | "t" => {
+            let prefix = unit.to_ascii_uppercase();
+            let (binary, decimal) = match prefix.as_str() {
+                "K" => (10, 3),
+                "M" => (20, 6),
+                "G" => (30, 9),
+                _ => (40, 12),
+            };
+            // The SI prefix of 10^3 is a lower-case k.
+            let si = if prefix == "K" { "k" } else { prefix.as_str() };
             return Err(format!(
-                "unknown size unit {other:?} in {text:?} (use MiB or GiB)"
+                "{text:?} is ambiguous: write {number}{prefix}iB (2^{binary} bytes) or {number}{si}B (10^{decimal} bytes)"
+            ));
+        }
+        _ => {
+            return Err(format!(
+                "unknown size unit {unit:?} in {text:?}: use KiB, MiB, GiB, TiB (powers of 2) or kB, MB, GB, TB (powers of 10)"
             ))
         }
     };
-    let bytes = value * scale as f64;
+    let bytes = value * scale;
     if !(bytes >= 1.0 && bytes < u64::MAX as f64) {
         return Err(format!("{text:?} is not a positive size"));
     }
@@ -347,5 +369,75 @@ mod tests {
             "the spray is tiled under {between} bytes"
         );
         assert!(spray_estimate <= between);
+    }
+
+    #[test]
+    fn binary_units_are_powers_of_two() {
+        assert_eq!(parse_memory_size("512MiB"), Ok(512 << 20));
+        assert_eq!(parse_memory_size("2GiB"), Ok(2 << 30));
+        assert_eq!(parse_memory_size("2 gib"), Ok(2 << 30));
+        assert_eq!(parse_memory_size("1.5GiB"), Ok(3 << 29));
+        assert_eq!(parse_memory_size("64KiB"), Ok(64 << 10));
+        assert_eq!(parse_memory_size("1TiB"), Ok(1 << 40));
+    }
+
+    #[test]
+    fn decimal_units_are_powers_of_ten() {
+        assert_eq!(parse_memory_size("2GB"), Ok(2_000_000_000));
+        assert_eq!(parse_memory_size("512MB"), Ok(512_000_000));
+        assert_eq!(parse_memory_size("64kB"), Ok(64_000));
+        assert_eq!(parse_memory_size("64KB"), Ok(64_000));
+        assert_eq!(parse_memory_size("1TB"), Ok(1_000_000_000_000));
+        assert_eq!(parse_memory_size("0.5 GB"), Ok(500_000_000));
+    }
+
+    #[test]
+    fn plain_digits_are_bytes() {
+        assert_eq!(parse_memory_size("1073741824"), Ok(1 << 30));
+        assert_eq!(parse_memory_size("4096B"), Ok(4096));
+        assert_eq!(parse_memory_size(" 100 "), Ok(100));
+    }
+
+    #[test]
+    fn a_bare_prefix_is_ambiguous_and_offers_both_readings() {
+        assert_eq!(
+            parse_memory_size("2g").unwrap_err(),
+            "\"2g\" is ambiguous: write 2GiB (2^30 bytes) or 2GB (10^9 bytes)"
+        );
+        assert_eq!(
+            parse_memory_size("2G").unwrap_err(),
+            "\"2G\" is ambiguous: write 2GiB (2^30 bytes) or 2GB (10^9 bytes)"
+        );
+        assert_eq!(
+            parse_memory_size("512m").unwrap_err(),
+            "\"512m\" is ambiguous: write 512MiB (2^20 bytes) or 512MB (10^6 bytes)"
+        );
+        assert_eq!(
+            parse_memory_size("512M").unwrap_err(),
+            "\"512M\" is ambiguous: write 512MiB (2^20 bytes) or 512MB (10^6 bytes)"
+        );
+        assert!(parse_memory_size("64k")
+            .unwrap_err()
+            .contains("64KiB (2^10 bytes) or 64kB (10^3 bytes)"));
+        assert!(parse_memory_size("1t").unwrap_err().contains("1TiB"));
+    }
+
+    #[test]
+    fn junk_units_and_values_are_refused() {
+        let e = parse_memory_size("2 furlongs").unwrap_err();
+        assert!(
+            e.contains("unknown size unit \"furlongs\"") && e.contains("GiB"),
+            "{e}"
+        );
+        assert!(parse_memory_size("2GiBs").is_err());
+        assert!(parse_memory_size("GiB").unwrap_err().contains("not a size"));
+        assert!(parse_memory_size("").is_err());
+        assert!(parse_memory_size("-2GiB").is_err());
+        assert!(parse_memory_size("0")
+            .unwrap_err()
+            .contains("not a positive size"));
+        assert!(parse_memory_size("0.1").is_err());
+        assert!(parse_memory_size("1.2.3GiB").is_err());
+        assert!(parse_memory_size("100000000TiB").is_err());
     }
 }
