@@ -215,7 +215,7 @@ fn a_budget_too_small_for_one_tile_fails_before_any_work() {
         &temp,
         &out,
     );
-    assert!(err.contains("--tile-size"), "{err}");
+    assert!(err.contains("tiles of 4096 cells need"), "{err}");
     // Nonsense sizes are rejected by name.
     let err = fails_cleanly(
         &["-r", "0.012", "--memory-budget", "2 parsecs"],

@@ -45,10 +45,13 @@ pub(crate) const MC_TRIANGLES_PER_SURFACE_BLOCK: f64 = 140.0;
 pub(crate) const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 110.0;
 /// Memory of the process before any particle (code, thread stacks, allocator), bytes.
 pub(crate) const BASE_BYTES: u64 = 64 << 20;
-/// What the tiles leave in memory under the post-processing, beyond the surface (the
-/// allocator's free heap, the isolated centres, the plan): 62–94 MiB measured after the
-/// 4M scene's tiles.
-pub(crate) const POST_TILES_BYTES: u64 = 96 << 20;
+/// What the tiles leave in memory under the post-processing, beyond the surface (mostly
+/// the allocator's free heap, which glibc's trim threshold bounds, and the isolated
+/// centres), bytes per particle up to [`POST_TILES_MAX_BYTES`]: 62–94 MiB measured after
+/// the 4M scene's tiles.
+pub(crate) const POST_TILES_BYTES_PER_PARTICLE: u64 = 24;
+/// The most the tiles leave (see [`POST_TILES_BYTES_PER_PARTICLE`]), bytes.
+pub(crate) const POST_TILES_MAX_BYTES: u64 = 96 << 20;
 /// Bytes per particle of a tile's particles loaded with a payload of `w` floats for the
 /// attribute stage, on top of `4·w` (records and rows read back, positions and indices,
 /// home half-blocks, the sort order, the sorted copy).
@@ -144,7 +147,9 @@ pub(super) fn choose_tile_blocks(
     let triangles = shape.marching_cubes_triangles();
     let payload = 4 * payload_width as u64;
     let kept = if payload > 0 { 12 + 2 * payload } else { 0 };
-    let output = BASE_BYTES + POST_TILES_BYTES + (triangles * output_bytes_per_triangle) as u64;
+    let output = BASE_BYTES
+        + (particles * POST_TILES_BYTES_PER_PARTICLE).min(POST_TILES_MAX_BYTES)
+        + (triangles * output_bytes_per_triangle) as u64;
     let produced = BASE_BYTES
         + (triangles
             * if decimated_in_tiles {
