@@ -201,7 +201,10 @@ fn read_obj(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
 
 fn read_gltf(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
     let bad = |m: String| Error::parse(path, "glTF", m);
-    // The gltf crate's validation indexes with unchecked accessor indices and panics on
+    // Indices, extents, component types and the node hierarchy are checked first: the
+    // crate's readers trust them (and the scene walk below ends only on a forest).
+    super::gltf_check::check(path, bytes)?;
+    // Last guard: the gltf crate's validation indexes with unchecked accessor indices and panics on
     // some malformed documents: such a document is an error, not a crash.
     let imported = std::panic::catch_unwind(|| gltf::import_slice(bytes))
         .map_err(|_| bad("malformed document (an index out of range)".into()))?;
