@@ -93,6 +93,19 @@ pub enum Error {
         /// The panic's message.
         message: String,
     },
+    /// A directory without the free space a temporary or spill file is about to take;
+    /// found before writing it.
+    #[error("{path}: not enough free space for {what}: {needed} bytes needed ({:.1} MiB), {available} bytes free ({:.1} MiB)", *needed as f64 / 1048576.0, *available as f64 / 1048576.0)]
+    NoSpace {
+        /// The directory.
+        path: PathBuf,
+        /// What was to be written there ("the spooled particles of frame.bgeo.gz").
+        what: String,
+        /// Bytes the file would take.
+        needed: u64,
+        /// Bytes free for this user.
+        available: u64,
+    },
     /// The input holds no particles.
     #[error("{path}: the file holds no particles")]
     EmptyInput {
