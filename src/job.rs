@@ -333,6 +333,15 @@ fn run_frames_unguarded(
             })?;
         }
     }
+    // What runs killed before they could clean up left in the temporary directory and
+    // beside the outputs (names with a PID that is no running process) goes first.
+    let temp = options
+        .tiles
+        .temp_dir
+        .clone()
+        .unwrap_or_else(std::env::temp_dir);
+    crate::io::tempfiles::remove_temp_leftovers(&temp);
+    crate::io::tempfiles::remove_output_leftovers(plan.iter().map(|(_, out)| out.as_path()));
     // A .mseq output collects every frame: appended to an existing archive, else new.
     let mut archive = match plan.first() {
         Some((_, out)) if is_archive(out) => {

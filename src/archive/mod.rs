@@ -752,6 +752,8 @@ impl ArchiveReader {
                         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
                     }
                 }
+                // Temporary files of killed extractions beside the outputs go first.
+                crate::io::tempfiles::remove_output_leftovers(paths.iter().map(PathBuf::as_path));
                 numbers
                     .par_iter()
                     .zip(&paths)

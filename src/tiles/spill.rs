@@ -54,7 +54,10 @@ impl SpillFile {
             records.saturating_mul(record_bytes as u64),
         )?;
         let dir = tempfile::Builder::new()
-            .prefix("meniscus-spill-")
+            .prefix(&crate::io::tempfiles::owned_prefix(
+                crate::io::tempfiles::SPILL_PREFIX,
+            ))
+            .rand_bytes(crate::io::tempfiles::RANDOM_CHARS)
             .tempdir_in(parent)
             .map_err(|e| spill_error(parent, e))?;
         let path = dir.path().join("particles.bin");

@@ -340,7 +340,8 @@ struct TempWriter {
 impl TempWriter {
     fn create(dir: &Path, prefix: &str, suffix: &str) -> Result<Self> {
         let file = tempfile::Builder::new()
-            .prefix(prefix)
+            .prefix(&crate::io::tempfiles::owned_prefix(prefix))
+            .rand_bytes(crate::io::tempfiles::RANDOM_CHARS)
             .suffix(suffix)
             .tempfile_in(dir)
             .map_err(|e| Error::io(dir, e))?;
@@ -385,9 +386,13 @@ impl<'a> Spool<'a> {
             ),
             needed,
         )?;
-        let positions = TempWriter::create(dir, "meniscus-input-", ".xyz")?;
+        let positions = TempWriter::create(dir, crate::io::tempfiles::INPUT_PREFIX, ".xyz")?;
         let payload = if width > 0 {
-            Some(TempWriter::create(dir, "meniscus-payload-", ".f32")?)
+            Some(TempWriter::create(
+                dir,
+                crate::io::tempfiles::PAYLOAD_PREFIX,
+                ".f32",
+            )?)
         } else {
             None
         };
