@@ -791,3 +791,34 @@ fn a_gltf_accessor_past_its_buffer_is_an_error() {
     doc["buffers"][0]["uri"] = serde_json::json!("/dev/zero");
     assert!(gltf_error(&doc).contains("external file"));
 }
+
+#[test]
+fn a_gltf_scene_that_would_walk_or_allocate_without_end_is_an_error() {
+    // A chain of nodes all listed as roots: the walk would be quadratic.
+    let mut doc = tiny_gltf();
+    doc["nodes"] = serde_json::json!([{"mesh": 0, "children": [1]}, {"mesh": 0}]);
+    doc["scenes"][0]["nodes"] = serde_json::json!([0, 1]);
+    assert!(gltf_error(&doc).contains("is a child of node 0"));
+    let mut doc = tiny_gltf();
+    doc["scenes"][0]["nodes"] = serde_json::json!([0, 0]);
+    assert!(gltf_error(&doc).contains("listed twice"));
+    // A zero-filled accessor (no bufferView) of 10^12 elements.
+    let mut doc = tiny_gltf();
+    doc["accessors"][0] = serde_json::json!(
+        {"componentType": 5126, "count": 1_000_000_000_000u64, "type": "VEC3"});
+    let e = gltf_error(&doc);
+    assert!(
+        e.contains("accessors[0]") && e.contains("without a bufferView"),
+        "{e}"
+    );
+    // One mesh of 10^8 vertices instanced by 43 nodes: more vertices than a mesh can
+    // index (found from the declared lengths, before any buffer is decoded).
+    let mut doc = tiny_gltf();
+    doc["buffers"][0]["byteLength"] = serde_json::json!(1_200_000_000u64);
+    doc["bufferViews"][0]["byteLength"] = serde_json::json!(1_200_000_000u64);
+    doc["accessors"][0]["count"] = serde_json::json!(100_000_000u64);
+    doc["nodes"] = serde_json::json!(vec![serde_json::json!({"mesh": 0}); 43]);
+    doc["scenes"][0]["nodes"] = serde_json::json!((0..43).collect::<Vec<_>>());
+    let e = gltf_error(&doc);
+    assert!(e.contains("instantiates 4300000000 vertices"), "{e}");
+}

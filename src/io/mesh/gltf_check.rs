@@ -92,7 +92,13 @@ pub(super) fn check(path: &Path, bytes: &[u8]) -> Result<()> {
         views.push(View { len, stride });
     }
 
-    // Accessors lie inside their buffer views (sparse parts too).
+    // Accessors lie inside their buffer views (sparse parts too). One without a buffer
+    // view is zeros (plus its sparse values): it may not hold more bytes than the file's
+    // buffers (64 KiB at least), or a few bytes of JSON would ask for gigabytes.
+    let zeros_limit = buffer_len
+        .iter()
+        .fold(0u64, |a, &b| a.saturating_add(b))
+        .max(1 << 16);
     let mut accessors = Vec::with_capacity(counts.accessors);
     for (i, a) in doc.array("accessors")?.iter().enumerate() {
         let at = format!("accessors[{i}]");
@@ -129,6 +135,13 @@ pub(super) fn check(path: &Path, bytes: &[u8]) -> Result<()> {
         if let Some(view) = doc.index(a, "bufferView", &at, counts.views, "bufferViews")? {
             let offset = doc.uint(a, "byteOffset", &at)?.unwrap_or(0);
             doc.extent(&at, offset, count, size, &views[view], view)?;
+        } else if count.saturating_mul(size) > zeros_limit {
+            return Err(bad(
+                at,
+                format!(
+                    "{count} elements of {size} bytes without a bufferView: more than the {zeros_limit} bytes the file's buffers hold"
+                ),
+            ));
         }
         if let Some(sparse) = a.get("sparse") {
             let at = format!("{at}.sparse");
@@ -162,17 +175,18 @@ pub(super) fn check(path: &Path, bytes: &[u8]) -> Result<()> {
                 doc.extent(&at, offset, n, element, &views[view], view)?;
             }
         }
-        accessors.push((component.unwrap_or(0), kind));
+        accessors.push((component.unwrap_or(0), kind, count));
     }
 
     // Meshes: primitives refer to accessors that exist; indices are unsigned integer
     // scalars, positions and normals float VEC3.
+    let mut mesh_vertices = vec![0u64; counts.meshes];
     for (i, m) in doc.array("meshes")?.iter().enumerate() {
         let prims = m.get("primitives").and_then(Value::as_array);
         for (j, prim) in prims.into_iter().flatten().enumerate() {
             let at = format!("meshes[{i}].primitives[{j}]");
             if let Some(k) = doc.index(prim, "indices", &at, counts.accessors, "accessors")? {
-                let (component, kind) = accessors[k];
+                let (component, kind, _) = accessors[k];
                 if !matches!(component, 5121 | 5123 | 5125) || kind != "SCALAR" {
                     return Err(bad(
                         format!("{at}.indices"),
@@ -202,7 +216,10 @@ pub(super) fn check(path: &Path, bytes: &[u8]) -> Result<()> {
                         ))
                     }
                 };
-                let (component, kind) = accessors[k];
+                let (component, kind, count) = accessors[k];
+                if name == "POSITION" {
+                    mesh_vertices[i] = mesh_vertices[i].saturating_add(count);
+                }
                 if (name == "POSITION" || name == "NORMAL") && (component != 5126 || kind != "VEC3")
                 {
                     return Err(bad(
@@ -220,9 +237,13 @@ pub(super) fn check(path: &Path, bytes: &[u8]) -> Result<()> {
     // descendant, none has two parents), so that the walk from the scene ends.
     let nodes = doc.array("nodes")?;
     let mut parent: Vec<Option<usize>> = vec![None; nodes.len()];
+    let mut children: Vec<Vec<usize>> = Vec::with_capacity(nodes.len());
+    let mut vertices: Vec<u64> = Vec::with_capacity(nodes.len());
     for (i, n) in nodes.iter().enumerate() {
         let at = format!("nodes[{i}]");
-        doc.index(n, "mesh", &at, counts.meshes, "meshes")?;
+        let mesh = doc.index(n, "mesh", &at, counts.meshes, "meshes")?;
+        vertices.push(mesh.map_or(0, |m| mesh_vertices[m]));
+        let mut own = Vec::new();
         let list = match n.get("children") {
             None => &[][..],
             Some(Value::Array(list)) => &list[..],
@@ -240,7 +261,9 @@ pub(super) fn check(path: &Path, bytes: &[u8]) -> Result<()> {
                 ));
             }
             parent[c] = Some(i);
+            own.push(c);
         }
+        children.push(own);
     }
     // With one parent each, a cycle is a loop of parent links: follow them from every node,
     // each node visited at most once overall.
@@ -272,20 +295,59 @@ pub(super) fn check(path: &Path, bytes: &[u8]) -> Result<()> {
         }
     }
 
-    // Scenes list nodes that exist.
-    for (i, s) in doc.array("scenes")?.iter().enumerate() {
+    // The vertices each node's subtree instantiates (a mesh counts once per node using
+    // it): children before parents, in reversed pre-order from the roots.
+    let mut order = Vec::with_capacity(nodes.len());
+    let mut stack: Vec<usize> = (0..nodes.len()).filter(|&i| parent[i].is_none()).collect();
+    while let Some(i) = stack.pop() {
+        order.push(i);
+        stack.extend(&children[i]);
+    }
+    for &i in order.iter().rev() {
+        let below = children[i]
+            .iter()
+            .fold(0u64, |a, &c| a.saturating_add(vertices[c]));
+        vertices[i] = vertices[i].saturating_add(below);
+    }
+
+    // Scenes list distinct root nodes that exist (the walk visits each node once),
+    // instantiating no more vertices than a mesh
+    // can index.
+    let scenes = doc.array("scenes")?;
+    for (i, s) in scenes.iter().enumerate() {
         let at = format!("scenes[{i}]");
         let list = match s.get("nodes") {
             None => &[][..],
             Some(Value::Array(list)) => &list[..],
             Some(_) => return Err(bad(at, "nodes is not an array".into())),
         };
+        let mut listed = vec![false; nodes.len()];
+        let mut total = 0u64;
         for (k, n) in list.iter().enumerate() {
-            doc.index_value(n, &format!("{at}.nodes[{k}]"), counts.nodes, "nodes")?;
+            let n = doc.index_value(n, &format!("{at}.nodes[{k}]"), counts.nodes, "nodes")?;
+            if std::mem::replace(&mut listed[n], true) {
+                return Err(bad(at, format!("node {n} is listed twice")));
+            }
+            if let Some(p) = parent[n] {
+                return Err(bad(
+                    at,
+                    format!("node {n} is listed as a root but is a child of node {p}"),
+                ));
+            }
+            total = total.saturating_add(vertices[n]);
+        }
+        if total > u32::MAX as u64 {
+            return Err(bad(
+                at,
+                format!(
+                    "the scene instantiates {total} vertices, more than a mesh can index ({})",
+                    u32::MAX
+                ),
+            ));
         }
     }
     if let Some(s) = root.get("scene") {
-        doc.index_value(s, "scene", doc.array("scenes")?.len(), "scenes")?;
+        doc.index_value(s, "scene", scenes.len(), "scenes")?;
     }
     Ok(())
 }
