@@ -175,204 +175,209 @@ pub fn reconstruct_source<S: ParticleSource>(
     progress: &dyn Fn(&str),
     cancel: &CancelToken,
 ) -> Result<(Surface, ReconstructionStats)> {
-    let guard_input = String::from("the particles given to reconstruct");
+    let input = String::from("the particles given to reconstruct");
     crate::error::guard(
-        move || guard_input,
-        || {
-            options.field.validate()?;
-            let mut stats = ReconstructionStats {
-                particles: source.particle_count(),
-                ..Default::default()
-            };
-            let r = options.field.particle_radius;
-            let layout = source.attribute_layout();
-
-            // 1.–2. Plan the tiles and hold the particles for them.
-            let clock = Instant::now();
-            let decimating = options.decimate.as_ref();
-            let plan = plan_tiles(
-                &source,
-                &options.field,
-                &options.tiles,
-                output_bytes_per_particle(
-                    decimating.map(|d| d.target_reduction.unwrap_or(0.8)),
-                    options.subdivide.levels,
-                ),
-                decimating.is_some(),
-                cancel,
-            )?;
-            let store =
-                ParticleStore::build(source, &plan, options.tiles.temp_dir.as_deref(), cancel)?;
-            stats.tiles = TileStats {
-                tile_blocks: plan.tile_blocks.unwrap_or(0) as u32,
-                memory_budget_bytes: options.tiles.memory_budget_bytes,
-                estimated_peak_bytes: plan.estimated_peak_bytes,
-                kept_freed_memory: plan.kept_freed_memory,
-                spill_bytes: store.spill_bytes(),
-                spill_seconds: clock.elapsed().as_secs_f64(),
-                tiles: plan.tile_count(),
-                ..TileStats::default()
-            };
-
-            // 3. Isolated particles leave the field; field and marching cubes, tile by tile, into
-            // a sink: decimated as they come when tiled, else stitched.
-            let isolation_radius = options
-                .isolated_sphere_level
-                .map(|_| options.field.influence_radius_world() as f32);
-            let on_tile = |tile: usize, tiles: usize| {
-                if tiles > 1 {
-                    progress(&format!(
-                        "field + marching cubes, tile {}/{tiles}",
-                        tile + 1
-                    ))
-                } else {
-                    progress("field + marching cubes")
-                }
-            };
-            let run_into = |sink: &mut dyn TileSink, stats: &mut TileStats| {
-                run_tiles(
-                    &store,
-                    &plan,
-                    &options.field,
-                    isolation_radius,
-                    sink,
-                    stats,
-                    cancel,
-                    &on_tile,
-                )
-            };
-            let (mut fluid, tiles_run, tile_decimation) =
-                match decimating.filter(|_| plan.is_tiled()) {
-                    Some(decimate_options) => {
-                        let mut sink = TileDecimation::new(decimate_options, r);
-                        let run = run_into(&mut sink, &mut stats.tiles)?;
-                        stats.marching_cubes.triangles = sink.marching_triangles();
-                        stats.tiles.stitch_seconds = sink.stitch_seconds;
-                        let (mesh, decimation, seconds) = sink.finish();
-                        stats.tiles.decimation_seconds = seconds;
-                        (mesh, run, Some(decimation))
-                    }
-                    None => {
-                        let mut sink = StitchSink::default();
-                        let run = run_into(&mut sink, &mut stats.tiles)?;
-                        let clock = Instant::now();
-                        let (mesh, marching_cubes, bytes) = sink.finish();
-                        stats.marching_cubes = marching_cubes;
-                        stats.tiles.surface_bytes = bytes;
-                        stats.tiles.stitch_seconds = clock.elapsed().as_secs_f64();
-                        (mesh, run, None)
-                    }
-                };
-            // The particles are needed again only to carry their payload to the surface.
-            let store = (!layout.is_empty()).then_some(store);
-            let isolated_centers = tiles_run.isolated;
-            stats.isolated_particles = isolated_centers.len();
-            stats.field = tiles_run.field;
-            let t = &stats.tiles;
-            let untimed = clock.elapsed().as_secs_f64()
-                - (t.spill_seconds
-                    + t.neighbour_seconds
-                    + t.field_seconds
-                    + t.marching_seconds
-                    + t.stitch_seconds
-                    + t.decimation_seconds);
-            let (neighbours, field, marching, stitching) = (
-                t.spill_seconds + t.neighbour_seconds + untimed,
-                t.field_seconds,
-                t.marching_seconds,
-                t.stitch_seconds,
-            );
-            stats.marching_cubes_triangles = stats.marching_cubes.triangles;
-            stats.push_stage("neighbours", neighbours, 0);
-            stats.push_stage("field", field, 0);
-            stats.push_stage(
-                "marching cubes",
-                marching + stitching,
-                stats.marching_cubes.triangles,
-            );
-
-            cancel.check()?;
-            // 4. Decimation (already done tile by tile when the run was tiled).
-            progress("decimation");
-            if let Some(tile_decimation) = tile_decimation {
-                stats.decimation = Some(tile_decimation);
-                stats.push_stage(
-                    "decimation",
-                    stats.tiles.decimation_seconds,
-                    fluid.triangle_count(),
-                );
-            } else if let Some(decimate_options) = decimating {
-                let clock = Instant::now();
-                stats.decimation = Some(decimate(&mut fluid, decimate_options));
-                stats.push_stage(
-                    "decimation",
-                    clock.elapsed().as_secs_f64(),
-                    fluid.triangle_count(),
-                );
-            }
-
-            cancel.check()?;
-            // 5. Subdivision.
-            progress("subdivision");
-            if options.subdivide.levels > 0 {
-                let clock = Instant::now();
-                subdivide(&mut fluid, &options.subdivide);
-                stats.push_stage(
-                    "subdivision",
-                    clock.elapsed().as_secs_f64(),
-                    fluid.triangle_count(),
-                );
-            }
-
-            cancel.check()?;
-            // 6. Spheres.
-            let clock = Instant::now();
-            let mut spheres = match options.isolated_sphere_level {
-                Some(level) if !isolated_centers.is_empty() => SphereInstances {
-                    template: crate::isolated::icosphere(level, r),
-                    centers: isolated_centers,
-                    attributes: Vec::new(),
-                },
-                _ => SphereInstances::default(),
-            };
-            stats.sphere_triangles = spheres.template.triangle_count() * spheres.centers.len();
-            stats.push_stage(
-                "spheres",
-                clock.elapsed().as_secs_f64(),
-                fluid.triangle_count(),
-            );
-
-            // 7. Normals.
-            let clock = Instant::now();
-            fluid.compute_normals();
-            stats.fluid_triangles = fluid.triangle_count();
-            stats.push_stage(
-                "normals",
-                clock.elapsed().as_secs_f64(),
-                fluid.triangle_count(),
-            );
-
-            // 8. Attributes at the final vertices and the sphere centres.
-            if let Some(store) = store {
-                cancel.check()?;
-                progress("attributes");
-                let clock = Instant::now();
-                let influence_radius = options.field.influence_radius_world();
-                let sets = [fluid.positions.as_slice(), spheres.centers.as_slice()];
-                let mut values = transfer(&store, &plan, &layout, &sets, influence_radius, cancel)?;
-                spheres.attributes = values.pop().expect("one list per set");
-                fluid.attributes = values.pop().expect("one list per set");
-                drop(store);
-                stats.push_stage(
-                    "attributes",
-                    clock.elapsed().as_secs_f64(),
-                    fluid.triangle_count(),
-                );
-            }
-
-            Ok((Surface { fluid, spheres }, stats))
-        },
+        move || input,
+        || reconstruct_source_unguarded(source, options, progress, cancel),
     )
+}
+
+fn reconstruct_source_unguarded<S: ParticleSource>(
+    source: S,
+    options: &ReconstructOptions,
+    progress: &dyn Fn(&str),
+    cancel: &CancelToken,
+) -> Result<(Surface, ReconstructionStats)> {
+    options.field.validate()?;
+    let mut stats = ReconstructionStats {
+        particles: source.particle_count(),
+        ..Default::default()
+    };
+    let r = options.field.particle_radius;
+    let layout = source.attribute_layout();
+
+    // 1.–2. Plan the tiles and hold the particles for them.
+    let clock = Instant::now();
+    let decimating = options.decimate.as_ref();
+    let plan = plan_tiles(
+        &source,
+        &options.field,
+        &options.tiles,
+        output_bytes_per_particle(
+            decimating.map(|d| d.target_reduction.unwrap_or(0.8)),
+            options.subdivide.levels,
+        ),
+        decimating.is_some(),
+        cancel,
+    )?;
+    let store = ParticleStore::build(source, &plan, options.tiles.temp_dir.as_deref(), cancel)?;
+    stats.tiles = TileStats {
+        tile_blocks: plan.tile_blocks.unwrap_or(0) as u32,
+        memory_budget_bytes: options.tiles.memory_budget_bytes,
+        estimated_peak_bytes: plan.estimated_peak_bytes,
+        kept_freed_memory: plan.kept_freed_memory,
+        spill_bytes: store.spill_bytes(),
+        spill_seconds: clock.elapsed().as_secs_f64(),
+        tiles: plan.tile_count(),
+        ..TileStats::default()
+    };
+
+    // 3. Isolated particles leave the field; field and marching cubes, tile by tile, into
+    // a sink: decimated as they come when tiled, else stitched.
+    let isolation_radius = options
+        .isolated_sphere_level
+        .map(|_| options.field.influence_radius_world() as f32);
+    let on_tile = |tile: usize, tiles: usize| {
+        if tiles > 1 {
+            progress(&format!(
+                "field + marching cubes, tile {}/{tiles}",
+                tile + 1
+            ))
+        } else {
+            progress("field + marching cubes")
+        }
+    };
+    let run_into = |sink: &mut dyn TileSink, stats: &mut TileStats| {
+        run_tiles(
+            &store,
+            &plan,
+            &options.field,
+            isolation_radius,
+            sink,
+            stats,
+            cancel,
+            &on_tile,
+        )
+    };
+    let (mut fluid, tiles_run, tile_decimation) = match decimating.filter(|_| plan.is_tiled()) {
+        Some(decimate_options) => {
+            let mut sink = TileDecimation::new(decimate_options, r);
+            let run = run_into(&mut sink, &mut stats.tiles)?;
+            stats.marching_cubes.triangles = sink.marching_triangles();
+            stats.tiles.stitch_seconds = sink.stitch_seconds;
+            let (mesh, decimation, seconds) = sink.finish();
+            stats.tiles.decimation_seconds = seconds;
+            (mesh, run, Some(decimation))
+        }
+        None => {
+            let mut sink = StitchSink::default();
+            let run = run_into(&mut sink, &mut stats.tiles)?;
+            let clock = Instant::now();
+            let (mesh, marching_cubes, bytes) = sink.finish();
+            stats.marching_cubes = marching_cubes;
+            stats.tiles.surface_bytes = bytes;
+            stats.tiles.stitch_seconds = clock.elapsed().as_secs_f64();
+            (mesh, run, None)
+        }
+    };
+    // The particles are needed again only to carry their payload to the surface.
+    let store = (!layout.is_empty()).then_some(store);
+    let isolated_centers = tiles_run.isolated;
+    stats.isolated_particles = isolated_centers.len();
+    stats.field = tiles_run.field;
+    let t = &stats.tiles;
+    let untimed = clock.elapsed().as_secs_f64()
+        - (t.spill_seconds
+            + t.neighbour_seconds
+            + t.field_seconds
+            + t.marching_seconds
+            + t.stitch_seconds
+            + t.decimation_seconds);
+    let (neighbours, field, marching, stitching) = (
+        t.spill_seconds + t.neighbour_seconds + untimed,
+        t.field_seconds,
+        t.marching_seconds,
+        t.stitch_seconds,
+    );
+    stats.marching_cubes_triangles = stats.marching_cubes.triangles;
+    stats.push_stage("neighbours", neighbours, 0);
+    stats.push_stage("field", field, 0);
+    stats.push_stage(
+        "marching cubes",
+        marching + stitching,
+        stats.marching_cubes.triangles,
+    );
+
+    cancel.check()?;
+    // 4. Decimation (already done tile by tile when the run was tiled).
+    progress("decimation");
+    if let Some(tile_decimation) = tile_decimation {
+        stats.decimation = Some(tile_decimation);
+        stats.push_stage(
+            "decimation",
+            stats.tiles.decimation_seconds,
+            fluid.triangle_count(),
+        );
+    } else if let Some(decimate_options) = decimating {
+        let clock = Instant::now();
+        stats.decimation = Some(decimate(&mut fluid, decimate_options));
+        stats.push_stage(
+            "decimation",
+            clock.elapsed().as_secs_f64(),
+            fluid.triangle_count(),
+        );
+    }
+
+    cancel.check()?;
+    // 5. Subdivision.
+    progress("subdivision");
+    if options.subdivide.levels > 0 {
+        let clock = Instant::now();
+        subdivide(&mut fluid, &options.subdivide);
+        stats.push_stage(
+            "subdivision",
+            clock.elapsed().as_secs_f64(),
+            fluid.triangle_count(),
+        );
+    }
+
+    cancel.check()?;
+    // 6. Spheres.
+    let clock = Instant::now();
+    let mut spheres = match options.isolated_sphere_level {
+        Some(level) if !isolated_centers.is_empty() => SphereInstances {
+            template: crate::isolated::icosphere(level, r),
+            centers: isolated_centers,
+            attributes: Vec::new(),
+        },
+        _ => SphereInstances::default(),
+    };
+    stats.sphere_triangles = spheres.template.triangle_count() * spheres.centers.len();
+    stats.push_stage(
+        "spheres",
+        clock.elapsed().as_secs_f64(),
+        fluid.triangle_count(),
+    );
+
+    // 7. Normals.
+    let clock = Instant::now();
+    fluid.compute_normals();
+    stats.fluid_triangles = fluid.triangle_count();
+    stats.push_stage(
+        "normals",
+        clock.elapsed().as_secs_f64(),
+        fluid.triangle_count(),
+    );
+
+    // 8. Attributes at the final vertices and the sphere centres.
+    if let Some(store) = store {
+        cancel.check()?;
+        progress("attributes");
+        let clock = Instant::now();
+        let influence_radius = options.field.influence_radius_world();
+        let sets = [fluid.positions.as_slice(), spheres.centers.as_slice()];
+        let mut values = transfer(&store, &plan, &layout, &sets, influence_radius, cancel)?;
+        spheres.attributes = values.pop().expect("one list per set");
+        fluid.attributes = values.pop().expect("one list per set");
+        drop(store);
+        stats.push_stage(
+            "attributes",
+            clock.elapsed().as_secs_f64(),
+            fluid.triangle_count(),
+        );
+    }
+
+    Ok((Surface { fluid, spheres }, stats))
 }
 
 /// Peak resident memory of this process so far (Linux `VmHWM`), bytes.

@@ -348,48 +348,47 @@ impl ArchiveReader {
     /// reported by the frame number the index gives them), else by scanning its records
     /// (an interrupted append), resynchronising past damaged ones.
     pub fn open(path: &Path) -> Result<ArchiveReader> {
-        let guard_input = path.display().to_string();
-        crate::error::guard(
-            move || guard_input,
-            || {
-                let mut bytes = Vec::new();
-                File::open(path)
-                    .and_then(|mut f| f.read_to_end(&mut bytes))
-                    .map_err(|e| Error::io(path, e))?;
-                if bytes.len() < HEADER_LEN as usize || &bytes[0..8] != MAGIC {
-                    return Err(archive_error(
-                        path,
-                        None,
-                        "not a meniscus .mseq archive (bad magic number)",
-                    ));
-                }
-                let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
-                if !(1..=ATTRIBUTES_VERSION).contains(&version) {
-                    return Err(Error::UnsupportedFormat {
-                        path: path.to_path_buf(),
-                        message: format!(
+        let input = path.display().to_string();
+        crate::error::guard(move || input, || Self::open_unguarded(path))
+    }
+
+    fn open_unguarded(path: &Path) -> Result<ArchiveReader> {
+        let mut bytes = Vec::new();
+        File::open(path)
+            .and_then(|mut f| f.read_to_end(&mut bytes))
+            .map_err(|e| Error::io(path, e))?;
+        if bytes.len() < HEADER_LEN as usize || &bytes[0..8] != MAGIC {
+            return Err(archive_error(
+                path,
+                None,
+                "not a meniscus .mseq archive (bad magic number)",
+            ));
+        }
+        let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
+        if !(1..=ATTRIBUTES_VERSION).contains(&version) {
+            return Err(Error::UnsupportedFormat {
+                path: path.to_path_buf(),
+                message: format!(
                     ".mseq version {version}; this build reads versions 1 to {ATTRIBUTES_VERSION}"
                 ),
-                    });
-                }
-                let mut reader = ArchiveReader {
-                    path: path.to_path_buf(),
-                    version,
-                    bytes,
-                    frames: Vec::new(),
-                    crcs: Vec::new(),
-                    flags: Vec::new(),
-                    recovered_by_scan: false,
-                    data_end: HEADER_LEN,
-                    damage: Vec::new(),
-                };
-                match reader.read_index() {
-                    Some((index_offset, entries)) => reader.use_index(index_offset, &entries),
-                    None => reader.scan(),
-                }
-                Ok(reader)
-            },
-        )
+            });
+        }
+        let mut reader = ArchiveReader {
+            path: path.to_path_buf(),
+            version,
+            bytes,
+            frames: Vec::new(),
+            crcs: Vec::new(),
+            flags: Vec::new(),
+            recovered_by_scan: false,
+            data_end: HEADER_LEN,
+            damage: Vec::new(),
+        };
+        match reader.read_index() {
+            Some((index_offset, entries)) => reader.use_index(index_offset, &entries),
+            None => reader.scan(),
+        }
+        Ok(reader)
     }
 
     /// The index through the trailer: its offset and its (frame, record offset) entries;
@@ -632,25 +631,24 @@ impl ArchiveReader {
     /// Decodes frame `number` as fluid surface plus sphere instances: positions and
     /// triangles only, no normals (what a renderer that makes its own normals needs).
     pub fn read_geometry(&self, number: i64) -> Result<Surface> {
-        let guard_input = format!("{}: frame {number}", self.path.display());
-        crate::error::guard(
-            move || guard_input,
-            || {
-                let k = self
-                    .frames
+        let input = format!("{}: frame {number}", self.path.display());
+        crate::error::guard(move || input, || self.read_geometry_unguarded(number))
+    }
+
+    fn read_geometry_unguarded(&self, number: i64) -> Result<Surface> {
+        let k = self
+            .frames
+            .iter()
+            .position(|f| f.number == number)
+            .ok_or_else(|| {
+                let why = self
+                    .damage
                     .iter()
-                    .position(|f| f.number == number)
-                    .ok_or_else(|| {
-                        let why = self
-                            .damage
-                            .iter()
-                            .find(|d| d.frame == Some(number))
-                            .map_or("no such frame in the archive", |d| d.message.as_str());
-                        archive_error(&self.path, Some(number), why)
-                    })?;
-                self.decode(k)
-            },
-        )
+                    .find(|d| d.frame == Some(number))
+                    .map_or("no such frame in the archive", |d| d.message.as_str());
+                archive_error(&self.path, Some(number), why)
+            })?;
+        self.decode(k)
     }
 
     fn decode(&self, k: usize) -> Result<Surface> {
@@ -721,51 +719,59 @@ impl ArchiveReader {
         options: &crate::io::mesh::MeshWriteOptions,
         cancel: &crate::CancelToken,
     ) -> Result<Vec<PathBuf>> {
-        let guard_input = self.path.display().to_string();
+        let input = self.path.display().to_string();
         crate::error::guard(
-            move || guard_input,
-            || {
-                use rayon::prelude::*;
-                let single = numbers.is_some_and(|n| n.len() == 1);
-                if !single && !crate::sequence::is_pattern(output_pattern) {
-                    return Err(Error::InvalidOption {
-                        option: "--output",
-                        message: format!(
+            move || input,
+            || self.extract_unguarded(numbers, output_pattern, options, cancel),
+        )
+    }
+
+    fn extract_unguarded(
+        &self,
+        numbers: Option<&[i64]>,
+        output_pattern: &str,
+        options: &crate::io::mesh::MeshWriteOptions,
+        cancel: &crate::CancelToken,
+    ) -> Result<Vec<PathBuf>> {
+        use rayon::prelude::*;
+        let single = numbers.is_some_and(|n| n.len() == 1);
+        if !single && !crate::sequence::is_pattern(output_pattern) {
+            return Err(Error::InvalidOption {
+                option: "--output",
+                message: format!(
                     "{output_pattern:?} needs a {{}} for the frame number to hold several frames"
                 ),
-                    });
-                }
-                let all: Vec<i64>;
-                let numbers = match numbers {
-                    Some(n) => n,
-                    None => {
-                        all = self.frames.iter().map(|f| f.number).collect();
-                        &all
-                    }
-                };
-                let paths: Vec<PathBuf> = numbers
-                    .iter()
-                    .map(|n| crate::sequence::substitute(output_pattern, &n.to_string()))
-                    .collect();
-                for dir in paths.iter().filter_map(|p| p.parent()) {
-                    if !dir.as_os_str().is_empty() {
-                        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-                    }
-                }
-                // Temporary files of killed extractions beside the outputs go first.
-                crate::io::tempfiles::remove_output_leftovers(paths.iter().map(PathBuf::as_path));
-                numbers
-                    .par_iter()
-                    .zip(&paths)
-                    .try_for_each(|(&n, path)| -> Result<()> {
-                        cancel.check()?;
-                        let surface = self.read_surface(n)?;
-                        crate::io::mesh::write_surface(path, &surface, options)?;
-                        Ok(())
-                    })?;
-                Ok(paths)
-            },
-        )
+            });
+        }
+        let all: Vec<i64>;
+        let numbers = match numbers {
+            Some(n) => n,
+            None => {
+                all = self.frames.iter().map(|f| f.number).collect();
+                &all
+            }
+        };
+        let paths: Vec<PathBuf> = numbers
+            .iter()
+            .map(|n| crate::sequence::substitute(output_pattern, &n.to_string()))
+            .collect();
+        for dir in paths.iter().filter_map(|p| p.parent()) {
+            if !dir.as_os_str().is_empty() {
+                std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+            }
+        }
+        // Temporary files of killed extractions beside the outputs go first.
+        crate::io::tempfiles::remove_output_leftovers(paths.iter().map(PathBuf::as_path));
+        numbers
+            .par_iter()
+            .zip(&paths)
+            .try_for_each(|(&n, path)| -> Result<()> {
+                cancel.check()?;
+                let surface = self.read_surface(n)?;
+                crate::io::mesh::write_surface(path, &surface, options)?;
+                Ok(())
+            })?;
+        Ok(paths)
     }
 
     /// Decodes every frame (in parallel; the report is in file order) and reports the
@@ -821,63 +827,63 @@ impl ArchiveWriter {
     /// the first frame is ready (or by `finish` for an archive without frames), so an
     /// archive whose first frame fails is never left behind, empty.
     pub fn create(path: &Path, options: &ArchiveOptions) -> Result<ArchiveWriter> {
-        let guard_input = path.display().to_string();
-        crate::error::guard(
-            move || guard_input,
-            || {
-                options.check()?;
-                Ok(ArchiveWriter {
-                    path: path.to_path_buf(),
-                    version: VERSION,
-                    file: None,
-                    options: options.clone(),
-                    index: Vec::new(),
-                    end: HEADER_LEN,
-                })
-            },
-        )
+        let input = path.display().to_string();
+        crate::error::guard(move || input, || Self::create_unguarded(path, options))
+    }
+
+    fn create_unguarded(path: &Path, options: &ArchiveOptions) -> Result<ArchiveWriter> {
+        options.check()?;
+        Ok(ArchiveWriter {
+            path: path.to_path_buf(),
+            version: VERSION,
+            file: None,
+            options: options.clone(),
+            index: Vec::new(),
+            end: HEADER_LEN,
+        })
     }
 
     /// Opens an archive for appending. Earlier frames are kept as they are; an
     /// incomplete last record left by an interrupted append is cut off (that frame was
     /// never complete). An archive with a damaged frame is refused.
     pub fn open_append(path: &Path, options: &ArchiveOptions) -> Result<ArchiveWriter> {
-        let guard_input = path.display().to_string();
-        crate::error::guard(
-            move || guard_input,
-            || {
-                options.check()?;
-                let reader = ArchiveReader::open(path)?;
-                let report = reader.verify();
-                // A frame whose payload is damaged, an index that disagrees with the records, or
-                // bytes at the end that appending would cut and that are not a cut-off record:
-                // refused, so that nothing is lost. Damaged record headers in the middle stay
-                // where they are (appending goes after the last record) and stay reported.
-                // The frames' own damage comes first in the report, the rest after.
-                let frame_damage = report.damaged.len()
-                    - reader.damage.iter().filter(|d| d.frame.is_some()).count();
-                let refusal = report.damaged[..frame_damage]
-                    .first()
-                    .map(|(n, why)| (Some(*n), why.clone()))
-                    .or_else(|| {
-                        reader
-                            .damage
-                            .iter()
-                            .find(|d| matches!(d.kind, DamageKind::Index | DamageKind::Tail))
-                            .map(|d| (d.frame, d.message.clone()))
-                    });
-                if let Some((n, why)) = refusal {
-                    return Err(archive_error(
-                        path,
-                        n,
-                        format!("refusing to append to a damaged archive: {why}"),
-                    ));
-                }
-                // One error bound for all frames: the archive lists one, and a frame quantized
-                // more coarsely than the others would break what the archive promises.
-                let step = 2.0 * options.error_bound;
-                if let Some(f) = reader.frames.iter().find(|f| f.step != step) {
-                    return Err(archive_error(
+        let input = path.display().to_string();
+        crate::error::guard(move || input, || Self::open_append_unguarded(path, options))
+    }
+
+    fn open_append_unguarded(path: &Path, options: &ArchiveOptions) -> Result<ArchiveWriter> {
+        options.check()?;
+        let reader = ArchiveReader::open(path)?;
+        let report = reader.verify();
+        // A frame whose payload is damaged, an index that disagrees with the records, or
+        // bytes at the end that appending would cut and that are not a cut-off record:
+        // refused, so that nothing is lost. Damaged record headers in the middle stay
+        // where they are (appending goes after the last record) and stay reported.
+        // The frames' own damage comes first in the report, the rest after.
+        let frame_damage =
+            report.damaged.len() - reader.damage.iter().filter(|d| d.frame.is_some()).count();
+        let refusal = report.damaged[..frame_damage]
+            .first()
+            .map(|(n, why)| (Some(*n), why.clone()))
+            .or_else(|| {
+                reader
+                    .damage
+                    .iter()
+                    .find(|d| matches!(d.kind, DamageKind::Index | DamageKind::Tail))
+                    .map(|d| (d.frame, d.message.clone()))
+            });
+        if let Some((n, why)) = refusal {
+            return Err(archive_error(
+                path,
+                n,
+                format!("refusing to append to a damaged archive: {why}"),
+            ));
+        }
+        // One error bound for all frames: the archive lists one, and a frame quantized
+        // more coarsely than the others would break what the archive promises.
+        let step = 2.0 * options.error_bound;
+        if let Some(f) = reader.frames.iter().find(|f| f.step != step) {
+            return Err(archive_error(
                 path,
                 Some(f.number),
                 format!(
@@ -886,41 +892,39 @@ impl ArchiveWriter {
                     f.step / 2.0
                 ),
             ));
-                }
-                let file = OpenOptions::new()
-                    .write(true)
-                    .open(path)
-                    .map_err(|e| Error::io(path, e))?;
-                // Drop the old index (and any cut-off record): everything before stays.
-                file.set_len(reader.data_end)
-                    .map_err(|e| Error::io(path, e))?;
-                // Records whose header is damaged keep their index entries, so that they stay
-                // reported by frame number.
-                let mut index: Vec<(i64, u64)> =
-                    reader.frames.iter().map(|f| (f.number, f.offset)).collect();
-                index.extend(
-                    reader
-                        .damage
-                        .iter()
-                        .filter_map(|d| Some((d.frame?, d.offset?))),
-                );
-                index.sort_by_key(|e| e.1);
-                let mut writer = ArchiveWriter {
-                    path: path.to_path_buf(),
-                    version: reader.version,
-                    file: Some(file),
-                    options: options.clone(),
-                    index,
-                    end: reader.data_end,
-                };
-                let end = writer.end;
-                writer
-                    .file()?
-                    .seek(SeekFrom::Start(end))
-                    .map_err(|e| Error::io(path, e))?;
-                Ok(writer)
-            },
-        )
+        }
+        let file = OpenOptions::new()
+            .write(true)
+            .open(path)
+            .map_err(|e| Error::io(path, e))?;
+        // Drop the old index (and any cut-off record): everything before stays.
+        file.set_len(reader.data_end)
+            .map_err(|e| Error::io(path, e))?;
+        // Records whose header is damaged keep their index entries, so that they stay
+        // reported by frame number.
+        let mut index: Vec<(i64, u64)> =
+            reader.frames.iter().map(|f| (f.number, f.offset)).collect();
+        index.extend(
+            reader
+                .damage
+                .iter()
+                .filter_map(|d| Some((d.frame?, d.offset?))),
+        );
+        index.sort_by_key(|e| e.1);
+        let mut writer = ArchiveWriter {
+            path: path.to_path_buf(),
+            version: reader.version,
+            file: Some(file),
+            options: options.clone(),
+            index,
+            end: reader.data_end,
+        };
+        let end = writer.end;
+        writer
+            .file()?
+            .seek(SeekFrom::Start(end))
+            .map_err(|e| Error::io(path, e))?;
+        Ok(writer)
     }
 
     /// The open file; a new archive's is created here, with its header.
@@ -963,144 +967,142 @@ impl ArchiveWriter {
     /// header's version field is rewritten before the record is written); a version-1
     /// archive cannot store attributes and refuses such a frame.
     pub fn append_frame(&mut self, number: i64, frame: &ArchiveFrame) -> Result<u64> {
-        let guard_input = format!("{}: frame {number}", self.path.display());
-        crate::error::guard(
-            move || guard_input,
-            || {
-                if self.index.iter().any(|e| e.0 == number) {
-                    return Err(archive_error(
-                        &self.path,
-                        Some(number),
-                        "the archive already holds this frame",
-                    ));
-                }
-                if frame.subdivision_levels > MAX_SUBDIVISION_LEVELS {
-                    return Err(archive_error(
-                        &self.path,
-                        Some(number),
-                        format!(
+        let input = format!("{}: frame {number}", self.path.display());
+        crate::error::guard(move || input, || self.append_frame_unguarded(number, frame))
+    }
+
+    fn append_frame_unguarded(&mut self, number: i64, frame: &ArchiveFrame) -> Result<u64> {
+        if self.index.iter().any(|e| e.0 == number) {
+            return Err(archive_error(
+                &self.path,
+                Some(number),
+                "the archive already holds this frame",
+            ));
+        }
+        if frame.subdivision_levels > MAX_SUBDIVISION_LEVELS {
+            return Err(archive_error(
+                &self.path,
+                Some(number),
+                format!(
                     "{} subdivision levels; an archive stores at most {MAX_SUBDIVISION_LEVELS}",
                     frame.subdivision_levels
                 ),
-                    ));
+            ));
+        }
+        let step = 2.0 * self.options.error_bound;
+        let level = self.options.zstd_level;
+        let with_attributes = frame::has_attributes(frame);
+        if with_attributes {
+            let attribute_step = 2.0 * self.options.attribute_error_bound;
+            let instances = frame::stored_instances(frame.spheres);
+            attributes::check(
+                &frame.fluid.attributes,
+                frame.fluid.vertex_count(),
+                "fluid vertices",
+                attribute_step,
+            )
+            .and_then(|_| {
+                if instances == 0 {
+                    return Ok(());
                 }
-                let step = 2.0 * self.options.error_bound;
-                let level = self.options.zstd_level;
-                let with_attributes = frame::has_attributes(frame);
-                if with_attributes {
-                    let attribute_step = 2.0 * self.options.attribute_error_bound;
-                    let instances = frame::stored_instances(frame.spheres);
-                    attributes::check(
-                        &frame.fluid.attributes,
-                        frame.fluid.vertex_count(),
-                        "fluid vertices",
-                        attribute_step,
-                    )
-                    .and_then(|_| {
-                        if instances == 0 {
-                            return Ok(());
-                        }
-                        attributes::check(
-                            &frame.spheres.attributes,
-                            instances,
-                            "sphere instances",
-                            attribute_step,
-                        )
-                    })
-                    .map_err(|m| archive_error(&self.path, Some(number), m))?;
-                    if self.version == 1 {
-                        return Err(archive_error(
-                            &self.path,
-                            Some(number),
-                            "a version-1 archive cannot store attributes (write a new archive)",
-                        ));
-                    }
-                    if self.version < ATTRIBUTES_VERSION {
-                        // A file not yet written gets the version in its header when it is.
-                        if let Some(file) = self.file.as_mut() {
-                            file.seek(SeekFrom::Start(8))
-                                .and_then(|_| file.write_all(&ATTRIBUTES_VERSION.to_le_bytes()))
-                                .and_then(|_| file.seek(SeekFrom::Start(self.end)))
-                                .map_err(|e| Error::io(&self.path, e))?;
-                        }
-                        self.version = ATTRIBUTES_VERSION;
-                    }
+                attributes::check(
+                    &frame.spheres.attributes,
+                    instances,
+                    "sphere instances",
+                    attribute_step,
+                )
+            })
+            .map_err(|m| archive_error(&self.path, Some(number), m))?;
+            if self.version == 1 {
+                return Err(archive_error(
+                    &self.path,
+                    Some(number),
+                    "a version-1 archive cannot store attributes (write a new archive)",
+                ));
+            }
+            if self.version < ATTRIBUTES_VERSION {
+                // A file not yet written gets the version in its header when it is.
+                if let Some(file) = self.file.as_mut() {
+                    file.seek(SeekFrom::Start(8))
+                        .and_then(|_| file.write_all(&ATTRIBUTES_VERSION.to_le_bytes()))
+                        .and_then(|_| file.seek(SeekFrom::Start(self.end)))
+                        .map_err(|e| Error::io(&self.path, e))?;
                 }
-                let encoded = if self.version == 1 {
-                    // An old archive keeps its format: one plain mesh per frame.
-                    let mut merged = frame.fluid.clone();
-                    crate::subdivision::subdivide(
-                        &mut merged,
-                        &crate::subdivision::SubdivideOptions {
-                            levels: frame.subdivision_levels,
-                        },
-                    );
-                    if !frame.spheres.centers.is_empty() {
-                        merged.append(&frame.spheres.merged());
-                    }
-                    codec::encode_v1(&merged, step, level).map(|(payload, vertices, triangles)| {
-                        frame::EncodedFrame {
-                            payload,
-                            vertices,
-                            triangles,
-                            flags: 0,
-                        }
-                    })
-                } else {
-                    frame::encode_frame(
-                        frame,
-                        step,
-                        self.options.attribute_error_bound,
-                        level,
-                        self.version >= 3,
-                    )
+                self.version = ATTRIBUTES_VERSION;
+            }
+        }
+        let encoded = if self.version == 1 {
+            // An old archive keeps its format: one plain mesh per frame.
+            let mut merged = frame.fluid.clone();
+            crate::subdivision::subdivide(
+                &mut merged,
+                &crate::subdivision::SubdivideOptions {
+                    levels: frame.subdivision_levels,
+                },
+            );
+            if !frame.spheres.centers.is_empty() {
+                merged.append(&frame.spheres.merged());
+            }
+            codec::encode_v1(&merged, step, level).map(|(payload, vertices, triangles)| {
+                frame::EncodedFrame {
+                    payload,
+                    vertices,
+                    triangles,
+                    flags: 0,
                 }
-                .map_err(|e| Error::io(&self.path, e))?;
-                let payload = encoded.payload;
-                let header = RecordHeader {
-                    number,
-                    vertices: encoded.vertices,
-                    triangles: encoded.triangles,
-                    step,
-                    payload_len: payload.len() as u64,
-                    payload_crc: crc32fast::hash(&payload),
-                    flags: encoded.flags,
-                };
-                let file = self.file()?;
-                file.write_all(&header.to_bytes())
-                    .and_then(|_| file.write_all(&payload))
-                    .map_err(|e| Error::io(&self.path, e))?;
-                self.index.push((number, self.end));
-                let bytes = (RECORD_HEADER_LEN + payload.len()) as u64;
-                self.end += bytes;
-                Ok(bytes)
-            },
-        )
+            })
+        } else {
+            frame::encode_frame(
+                frame,
+                step,
+                self.options.attribute_error_bound,
+                level,
+                self.version >= 3,
+            )
+        }
+        .map_err(|e| Error::io(&self.path, e))?;
+        let payload = encoded.payload;
+        let header = RecordHeader {
+            number,
+            vertices: encoded.vertices,
+            triangles: encoded.triangles,
+            step,
+            payload_len: payload.len() as u64,
+            payload_crc: crc32fast::hash(&payload),
+            flags: encoded.flags,
+        };
+        let file = self.file()?;
+        file.write_all(&header.to_bytes())
+            .and_then(|_| file.write_all(&payload))
+            .map_err(|e| Error::io(&self.path, e))?;
+        self.index.push((number, self.end));
+        let bytes = (RECORD_HEADER_LEN + payload.len()) as u64;
+        self.end += bytes;
+        Ok(bytes)
     }
 
     /// Writes the index and trailer and closes the archive.
-    pub fn finish(mut self) -> Result<()> {
-        let guard_input = self.path.display().to_string();
-        crate::error::guard(
-            move || guard_input,
-            || {
-                let mut index = Vec::with_capacity(12 + 16 * self.index.len() + 20);
-                index.extend_from_slice(INDEX_MAGIC);
-                index.extend_from_slice(&(self.index.len() as u64).to_le_bytes());
-                for (n, offset) in &self.index {
-                    index.extend_from_slice(&n.to_le_bytes());
-                    index.extend_from_slice(&offset.to_le_bytes());
-                }
-                let crc = crc32fast::hash(&index);
-                index.extend_from_slice(&crc.to_le_bytes());
-                index.extend_from_slice(&self.end.to_le_bytes());
-                index.extend_from_slice(TRAILER_MAGIC);
-                let file = self.file()?;
-                file.write_all(&index)
-                    .and_then(|_| file.sync_all())
-                    .map_err(|e| Error::io(&self.path, e))
-            },
-        )
+    pub fn finish(self) -> Result<()> {
+        let input = self.path.display().to_string();
+        crate::error::guard(move || input, || self.finish_unguarded())
+    }
+
+    fn finish_unguarded(mut self) -> Result<()> {
+        let mut index = Vec::with_capacity(12 + 16 * self.index.len() + 20);
+        index.extend_from_slice(INDEX_MAGIC);
+        index.extend_from_slice(&(self.index.len() as u64).to_le_bytes());
+        for (n, offset) in &self.index {
+            index.extend_from_slice(&n.to_le_bytes());
+            index.extend_from_slice(&offset.to_le_bytes());
+        }
+        let crc = crc32fast::hash(&index);
+        index.extend_from_slice(&crc.to_le_bytes());
+        index.extend_from_slice(&self.end.to_le_bytes());
+        index.extend_from_slice(TRAILER_MAGIC);
+        let file = self.file()?;
+        file.write_all(&index)
+            .and_then(|_| file.sync_all())
+            .map_err(|e| Error::io(&self.path, e))
     }
 }
 

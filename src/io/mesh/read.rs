@@ -22,43 +22,42 @@ use std::path::Path;
 
 /// Reads a triangle mesh; the format comes from the extension.
 pub fn read_mesh(path: &Path) -> Result<TriMesh> {
-    let guard_input = path.display().to_string();
-    crate::error::guard(
-        move || guard_input,
-        || {
-            let ext = path
-                .extension()
-                .and_then(|e| e.to_str())
-                .unwrap_or_default()
-                .to_ascii_lowercase();
-            let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-            let mesh = match ext.as_str() {
-                "ply" => read_ply(path, &bytes)?,
-                "obj" => read_obj(path, &bytes)?,
-                "glb" | "gltf" => read_gltf(path, &bytes)?,
-                "vtk" => read_vtk(path, &bytes)?,
-                _ => {
-                    return Err(Error::UnsupportedFormat {
-                        path: path.to_path_buf(),
-                        message: "mesh input must be .ply, .obj, .glb, .gltf or .vtk".into(),
-                    })
-                }
-            };
-            let n = mesh.positions.len() as u32;
-            if let Some(t) = mesh
-                .triangles
-                .iter()
-                .position(|t| t.iter().any(|&i| i >= n))
-            {
-                return Err(Error::parse(
-                    path,
-                    format!("face {t}"),
-                    format!("vertex index out of range (the mesh has {n} vertices)"),
-                ));
-            }
-            Ok(mesh)
-        },
-    )
+    let input = path.display().to_string();
+    crate::error::guard(move || input, || read_mesh_unguarded(path))
+}
+
+fn read_mesh_unguarded(path: &Path) -> Result<TriMesh> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or_default()
+        .to_ascii_lowercase();
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let mesh = match ext.as_str() {
+        "ply" => read_ply(path, &bytes)?,
+        "obj" => read_obj(path, &bytes)?,
+        "glb" | "gltf" => read_gltf(path, &bytes)?,
+        "vtk" => read_vtk(path, &bytes)?,
+        _ => {
+            return Err(Error::UnsupportedFormat {
+                path: path.to_path_buf(),
+                message: "mesh input must be .ply, .obj, .glb, .gltf or .vtk".into(),
+            })
+        }
+    };
+    let n = mesh.positions.len() as u32;
+    if let Some(t) = mesh
+        .triangles
+        .iter()
+        .position(|t| t.iter().any(|&i| i >= n))
+    {
+        return Err(Error::parse(
+            path,
+            format!("face {t}"),
+            format!("vertex index out of range (the mesh has {n} vertices)"),
+        ));
+    }
+    Ok(mesh)
 }
 
 fn read_ply(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
@@ -210,8 +209,8 @@ fn read_gltf(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
     // Indices, extents, component types and the node hierarchy are checked first: the
     // crate's readers trust them (and the scene walk below ends only on a forest).
     super::gltf_check::check(path, bytes)?;
-    // Last guard: the gltf crate's validation indexes with unchecked accessor indices and panics on
-    // some malformed documents: such a document is an error, not a crash.
+    // Last guard: the gltf crate's validation indexes with unchecked accessor indices and
+    // panics on some malformed documents: such a document is an error, not a crash.
     let imported = std::panic::catch_unwind(|| gltf::import_slice(bytes))
         .map_err(|_| bad("malformed document (an index out of range)".into()))?;
     let (doc, buffers, _) = imported.map_err(|e| bad(e.to_string()))?;

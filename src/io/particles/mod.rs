@@ -95,40 +95,39 @@ impl std::str::FromStr for ParticleFormat {
 
 /// Reads the particles of one file; the format comes from `format` or the extension.
 pub fn read_particles(path: &Path, format: Option<ParticleFormat>) -> Result<Particles> {
-    let guard_input = path.display().to_string();
-    crate::error::guard(
-        move || guard_input,
-        || {
-            let format = match format {
-                Some(f) => f,
-                None => ParticleFormat::from_path(path)?,
-            };
-            let particles = match format {
-                ParticleFormat::Xyz => xyz::read(path)?,
-                other => {
-                    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-                    if bytes.is_empty() {
-                        return Err(Error::EmptyInput {
-                            path: path.to_path_buf(),
-                        });
-                    }
-                    match other {
-                        ParticleFormat::Vtk => vtk::read(path, &bytes)?,
-                        ParticleFormat::Ply => ply::read(path, &bytes)?,
-                        ParticleFormat::Bgeo => bgeo::read(path, &bytes)?,
-                        ParticleFormat::Xyz => unreachable!(),
-                    }
-                }
-            };
-            if particles.positions.is_empty() {
+    let input = path.display().to_string();
+    crate::error::guard(move || input, || read_particles_unguarded(path, format))
+}
+
+fn read_particles_unguarded(path: &Path, format: Option<ParticleFormat>) -> Result<Particles> {
+    let format = match format {
+        Some(f) => f,
+        None => ParticleFormat::from_path(path)?,
+    };
+    let particles = match format {
+        ParticleFormat::Xyz => xyz::read(path)?,
+        other => {
+            let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+            if bytes.is_empty() {
                 return Err(Error::EmptyInput {
                     path: path.to_path_buf(),
                 });
             }
-            check_finite(path, &particles.positions)?;
-            Ok(particles)
-        },
-    )
+            match other {
+                ParticleFormat::Vtk => vtk::read(path, &bytes)?,
+                ParticleFormat::Ply => ply::read(path, &bytes)?,
+                ParticleFormat::Bgeo => bgeo::read(path, &bytes)?,
+                ParticleFormat::Xyz => unreachable!(),
+            }
+        }
+    };
+    if particles.positions.is_empty() {
+        return Err(Error::EmptyInput {
+            path: path.to_path_buf(),
+        });
+    }
+    check_finite(path, &particles.positions)?;
+    Ok(particles)
 }
 
 /// Writes particles (positions and attributes where the format holds them), atomically.
