@@ -1,7 +1,9 @@
 //! Typed errors of the library: one variant family per stage, each saying what was wrong
 //! with which input.
 
+use std::panic::AssertUnwindSafe;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Result alias of the library.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
@@ -93,6 +95,28 @@ pub enum Error {
         /// How many frames the run has.
         planned: usize,
     },
+    /// A bug: the library panicked while working on `input`. The panic was caught at the
+    /// public entry point so that the caller gets an error, not an abort.
+    #[error("{input}: internal error (a bug in meniscus, please report it): {message}")]
+    Internal {
+        /// The file (or "particles in memory", "archive ...") being worked on.
+        input: String,
+        /// The panic's message.
+        message: String,
+    },
+    /// A directory without the free space a temporary or spill file is about to take;
+    /// found before writing it.
+    #[error("{path}: not enough free space for {what}: {needed} bytes needed ({:.1} MiB), {available} bytes free ({:.1} MiB)", *needed as f64 / 1048576.0, *available as f64 / 1048576.0)]
+    NoSpace {
+        /// The directory.
+        path: PathBuf,
+        /// What was to be written there ("the spooled particles of frame.bgeo.gz").
+        what: String,
+        /// Bytes the file would take.
+        needed: u64,
+        /// Bytes free for this user.
+        available: u64,
+    },
     /// The input holds no particles.
     #[error("{path}: the file holds no particles")]
     EmptyInput {
@@ -120,6 +144,45 @@ impl Error {
             path: path.into(),
             location: location.into(),
             message: message.into(),
+        }
+    }
+}
+
+/// How many [`guard`]s are running, in any thread.
+static GUARDS: AtomicUsize = AtomicUsize::new(0);
+
+/// True while a public entry point is running under [`guard`]: a panic now becomes an
+/// [`Error::Internal`] the caller will report, so a panic hook may stay silent (the CLI's
+/// does, to print the message once).
+pub fn panic_is_caught() -> bool {
+    GUARDS.load(Ordering::Relaxed) > 0
+}
+
+/// Runs a public entry point; a panic in it (or in the rayon tasks it waits for) becomes
+/// [`Error::Internal`] naming `input`.
+pub(crate) fn guard<T>(input: impl FnOnce() -> String, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    struct Count;
+    impl Drop for Count {
+        fn drop(&mut self) {
+            GUARDS.fetch_sub(1, Ordering::Relaxed);
+        }
+    }
+    GUARDS.fetch_add(1, Ordering::Relaxed);
+    let _count = Count;
+    match std::panic::catch_unwind(AssertUnwindSafe(f)) {
+        Ok(result) => result,
+        Err(payload) => {
+            let message = if let Some(s) = payload.downcast_ref::<&str>() {
+                (*s).to_string()
+            } else if let Some(s) = payload.downcast_ref::<String>() {
+                s.clone()
+            } else {
+                "panic without a message".to_string()
+            };
+            Err(Error::Internal {
+                input: input(),
+                message,
+            })
         }
     }
 }

@@ -339,8 +339,49 @@ pub fn run_frames(
     on_stage: &mut dyn FnMut(&str),
     on_done: &mut dyn FnMut(&FrameReport),
 ) -> Result<Vec<FrameReport>> {
+    // A panic becomes an error naming the frame being worked on (its input file), also
+    // when an inner entry point (reconstruct) caught it first.
+    let current: std::cell::RefCell<Option<PathBuf>> = Default::default();
+    let name = || {
+        current
+            .borrow()
+            .as_ref()
+            .or_else(|| plan.first().map(|(_, out)| out))
+            .map(|p| p.display().to_string())
+            .unwrap_or_default()
+    };
+    let result = crate::error::guard(name, || {
+        run_frames_unguarded(plan, options, job, &current, on_frame, on_stage, on_done)
+    });
+    match result {
+        Err(Error::Internal { input, message }) if input != name() => Err(Error::Internal {
+            input: name(),
+            message: format!("{input}: {message}"),
+        }),
+        other => other,
+    }
+}
+
+fn run_frames_unguarded(
+    plan: &[(Frame, PathBuf)],
+    options: &ReconstructOptions,
+    job: &JobOptions,
+    current: &std::cell::RefCell<Option<PathBuf>>,
+    on_frame: &mut dyn FnMut(usize, &Frame),
+    on_stage: &mut dyn FnMut(&str),
+    on_done: &mut dyn FnMut(&FrameReport),
+) -> Result<Vec<FrameReport>> {
     check_outputs(plan)?;
     let kind = output_kind(plan);
+    // What runs killed before they could clean up left in the temporary directory and
+    // beside the outputs (names with a PID that is no running process) goes first.
+    let temp = options
+        .tiles
+        .temp_dir
+        .clone()
+        .unwrap_or_else(std::env::temp_dir);
+    crate::io::tempfiles::remove_temp_leftovers(&temp);
+    crate::io::tempfiles::remove_output_leftovers(plan.iter().map(|(_, out)| out.as_path()));
     // A .mseq output collects every frame: appended to an existing archive, else new.
     let mut archive = match plan.first() {
         Some((_, out)) if kind == OutputKind::Archive => {
@@ -385,6 +426,7 @@ pub fn run_frames(
     let mut reports = Vec::with_capacity(plan.len());
     for (i, (frame, output)) in plan.iter().enumerate() {
         job.cancel.check()?;
+        *current.borrow_mut() = Some(frame.input.clone());
         on_frame(i, frame);
         let exists = match &archive {
             Some(_) => archived.contains(&frame.number),

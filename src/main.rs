@@ -235,6 +235,15 @@ fn main() -> ExitCode {
     meniscus::tune_allocator();
     let matches = Cli::command().get_matches();
     let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    // A panic inside a library entry point comes back as an error that is printed once,
+    // naming the input; the default hook would print it a first time (kept with
+    // RUST_BACKTRACE, for bug reports).
+    let default_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        if !meniscus::error::panic_is_caught() || std::env::var_os("RUST_BACKTRACE").is_some() {
+            default_hook(info);
+        }
+    }));
     // Ctrl-C: the first stops the run at the next tile or stage (temporary files are
     // removed, no partial output is left); a second one exits at once.
     let cancel = meniscus::CancelToken::new();

@@ -175,6 +175,19 @@ pub fn reconstruct_source<S: ParticleSource>(
     progress: &dyn Fn(&str),
     cancel: &CancelToken,
 ) -> Result<(Surface, ReconstructionStats)> {
+    let input = String::from("the particles given to reconstruct");
+    crate::error::guard(
+        move || input,
+        || reconstruct_source_unguarded(source, options, progress, cancel),
+    )
+}
+
+fn reconstruct_source_unguarded<S: ParticleSource>(
+    source: S,
+    options: &ReconstructOptions,
+    progress: &dyn Fn(&str),
+    cancel: &CancelToken,
+) -> Result<(Surface, ReconstructionStats)> {
     options.field.validate()?;
     let mut stats = ReconstructionStats {
         particles: source.particle_count(),

@@ -621,5 +621,204 @@ fn a_gltf_whose_position_accessor_index_is_out_of_range_is_an_error() {
     let e = read_mesh(&path)
         .expect_err("out-of-range accessor")
         .to_string();
-    assert!(e.contains("m.gltf") && e.contains("glTF"), "{e}");
+    assert!(
+        e.contains("m.gltf") && e.contains("POSITION") && e.contains("does not exist"),
+        "{e}"
+    );
+}
+
+/// A one-triangle glTF built by hand: positions (accessor 0, view 0) and u16 indices
+/// (accessor 1, view 1) in one embedded buffer; node 0 holds mesh 0.
+fn tiny_gltf() -> serde_json::Value {
+    let mut data = Vec::new();
+    for v in [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]] {
+        for c in v {
+            data.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    for i in [0u16, 1, 2, 0] {
+        data.extend_from_slice(&i.to_le_bytes());
+    }
+    let uri = format!("data:application/octet-stream;base64,{}", base64(&data));
+    serde_json::json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+             "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]},
+            {"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"}
+        ],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 36},
+            {"buffer": 0, "byteOffset": 36, "byteLength": 8}
+        ],
+        "buffers": [{"byteLength": data.len(), "uri": uri}]
+    })
+}
+
+fn base64(bytes: &[u8]) -> String {
+    const A: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut s = String::new();
+    for c in bytes.chunks(3) {
+        let n = (c[0] as u32) << 16
+            | (*c.get(1).unwrap_or(&0) as u32) << 8
+            | *c.get(2).unwrap_or(&0) as u32;
+        for k in 0..4 {
+            if k <= c.len() {
+                s.push(A[(n >> (18 - 6 * k)) as usize & 63] as char);
+            } else {
+                s.push('=');
+            }
+        }
+    }
+    s
+}
+
+/// Reads `doc` written as `m.gltf`; returns the error's text, or "" when it reads.
+fn gltf_error(doc: &serde_json::Value) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.gltf");
+    std::fs::write(&path, serde_json::to_vec(doc).unwrap()).unwrap();
+    match read_mesh(&path) {
+        Ok(_) => String::new(),
+        Err(e) => {
+            let e = e.to_string();
+            assert!(e.contains("m.gltf"), "{e}");
+            e
+        }
+    }
+}
+
+#[test]
+fn a_hand_built_gltf_reads() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.gltf");
+    std::fs::write(&path, serde_json::to_vec(&tiny_gltf()).unwrap()).unwrap();
+    let mesh = read_mesh(&path).unwrap();
+    assert_eq!(mesh.positions.len(), 3);
+    assert_eq!(mesh.triangles, vec![[0, 1, 2]]);
+}
+
+#[test]
+fn a_gltf_node_that_is_its_own_child_is_an_error() {
+    let mut doc = tiny_gltf();
+    doc["nodes"][0]["children"] = serde_json::json!([0]);
+    let e = gltf_error(&doc);
+    assert!(e.contains("nodes[0]") && e.contains("its own child"), "{e}");
+}
+
+#[test]
+fn a_gltf_node_cycle_is_an_error() {
+    let mut doc = tiny_gltf();
+    doc["nodes"] = serde_json::json!([{"mesh": 0, "children": [1]}, {"children": [0]}]);
+    let e = gltf_error(&doc);
+    assert!(e.contains("cycle"), "{e}");
+}
+
+#[test]
+fn a_gltf_node_with_two_parents_is_an_error() {
+    // A diamond chain would make the scene walk visit 2^n paths.
+    let mut doc = tiny_gltf();
+    let mut nodes = vec![serde_json::json!({"mesh": 0})];
+    for i in 1..64 {
+        nodes.push(serde_json::json!({"children": [i - 1]}));
+        nodes.push(serde_json::json!({"children": [i - 1]}));
+    }
+    doc["nodes"] = serde_json::Value::Array(nodes);
+    let e = gltf_error(&doc);
+    assert!(e.contains("one parent"), "{e}");
+}
+
+#[test]
+fn a_gltf_primitive_pointing_at_a_missing_accessor_is_an_error() {
+    let mut doc = tiny_gltf();
+    doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = serde_json::json!(7);
+    let e = gltf_error(&doc);
+    assert!(
+        e.contains("POSITION") && e.contains("does not exist"),
+        "{e}"
+    );
+    let mut doc = tiny_gltf();
+    doc["meshes"][0]["primitives"][0]["indices"] = serde_json::json!(2);
+    let e = gltf_error(&doc);
+    assert!(e.contains("indices") && e.contains("out of range"), "{e}");
+    let mut doc = tiny_gltf();
+    doc["nodes"][0]["mesh"] = serde_json::json!(1);
+    assert!(gltf_error(&doc).contains("nodes[0].mesh"));
+    let mut doc = tiny_gltf();
+    doc["accessors"][0]["bufferView"] = serde_json::json!(5);
+    assert!(gltf_error(&doc).contains("accessors[0].bufferView"));
+    let mut doc = tiny_gltf();
+    doc["bufferViews"][1]["buffer"] = serde_json::json!(1);
+    assert!(gltf_error(&doc).contains("bufferViews[1].buffer"));
+}
+
+#[test]
+fn gltf_float_indices_are_an_error() {
+    let mut doc = tiny_gltf();
+    doc["accessors"][1] =
+        serde_json::json!({"bufferView": 1, "componentType": 5126, "count": 2, "type": "SCALAR"});
+    let e = gltf_error(&doc);
+    assert!(
+        e.contains("indices") && e.contains("not an unsigned integer"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_gltf_accessor_past_its_buffer_is_an_error() {
+    let mut doc = tiny_gltf();
+    doc["accessors"][0]["count"] = serde_json::json!(1_000_000);
+    let e = gltf_error(&doc);
+    assert!(
+        e.contains("accessors[0]") && e.contains("exceed buffer view 0"),
+        "{e}"
+    );
+    let mut doc = tiny_gltf();
+    doc["accessors"][0]["count"] = serde_json::json!(u64::MAX);
+    assert!(gltf_error(&doc).contains("exceed buffer view 0"));
+    let mut doc = tiny_gltf();
+    doc["bufferViews"][1]["byteLength"] = serde_json::json!(80);
+    let e = gltf_error(&doc);
+    assert!(
+        e.contains("bufferViews[1]") && e.contains("exceed buffer 0"),
+        "{e}"
+    );
+    let mut doc = tiny_gltf();
+    doc["buffers"][0]["uri"] = serde_json::json!("/dev/zero");
+    assert!(gltf_error(&doc).contains("external file"));
+}
+
+#[test]
+fn a_gltf_scene_that_would_walk_or_allocate_without_end_is_an_error() {
+    // A chain of nodes all listed as roots: the walk would be quadratic.
+    let mut doc = tiny_gltf();
+    doc["nodes"] = serde_json::json!([{"mesh": 0, "children": [1]}, {"mesh": 0}]);
+    doc["scenes"][0]["nodes"] = serde_json::json!([0, 1]);
+    assert!(gltf_error(&doc).contains("is a child of node 0"));
+    let mut doc = tiny_gltf();
+    doc["scenes"][0]["nodes"] = serde_json::json!([0, 0]);
+    assert!(gltf_error(&doc).contains("listed twice"));
+    // A zero-filled accessor (no bufferView) of 10^12 elements.
+    let mut doc = tiny_gltf();
+    doc["accessors"][0] = serde_json::json!(
+        {"componentType": 5126, "count": 1_000_000_000_000u64, "type": "VEC3"});
+    let e = gltf_error(&doc);
+    assert!(
+        e.contains("accessors[0]") && e.contains("without a bufferView"),
+        "{e}"
+    );
+    // One mesh of 10^8 vertices instanced by 43 nodes: more vertices than a mesh can
+    // index (found from the declared lengths, before any buffer is decoded).
+    let mut doc = tiny_gltf();
+    doc["buffers"][0]["byteLength"] = serde_json::json!(1_200_000_000u64);
+    doc["bufferViews"][0]["byteLength"] = serde_json::json!(1_200_000_000u64);
+    doc["accessors"][0]["count"] = serde_json::json!(100_000_000u64);
+    doc["nodes"] = serde_json::json!(vec![serde_json::json!({"mesh": 0}); 43]);
+    doc["scenes"][0]["nodes"] = serde_json::json!((0..43).collect::<Vec<_>>());
+    let e = gltf_error(&doc);
+    assert!(e.contains("instantiates 4300000000 vertices"), "{e}");
 }

@@ -1148,3 +1148,42 @@ fn mutated_particle_files_are_read_or_rejected_never_panic() {
         }
     }
 }
+
+#[test]
+fn a_gzip_bgeo_holding_more_points_than_its_header_announces_fails_fast() {
+    // The header says 10 points; the data holds a million (about 28 MB decompressed).
+    let positions: Vec<Vec3> = (0..1_000_000)
+        .map(|i| Vec3::new(i as f32 * 1e-3, 0.0, 0.0))
+        .collect();
+    let mut plain = bgeo_bytes(&positions);
+    plain[9..13].copy_from_slice(&10i32.to_be_bytes());
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    std::io::Write::write_all(&mut gz, &plain).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(dir.path(), "liar.bgeo", &gz.finish().unwrap());
+    let temp = tempfile::tempdir().unwrap();
+    let clock = std::time::Instant::now();
+    let check = |e: meniscus::Error| {
+        let e = e.to_string();
+        assert!(
+            e.contains("liar.bgeo") && e.contains("past the 10 points the header announces"),
+            "{e}"
+        );
+    };
+    check(read_particles(&path, None).expect_err("undercounting header"));
+    check(stream_bgeo_positions(&path, &mut |_| Ok(())).expect_err("undercounting header"));
+    for selection in [AttributeSelection::None, AttributeSelection::All] {
+        let spooled = SpooledParticles::from_file(
+            &path,
+            ParticleFormat::Bgeo,
+            &selection,
+            Some(temp.path()),
+            &CancelToken::new(),
+        );
+        check(spooled.err().expect("undercounting header"));
+    }
+    // Nothing but the announced points and one MiB past them is decompressed.
+    assert!(clock.elapsed().as_secs_f64() < 5.0, "{:?}", clock.elapsed());
+    // The spool files are removed with the error.
+    assert_eq!(std::fs::read_dir(temp.path()).unwrap().count(), 0);
+}

@@ -505,3 +505,76 @@ fn a_tiled_run_streaming_attributes_writes_the_file_of_the_parsed_path() {
     );
     assert!(entries(&temp).is_empty(), "left {:?}", entries(&temp));
 }
+
+/// The PID of a process that has exited (and that no process has taken since).
+#[cfg(target_os = "linux")]
+fn dead_pid() -> u32 {
+    loop {
+        let mut child = Command::new("true").spawn().unwrap();
+        let pid = child.id();
+        child.wait().unwrap();
+        if !Path::new("/proc").join(pid.to_string()).exists() {
+            return pid;
+        }
+    }
+}
+
+#[cfg(target_os = "linux")]
+#[test]
+fn a_run_removes_what_killed_runs_left_and_keeps_what_live_ones_hold() {
+    let dir = tempfile::tempdir().unwrap();
+    let temp = dir.path().join("temp");
+    let outputs = dir.path().join("out");
+    std::fs::create_dir(&temp).unwrap();
+    std::fs::create_dir(&outputs).unwrap();
+    let dead = dead_pid();
+    let mut live = Command::new("sleep").arg("60").spawn().unwrap();
+    let alive = live.id();
+    let spill = temp.join(format!("meniscus-spill-{dead}-aB3xYz"));
+    std::fs::create_dir(&spill).unwrap();
+    std::fs::write(spill.join("particles.bin"), [0u8; 64]).unwrap();
+    let gone_temp = [
+        format!("meniscus-input-{dead}-aB3xYz.xyz"),
+        format!("meniscus-payload-{dead}-Qw12er.f32"),
+    ];
+    let kept_temp = [
+        format!("meniscus-input-{alive}-aB3xYz.xyz"),
+        format!("meniscus-spill-{alive}-aB3xYz"),
+        format!("meniscus-input-{dead}-aB3.xyz"),
+        format!("meniscus-input-{dead}-aB3xYz.xyz.keep"),
+        "meniscus-input-aB3xYz.xyz".to_string(),
+        "notes.txt".to_string(),
+    ];
+    for name in gone_temp.iter().chain(&kept_temp) {
+        std::fs::write(temp.join(name), b"x").unwrap();
+    }
+    let out = outputs.join("s.ply");
+    let gone_out = format!(".s.ply.tmp-{dead}-0");
+    let kept_out = [
+        format!(".s.ply.tmp-{alive}-3"),
+        format!(".other.ply.tmp-{dead}-0"),
+        format!("s.ply.tmp-{dead}-0"),
+    ];
+    for name in std::iter::once(&gone_out).chain(&kept_out) {
+        std::fs::write(outputs.join(name), b"x").unwrap();
+    }
+    let status = meniscus()
+        .args(["reconstruct"])
+        .arg(dataset("dambreak_small/ParticleData_Fluid_25.xyz"))
+        .args(["-r", "0.012", "-q", "--temp-dir"])
+        .arg(&temp)
+        .arg("-o")
+        .arg(&out)
+        .status()
+        .unwrap();
+    live.kill().unwrap();
+    live.wait().unwrap();
+    assert!(status.success());
+    let mut kept: Vec<String> = kept_temp.to_vec();
+    kept.sort();
+    assert_eq!(entries(&temp), kept);
+    let mut kept: Vec<String> = kept_out.to_vec();
+    kept.push("s.ply".into());
+    kept.sort();
+    assert_eq!(entries(&outputs), kept);
+}

@@ -221,3 +221,39 @@ fn the_iso_offset_moves_the_surface_outwards_onto_the_true_box() {
     bad.field.iso_offset = 1.5;
     assert!(reconstruct(&particles, &bad).is_err());
 }
+
+/// A particle source whose reading panics (a bug in a caller's source, or in ours).
+struct PanickingSource;
+
+impl meniscus::io::particles::ParticleSource for PanickingSource {
+    fn particle_count(&self) -> usize {
+        1000
+    }
+    fn visit_chunks(
+        &self,
+        _visit: &mut dyn FnMut(meniscus::io::particles::ParticleChunk<'_>) -> meniscus::Result<()>,
+    ) -> meniscus::Result<()> {
+        panic!("the source broke at particle 7");
+    }
+}
+
+#[test]
+fn a_panic_inside_reconstruct_is_an_internal_error_not_a_crash() {
+    let r = 0.025;
+    let options = raw_options(r);
+    let cancel = meniscus::CancelToken::new();
+    let e = meniscus::pipeline::reconstruct_source(PanickingSource, &options, &|_| {}, &cancel)
+        .expect_err("the source panics");
+    assert!(
+        matches!(&e, meniscus::Error::Internal { message, .. } if message.contains("particle 7")),
+        "{e:?}"
+    );
+    let text = e.to_string();
+    assert!(
+        text.contains("particles given to reconstruct") && text.contains("internal error"),
+        "{text}"
+    );
+    // The library is still usable afterwards.
+    let (surface, _) = reconstruct(&dataset("analytic/sphere.xyz"), &options).unwrap();
+    assert!(!surface.fluid.triangles.is_empty());
+}

@@ -366,6 +366,11 @@ impl ArchiveReader {
     /// reported by the frame number the index gives them), else by scanning its records
     /// (an interrupted append), resynchronising past damaged ones.
     pub fn open(path: &Path) -> Result<ArchiveReader> {
+        let input = path.display().to_string();
+        crate::error::guard(move || input, || Self::open_unguarded(path))
+    }
+
+    fn open_unguarded(path: &Path) -> Result<ArchiveReader> {
         let mut bytes = Vec::new();
         File::open(path)
             .and_then(|mut f| f.read_to_end(&mut bytes))
@@ -644,6 +649,11 @@ impl ArchiveReader {
     /// Decodes frame `number` as fluid surface plus sphere instances: positions and
     /// triangles only, no normals (what a renderer that makes its own normals needs).
     pub fn read_geometry(&self, number: i64) -> Result<Surface> {
+        let input = format!("{}: frame {number}", self.path.display());
+        crate::error::guard(move || input, || self.read_geometry_unguarded(number))
+    }
+
+    fn read_geometry_unguarded(&self, number: i64) -> Result<Surface> {
         let k = self
             .frames
             .iter()
@@ -727,6 +737,20 @@ impl ArchiveReader {
         options: &crate::io::mesh::MeshWriteOptions,
         cancel: &crate::CancelToken,
     ) -> Result<Vec<PathBuf>> {
+        let input = self.path.display().to_string();
+        crate::error::guard(
+            move || input,
+            || self.extract_unguarded(numbers, output_pattern, options, cancel),
+        )
+    }
+
+    fn extract_unguarded(
+        &self,
+        numbers: Option<&[i64]>,
+        output_pattern: &str,
+        options: &crate::io::mesh::MeshWriteOptions,
+        cancel: &crate::CancelToken,
+    ) -> Result<Vec<PathBuf>> {
         use rayon::prelude::*;
         let single = numbers.is_some_and(|n| n.len() == 1);
         if !single && !crate::sequence::is_pattern(output_pattern) {
@@ -754,6 +778,8 @@ impl ArchiveReader {
                 std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
             }
         }
+        // Temporary files of killed extractions beside the outputs go first.
+        crate::io::tempfiles::remove_output_leftovers(paths.iter().map(PathBuf::as_path));
         numbers
             .par_iter()
             .zip(&paths)
@@ -776,7 +802,12 @@ impl ArchiveReader {
         };
         let outcomes: Vec<Option<String>> = (0..self.frames.len())
             .into_par_iter()
-            .map(|k| self.decode(k).err().map(|e| e.to_string()))
+            .map(|k| {
+                let input = || format!("{}: frame {}", self.path.display(), self.frames[k].number);
+                crate::error::guard(input, || self.decode(k))
+                    .err()
+                    .map(|e| e.to_string())
+            })
             .collect();
         for (f, outcome) in self.frames.iter().zip(outcomes) {
             match outcome {
@@ -814,6 +845,11 @@ impl ArchiveWriter {
     /// the first frame is ready (or by `finish` for an archive without frames), so an
     /// archive whose first frame fails is never left behind, empty.
     pub fn create(path: &Path, options: &ArchiveOptions) -> Result<ArchiveWriter> {
+        let input = path.display().to_string();
+        crate::error::guard(move || input, || Self::create_unguarded(path, options))
+    }
+
+    fn create_unguarded(path: &Path, options: &ArchiveOptions) -> Result<ArchiveWriter> {
         options.check()?;
         Ok(ArchiveWriter {
             path: path.to_path_buf(),
@@ -829,6 +865,11 @@ impl ArchiveWriter {
     /// incomplete last record left by an interrupted append is cut off (that frame was
     /// never complete). An archive with a damaged frame is refused.
     pub fn open_append(path: &Path, options: &ArchiveOptions) -> Result<ArchiveWriter> {
+        let input = path.display().to_string();
+        crate::error::guard(move || input, || Self::open_append_unguarded(path, options))
+    }
+
+    fn open_append_unguarded(path: &Path, options: &ArchiveOptions) -> Result<ArchiveWriter> {
         options.check()?;
         let reader = ArchiveReader::open(path)?;
         let report = reader.verify();
@@ -952,6 +993,11 @@ impl ArchiveWriter {
     /// header's version field is rewritten before the record is written); a version-1
     /// archive cannot store attributes and refuses such a frame.
     pub fn append_frame(&mut self, number: i64, frame: &ArchiveFrame) -> Result<u64> {
+        let input = format!("{}: frame {number}", self.path.display());
+        crate::error::guard(move || input, || self.append_frame_unguarded(number, frame))
+    }
+
+    fn append_frame_unguarded(&mut self, number: i64, frame: &ArchiveFrame) -> Result<u64> {
         if self.index.iter().any(|e| e.0 == number) {
             return Err(archive_error(
                 &self.path,
@@ -1062,7 +1108,12 @@ impl ArchiveWriter {
     }
 
     /// Writes the index and trailer and closes the archive.
-    pub fn finish(mut self) -> Result<()> {
+    pub fn finish(self) -> Result<()> {
+        let input = self.path.display().to_string();
+        crate::error::guard(move || input, || self.finish_unguarded())
+    }
+
+    fn finish_unguarded(mut self) -> Result<()> {
         let mut index = Vec::with_capacity(12 + 16 * self.index.len() + 20);
         index.extend_from_slice(INDEX_MAGIC);
         index.extend_from_slice(&(self.index.len() as u64).to_le_bytes());

@@ -9,5 +9,6 @@ pub(crate) mod atomic;
 pub mod mesh;
 pub mod particles;
 pub(crate) mod ply_header;
+pub(crate) mod tempfiles;
 pub(crate) mod text;
 pub(crate) mod vtk_legacy;

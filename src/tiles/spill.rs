@@ -45,8 +45,19 @@ impl SpillFile {
         payload_width: usize,
     ) -> Result<Self> {
         let record_bytes = RECORD_BYTES + 4 * payload_width;
+        // The file's size is known before anything is written: a directory without room
+        // for it fails now, not after minutes of binning (the file is sparse until then).
+        let records: u64 = counts.values().sum();
+        crate::io::tempfiles::ensure_room(
+            parent,
+            &format!("the spill file of {records} particles"),
+            records.saturating_mul(record_bytes as u64),
+        )?;
         let dir = tempfile::Builder::new()
-            .prefix("meniscus-spill-")
+            .prefix(&crate::io::tempfiles::owned_prefix(
+                crate::io::tempfiles::SPILL_PREFIX,
+            ))
+            .rand_bytes(crate::io::tempfiles::RANDOM_CHARS)
             .tempdir_in(parent)
             .map_err(|e| spill_error(parent, e))?;
         let path = dir.path().join("particles.bin");

@@ -18,6 +18,7 @@
 //! write leaves no partial file and keeps an existing target.
 
 mod columns;
+mod gltf_check;
 mod gltf_writer;
 mod read;
 mod simple;

@@ -22,6 +22,11 @@ use std::path::Path;
 
 /// Reads a triangle mesh; the format comes from the extension.
 pub fn read_mesh(path: &Path) -> Result<TriMesh> {
+    let input = path.display().to_string();
+    crate::error::guard(move || input, || read_mesh_unguarded(path))
+}
+
+fn read_mesh_unguarded(path: &Path) -> Result<TriMesh> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -201,8 +206,11 @@ fn read_obj(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
 
 fn read_gltf(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
     let bad = |m: String| Error::parse(path, "glTF", m);
-    // The gltf crate's validation indexes with unchecked accessor indices and panics on
-    // some malformed documents: such a document is an error, not a crash.
+    // Indices, extents, component types and the node hierarchy are checked first: the
+    // crate's readers trust them (and the scene walk below ends only on a forest).
+    super::gltf_check::check(path, bytes)?;
+    // Last guard: the gltf crate's validation indexes with unchecked accessor indices and
+    // panics on some malformed documents: such a document is an error, not a crash.
     let imported = std::panic::catch_unwind(|| gltf::import_slice(bytes))
         .map_err(|_| bad("malformed document (an index out of range)".into()))?;
     let (doc, buffers, _) = imported.map_err(|e| bad(e.to_string()))?;

@@ -91,8 +91,13 @@ impl Stream<'_> {
 }
 
 /// Chooses, from the attributes a header declares (in file order), the indices of those
-/// to stream, in payload order.
-pub(super) type Select<'a> = dyn FnMut(&[AttributeLayout]) -> Result<Vec<usize>> + 'a;
+/// to stream, in payload order; told first the point count the header announces.
+pub(super) type Select<'a> = dyn FnMut(usize, &[AttributeLayout]) -> Result<Vec<usize>> + 'a;
+
+/// Most bytes a BGEO stream may hold after its point records (primitives, detail
+/// attributes, the two-byte extra block partio writes) before it counts as data the
+/// header did not announce.
+const MAX_TRAILER_BYTES: u64 = 1 << 20;
 
 /// Parses a BGEO stream (gzip detected by its magic bytes) chunk by chunk: once the
 /// header is read, `select` picks the attributes to carry; then positions and the
@@ -178,7 +183,7 @@ fn parse<'a, R: BufRead + 'a>(
             components: *size,
         })
         .collect();
-    let chosen = select(&declared)?;
+    let chosen = select(npoints, &declared)?;
     // Byte offset in the record, components and int-ness of each selected attribute.
     let mut at = Vec::with_capacity(defs.len());
     let mut o = 16;
@@ -235,6 +240,30 @@ fn parse<'a, R: BufRead + 'a>(
         sink(&chunk, &payload)?;
         first += count;
     }
+    // The stream ends soon after the announced points: a header that undercounts (a
+    // gzip of a few KiB can decompress to gigabytes) is an error, found after reading at
+    // most `MAX_TRAILER_BYTES` more.
+    let end = r.pos;
+    let trailer = std::io::copy(
+        &mut (&mut r.inner).take(MAX_TRAILER_BYTES + 1),
+        &mut std::io::sink(),
+    )
+    .map_err(|e| {
+        Error::parse(
+            path,
+            format!("byte offset {end} (decompressed)"),
+            format!("cannot read past the points: {e}"),
+        )
+    })?;
+    if trailer > MAX_TRAILER_BYTES {
+        return Err(Error::parse(
+            path,
+            format!("byte offset {end} (decompressed)"),
+            format!(
+                "the data goes on past the {npoints} points the header announces (more than {MAX_TRAILER_BYTES} bytes follow the last point)"
+            ),
+        ));
+    }
     Ok((npoints, layout))
 }
 
@@ -245,7 +274,7 @@ pub(super) fn read(path: &Path, raw: &[u8]) -> Result<Particles> {
     parse(
         path,
         raw,
-        &mut |declared| {
+        &mut |_, declared| {
             // Every attribute, values gathered as the records come (no reservation from
             // the header's count).
             *attributes.borrow_mut() = declared
@@ -288,7 +317,7 @@ pub fn stream_positions(
     let (count, _) = parse(
         path,
         super::open_buffered(path)?,
-        &mut |_| Ok(Vec::new()),
+        &mut |_, _| Ok(Vec::new()),
         &mut |chunk, _| positions(chunk),
     )?;
     Ok(count)

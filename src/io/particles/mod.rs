@@ -95,6 +95,11 @@ impl std::str::FromStr for ParticleFormat {
 
 /// Reads the particles of one file; the format comes from `format` or the extension.
 pub fn read_particles(path: &Path, format: Option<ParticleFormat>) -> Result<Particles> {
+    let input = path.display().to_string();
+    crate::error::guard(move || input, || read_particles_unguarded(path, format))
+}
+
+fn read_particles_unguarded(path: &Path, format: Option<ParticleFormat>) -> Result<Particles> {
     let format = match format {
         Some(f) => f,
         None => ParticleFormat::from_path(path)?,

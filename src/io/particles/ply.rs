@@ -154,7 +154,7 @@ pub fn stream_positions(
     path: &Path,
     positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
 ) -> Result<Option<usize>> {
-    Ok(stream(path, &mut |_| Ok(Vec::new()), &mut |chunk, _| {
+    Ok(stream(path, &mut |_, _| Ok(Vec::new()), &mut |chunk, _| {
         positions(chunk)
     })?
     .map(|(count, _)| count))
@@ -207,7 +207,7 @@ pub(crate) fn stream(
             components: ks.len(),
         })
         .collect();
-    let chosen = select(&layouts)?;
+    let chosen = select(element.count, &layouts)?;
     // The property columns of the payload row, in order.
     let columns: Vec<usize> = chosen
         .iter()

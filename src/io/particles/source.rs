@@ -324,6 +324,8 @@ struct Spool<'a> {
     payload: Option<TempWriter>,
     /// Particles written to the positions file.
     count: usize,
+    /// Particles the header announced: no more are spooled.
+    announced: usize,
     bytes: Vec<u8>,
 }
 
@@ -338,7 +340,8 @@ struct TempWriter {
 impl TempWriter {
     fn create(dir: &Path, prefix: &str, suffix: &str) -> Result<Self> {
         let file = tempfile::Builder::new()
-            .prefix(prefix)
+            .prefix(&crate::io::tempfiles::owned_prefix(prefix))
+            .rand_bytes(crate::io::tempfiles::RANDOM_CHARS)
             .suffix(suffix)
             .tempfile_in(dir)
             .map_err(|e| Error::io(dir, e))?;
@@ -365,15 +368,31 @@ impl TempWriter {
 }
 
 impl<'a> Spool<'a> {
+    /// The files for `announced` particles with `width` payload floats each, once `dir`
+    /// is found to have room for them.
     fn new(
         path: &'a Path,
         dir: &Path,
         cancel: &'a CancelToken,
-        with_payload: bool,
+        announced: usize,
+        width: usize,
     ) -> Result<Self> {
-        let positions = TempWriter::create(dir, "meniscus-input-", ".xyz")?;
-        let payload = if with_payload {
-            Some(TempWriter::create(dir, "meniscus-payload-", ".f32")?)
+        let needed = (announced as u64).saturating_mul(12 + 4 * width as u64);
+        crate::io::tempfiles::ensure_room(
+            dir,
+            &format!(
+                "the particles of {} (its header announces {announced})",
+                path.display()
+            ),
+            needed,
+        )?;
+        let positions = TempWriter::create(dir, crate::io::tempfiles::INPUT_PREFIX, ".xyz")?;
+        let payload = if width > 0 {
+            Some(TempWriter::create(
+                dir,
+                crate::io::tempfiles::PAYLOAD_PREFIX,
+                ".f32",
+            )?)
         } else {
             None
         };
@@ -383,6 +402,7 @@ impl<'a> Spool<'a> {
             positions,
             payload,
             count: 0,
+            announced,
             bytes: Vec::new(),
         })
     }
@@ -390,6 +410,16 @@ impl<'a> Spool<'a> {
     /// Appends positions.
     fn positions(&mut self, chunk: &[Vec3]) -> Result<()> {
         self.cancel.check()?;
+        if self.count + chunk.len() > self.announced {
+            return Err(Error::parse(
+                self.path,
+                format!("particle {}", self.announced),
+                format!(
+                    "more particles than the {} the header announces",
+                    self.announced
+                ),
+            ));
+        }
         self.bytes.clear();
         for p in chunk {
             for c in p.to_array() {
@@ -482,11 +512,14 @@ impl SpooledParticles {
         // resolved once the header is read, the files created then.
         let spool: std::cell::RefCell<Option<Spool>> = std::cell::RefCell::new(None);
         let layout: std::cell::RefCell<Vec<AttributeLayout>> = Default::default();
-        let select = &mut |declared: &[AttributeLayout]| -> Result<Vec<usize>> {
+        let select = &mut |count: usize, declared: &[AttributeLayout]| -> Result<Vec<usize>> {
             let names: Vec<&str> = declared.iter().map(|a| a.name.as_str()).collect();
             let chosen = resolve_selection(path, &names, selection)?;
-            *layout.borrow_mut() = chosen.iter().map(|&k| declared[k].clone()).collect();
-            *spool.borrow_mut() = Some(Spool::new(path, &dir, cancel, !chosen.is_empty())?);
+            let chosen_layout: Vec<AttributeLayout> =
+                chosen.iter().map(|&k| declared[k].clone()).collect();
+            let width = payload_width(&chosen_layout);
+            *layout.borrow_mut() = chosen_layout;
+            *spool.borrow_mut() = Some(Spool::new(path, &dir, cancel, count, width)?);
             Ok(chosen)
         };
         let sink = &mut |chunk: &[Vec3], rows: &[f32]| -> Result<()> {
@@ -502,10 +535,11 @@ impl SpooledParticles {
         let count = match format {
             ParticleFormat::Bgeo => Some(p::bgeo::stream(path, select, sink)?.0),
             ParticleFormat::Ply => p::ply::stream(path, select, sink)?.map(|(n, _)| n),
-            ParticleFormat::Vtk => {
-                select(&[])?;
-                p::stream_vtk_positions(path, &mut |chunk| sink(chunk, &[]))?
-            }
+            ParticleFormat::Vtk => p::vtk::stream_positions_counted(
+                path,
+                &mut |count| select(count, &[]).map(|_| ()),
+                &mut |chunk| sink(chunk, &[]),
+            )?,
             ParticleFormat::Xyz => unreachable!("mapped as it is"),
         };
         let Some(count) = count else {
@@ -542,7 +576,7 @@ impl SpooledParticles {
         let names: Vec<&str> = declared.iter().map(|a| a.name.as_str()).collect();
         let chosen = resolve_selection(path, &names, selection)?;
         let layout: Vec<AttributeLayout> = chosen.iter().map(|&k| declared[k].clone()).collect();
-        let mut spool = Spool::new(path, dir, cancel, !chosen.is_empty())?;
+        let mut spool = Spool::new(path, dir, cancel, scan.count(), payload_width(&layout))?;
         scan.stream_points(path, &mut |chunk, _| spool.positions(chunk))?;
         // Arrays in file order, each its own block.
         let mut in_file = chosen.clone();

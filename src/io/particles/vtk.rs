@@ -161,6 +161,16 @@ pub fn stream_positions(
     path: &Path,
     positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
 ) -> Result<Option<usize>> {
+    stream_positions_counted(path, &mut |_| Ok(()), positions)
+}
+
+/// [`stream_positions`], telling `announced` the header's point count before the first
+/// chunk.
+pub(crate) fn stream_positions_counted(
+    path: &Path,
+    announced: &mut dyn FnMut(usize) -> Result<()>,
+    positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
+) -> Result<Option<usize>> {
     use std::io::BufRead;
     let mut r = super::open_buffered(path)?;
     let mut offset = 0u64;
@@ -208,6 +218,7 @@ pub fn stream_positions(
             _ => return Ok(None),
         }
     };
+    announced(count)?;
     if ascii {
         super::stream_ascii_records(
             path,
