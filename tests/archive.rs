@@ -413,12 +413,19 @@ fn appends_resume_after_interruption_and_refuse_damage() {
             .is_err(),
         "duplicate frame numbers are refused"
     );
-    // Interrupted: dropped without finish, so there is no index.
+    // Dropped without finish (the caller failed after the refusal): the writer writes
+    // the index itself, of the frames before and the one appended.
     drop(w);
     let after = std::fs::read(&path).unwrap();
     assert_eq!(&after[..first_index], &before[..first_index]);
-    // A half-written record at the end, as a crash mid-append leaves it.
-    let mut crashed = after.clone();
+    let r = ArchiveReader::open(&path).unwrap();
+    assert!(!r.recovered_by_scan() && r.verify().is_clean());
+    assert_eq!(r.frames().len(), 3);
+    // A crash mid-append (the process killed): no index, and a half-written record at
+    // the end.
+    let n = after.len();
+    let index_offset = u64::from_le_bytes(after[n - 16..n - 8].try_into().unwrap()) as usize;
+    let mut crashed = after[..index_offset].to_vec();
     crashed.extend_from_slice(&after[first_index..first_index + 100]);
     std::fs::write(&path, &crashed).unwrap();
     let r = ArchiveReader::open(&path).unwrap();
