@@ -822,6 +822,9 @@ fn clean_archive(path: &Path, numbers: &[i64]) -> Decoded {
         .collect()
 }
 
+/// Makes a mesh file unreadable.
+type Damage = fn(&Path);
+
 /// `archive pack` over five meshes whose 3rd is corrupt or missing fails naming it, and
 /// leaves the archive (new or existing) clean, with every frame packed before the failure
 /// and the earlier frames unchanged.
@@ -862,7 +865,7 @@ fn a_failed_pack_leaves_a_clean_archive_with_every_complete_frame() {
     assert_eq!(code, Some(0), "{err}");
     let reference_frames = clean_archive(&reference, &[1, 2]);
 
-    let cases: &[(&str, fn(&Path))] = &[
+    let cases: &[(&str, Damage)] = &[
         ("corrupt", |p| {
             std::fs::write(p, "v 1 x 3\nf 1 2 3\n").unwrap()
         }),
