@@ -6,10 +6,10 @@
 //! Frames are self-delimiting records with CRC-32 checksums, appended after the earlier
 //! ones, which are never rewritten; a writer dropped without `finish` (an error, an
 //! interruption, a panic) writes the index of the complete frames itself, so a failed
-//! run leaves a consistent archive ([`ArchiveWriter`]). **Read:** [`ArchiveReader::open`] uses the index, or —
-//! after an interrupted append — scans the records and keeps every complete frame;
-//! [`ArchiveReader::read_frame`] is O(1) by frame number; [`ArchiveReader::verify`]
-//! decodes everything and names damaged frames.
+//! run leaves a consistent archive ([`ArchiveWriter`]). **Read:** [`ArchiveReader::open`]
+//! uses the index, or — after an interrupted append — scans the records and keeps every
+//! complete frame; [`ArchiveReader::read_frame`] is O(1) by frame number;
+//! [`ArchiveReader::verify`] decodes everything and names damaged frames.
 //!
 //! **Frames** ([`ArchiveFrame`]): the pipeline's fluid surface is stored as its Loop
 //! control mesh (the decimated mesh, a quarter of the triangles) and subdivided again on
