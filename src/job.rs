@@ -383,6 +383,8 @@ fn run_frames_unguarded(
     crate::io::tempfiles::remove_temp_leftovers(&temp);
     crate::io::tempfiles::remove_output_leftovers(plan.iter().map(|(_, out)| out.as_path()));
     // A .mseq output collects every frame: appended to an existing archive, else new.
+    // The frames it holds already:
+    let mut held: Vec<i64> = Vec::new();
     let mut archive = match plan.first() {
         Some((_, out)) if kind == OutputKind::Archive => {
             if let Some((_, other)) = plan.iter().find(|(_, o)| o != out) {
@@ -397,29 +399,42 @@ fn run_frames_unguarded(
             }
             // Frames the archive holds are refused before it is touched, unless they
             // are to be skipped.
-            if out.exists() && !job.skip_existing {
-                let numbers: Vec<i64> = plan.iter().map(|(f, _)| f.number).collect();
-                ArchiveReader::open(out)?.check_new_frames(&numbers)?;
+            if out.exists() {
+                let reader = ArchiveReader::open(out)?;
+                if !job.skip_existing {
+                    let numbers: Vec<i64> = plan.iter().map(|(f, _)| f.number).collect();
+                    reader.check_new_frames(&numbers)?;
+                }
+                held = reader.frames().iter().map(|f| f.number).collect();
             }
-            if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-            }
-            let archive_options = ArchiveOptions {
-                attribute_error_bound: job.archive_attribute_error_bound,
-                ..ArchiveOptions::new(job.archive_error_bound)
-            };
-            Some(if out.exists() {
-                ArchiveWriter::open_append(out, &archive_options)?
+            // With every frame skipped nothing is written: the archive is not opened for
+            // writing (nor its error bound compared).
+            let all_skipped =
+                job.skip_existing && plan.iter().all(|(f, _)| held.contains(&f.number));
+            if all_skipped {
+                None
             } else {
-                ArchiveWriter::create(out, &archive_options)?
-            })
+                if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+                    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+                }
+                let archive_options = ArchiveOptions {
+                    attribute_error_bound: job.archive_attribute_error_bound,
+                    ..ArchiveOptions::new(job.archive_error_bound)
+                };
+                Some(if out.exists() {
+                    ArchiveWriter::open_append(out, &archive_options)?
+                } else {
+                    ArchiveWriter::create(out, &archive_options)?
+                })
+            }
         }
         _ => None,
     };
-    let archived: Vec<i64> = archive
-        .as_ref()
-        .map(|a| a.frame_numbers())
-        .unwrap_or_default();
+    // The writer's list also holds frames whose record header is damaged (kept in place).
+    let archived: Vec<i64> = match &archive {
+        Some(a) => a.frame_numbers(),
+        None => held,
+    };
     // A pattern written into one .glb/.gltf: frames are kept and written together.
     let sequence_gltf = kind == OutputKind::AnimatedGltf;
     let mut collected: Vec<TriMesh> = Vec::new();
@@ -428,9 +443,9 @@ fn run_frames_unguarded(
         job.cancel.check()?;
         *current.borrow_mut() = Some(frame.input.clone());
         on_frame(i, frame);
-        let exists = match &archive {
-            Some(_) => archived.contains(&frame.number),
-            None => !sequence_gltf && output.exists(),
+        let exists = match kind {
+            OutputKind::Archive => archived.contains(&frame.number),
+            _ => !sequence_gltf && output.exists(),
         };
         let report = if job.skip_existing && exists {
             FrameReport {
@@ -450,6 +465,9 @@ fn run_frames_unguarded(
             }
             let sink = match archive.as_mut() {
                 Some(writer) => Sink::Archive(writer),
+                None if kind == OutputKind::Archive => {
+                    unreachable!("the archive is opened when a frame is to be written")
+                }
                 None if sequence_gltf => Sink::Collect(&mut collected),
                 None => Sink::File,
             };
@@ -466,6 +484,8 @@ fn run_frames_unguarded(
         on_done(&report);
         reports.push(report);
     }
+    // Without finish (an error or an interruption above), dropping the writer still
+    // writes the index of the frames appended (see `ArchiveWriter`).
     if let Some(writer) = archive {
         writer.finish()?;
     }

@@ -423,7 +423,10 @@ fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<()
                 ArchiveWriter::create(&output, &options)
             }
             .map_err(text)?;
+            // On an error or a Ctrl-C (checked between frames) the writer, dropped, still
+            // writes the index of the frames packed so far.
             for f in &frames {
+                cancel.check().map_err(text)?;
                 let mesh = read_mesh(&f.input).map_err(text)?;
                 w.append(f.number, &mesh).map_err(text)?;
             }

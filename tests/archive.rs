@@ -413,12 +413,19 @@ fn appends_resume_after_interruption_and_refuse_damage() {
             .is_err(),
         "duplicate frame numbers are refused"
     );
-    // Interrupted: dropped without finish, so there is no index.
+    // Dropped without finish (the caller failed after the refusal): the writer writes
+    // the index itself, of the frames before and the one appended.
     drop(w);
     let after = std::fs::read(&path).unwrap();
     assert_eq!(&after[..first_index], &before[..first_index]);
-    // A half-written record at the end, as a crash mid-append leaves it.
-    let mut crashed = after.clone();
+    let r = ArchiveReader::open(&path).unwrap();
+    assert!(!r.recovered_by_scan() && r.verify().is_clean());
+    assert_eq!(r.frames().len(), 3);
+    // A crash mid-append (the process killed): no index, and a half-written record at
+    // the end.
+    let n = after.len();
+    let index_offset = u64::from_le_bytes(after[n - 16..n - 8].try_into().unwrap()) as usize;
+    let mut crashed = after[..index_offset].to_vec();
     crashed.extend_from_slice(&after[first_index..first_index + 100]);
     std::fs::write(&path, &crashed).unwrap();
     let r = ArchiveReader::open(&path).unwrap();
@@ -1394,4 +1401,221 @@ fn a_new_archive_is_written_only_when_its_first_frame_is() {
         .unwrap();
     let r = ArchiveReader::open(&path).unwrap();
     assert!(r.frames().is_empty() && r.verify().is_clean());
+}
+
+// ---------------------------------------------------------------------------------------
+// Failures partway through appending: the archive stays consistent.
+
+/// A small mesh of its own per frame number.
+fn small_mesh(k: i64) -> TriMesh {
+    let mut m = icosphere(2, 1.0 + 0.1 * k as f32);
+    for p in &mut m.positions {
+        p.x += k as f32;
+    }
+    m
+}
+
+/// Every frame of the archive at `path`, decoded.
+fn decoded(path: &Path) -> Vec<(i64, Vec<glam::Vec3>, Vec<[u32; 3]>)> {
+    let r = ArchiveReader::open(path).unwrap();
+    r.frames()
+        .iter()
+        .map(|f| {
+            let m = r.read_frame(f.number).unwrap();
+            (f.number, m.positions, m.triangles)
+        })
+        .collect()
+}
+
+/// The archive verifies clean through its index and holds exactly `numbers`.
+fn assert_clean(path: &Path, numbers: &[i64]) {
+    let r = ArchiveReader::open(path).unwrap();
+    let v = r.verify();
+    assert!(v.is_clean(), "{v:?}");
+    assert!(!r.recovered_by_scan(), "the index was written");
+    assert_eq!(v.good, numbers);
+}
+
+/// Where the index of a finished archive starts (from its trailer).
+fn index_offset(bytes: &[u8]) -> usize {
+    let n = bytes.len();
+    u64::from_le_bytes(bytes[n - 16..n - 8].try_into().unwrap()) as usize
+}
+
+static NO_SPHERES: std::sync::LazyLock<SphereInstances> =
+    std::sync::LazyLock::new(SphereInstances::default);
+
+fn refused_frame(mesh: &TriMesh) -> ArchiveFrame<'_> {
+    // More Loop steps than an archive stores: refused before anything is written.
+    ArchiveFrame {
+        fluid: mesh,
+        subdivision_levels: 5,
+        spheres: &NO_SPHERES,
+    }
+}
+
+#[test]
+fn a_writer_dropped_after_an_error_keeps_every_complete_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let options = ArchiveOptions::new(1e-3);
+    // What finish writes for frames 0 and 1.
+    let reference = dir.path().join("reference.mseq");
+    let mut w = ArchiveWriter::create(&reference, &options).unwrap();
+    for k in [0, 1] {
+        w.append(k, &small_mesh(k)).unwrap();
+    }
+    w.finish().unwrap();
+
+    // A new archive: frames 0 and 1, then a duplicate number refused, the caller gives
+    // up (as `archive pack` returns its error) and drops the writer.
+    let path = dir.path().join("run.mseq");
+    let mut w = ArchiveWriter::create(&path, &options).unwrap();
+    for k in [0, 1] {
+        w.append(k, &small_mesh(k)).unwrap();
+    }
+    assert!(w.append(1, &small_mesh(1)).is_err(), "duplicate refused");
+    drop(w);
+    assert_clean(&path, &[0, 1]);
+    assert_eq!(
+        std::fs::read(&path).unwrap(),
+        std::fs::read(&reference).unwrap(),
+        "the same archive finish writes"
+    );
+    let before = std::fs::read(&path).unwrap();
+    let frames_before = decoded(&path);
+
+    // Opened for appending and dropped without writing: nothing changes.
+    drop(ArchiveWriter::open_append(&path, &options).unwrap());
+    assert_eq!(std::fs::read(&path).unwrap(), before, "untouched");
+
+    // An existing archive: a frame appended, one refused, the writer goes on after the
+    // refusal, then another refusal and the writer is dropped.
+    let mut w = ArchiveWriter::open_append(&path, &options).unwrap();
+    w.append(2, &small_mesh(2)).unwrap();
+    let mesh = small_mesh(3);
+    assert!(w.append_frame(3, &refused_frame(&mesh)).is_err());
+    w.append(4, &small_mesh(4)).unwrap();
+    assert!(w.append(0, &small_mesh(0)).is_err(), "duplicate refused");
+    drop(w);
+    assert_clean(&path, &[0, 1, 2, 4]);
+    let after = std::fs::read(&path).unwrap();
+    let old_index = index_offset(&before);
+    assert_eq!(&after[..old_index], &before[..old_index], "earlier records");
+    let frames_after = decoded(&path);
+    assert_eq!(
+        &frames_after[..2],
+        &frames_before[..],
+        "earlier frames decode the same"
+    );
+    // The frames appended before the failure are complete: they decode to what a
+    // finished archive of the same meshes holds.
+    let full = dir.path().join("full.mseq");
+    let mut w = ArchiveWriter::create(&full, &options).unwrap();
+    for k in [0, 1, 2, 4] {
+        w.append(k, &small_mesh(k)).unwrap();
+    }
+    w.finish().unwrap();
+    assert_eq!(frames_after, decoded(&full));
+    assert_eq!(after, std::fs::read(&full).unwrap());
+}
+
+#[test]
+fn a_panic_while_appending_leaves_a_clean_archive() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mseq");
+    let options = ArchiveOptions::new(1e-3);
+    let mut w = ArchiveWriter::create(&path, &options).unwrap();
+    w.append(0, &small_mesh(0)).unwrap();
+    w.finish().unwrap();
+    let before = decoded(&path);
+    let unwound = std::panic::catch_unwind(|| {
+        let mut w = ArchiveWriter::open_append(&path, &options).unwrap();
+        w.append(1, &small_mesh(1)).unwrap();
+        panic!("the caller fails after frame 1");
+    });
+    assert!(unwound.is_err());
+    assert_clean(&path, &[0, 1]);
+    assert_eq!(&decoded(&path)[..1], &before[..]);
+}
+
+#[test]
+fn a_new_archive_whose_first_frame_fails_does_not_exist() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mseq");
+    let mut w = ArchiveWriter::create(&path, &ArchiveOptions::new(1e-3)).unwrap();
+    let mesh = small_mesh(0);
+    assert!(w.append_frame(0, &refused_frame(&mesh)).is_err());
+    assert!(!path.exists());
+    drop(w);
+    assert!(!path.exists(), "no archive without a frame");
+    // Nor after a panic before the first frame.
+    let unwound = std::panic::catch_unwind(|| {
+        let _w = ArchiveWriter::create(&path, &ArchiveOptions::new(1e-3)).unwrap();
+        panic!("before the first frame");
+    });
+    assert!(unwound.is_err());
+    assert!(!path.exists());
+}
+
+/// `reconstruct … -o run.mseq` through the library, interrupted (its cancel token set,
+/// as Ctrl-C does) when frame `cancel_at` starts.
+fn run_into_archive(
+    input: &str,
+    archive: &Path,
+    cancel_at: Option<i64>,
+) -> meniscus::Result<Vec<meniscus::job::FrameReport>> {
+    use meniscus::job::{plan_frames, run_frames, JobOptions};
+    let cancel = meniscus::CancelToken::new();
+    let job = JobOptions {
+        input_format: None,
+        write: Default::default(),
+        skip_existing: true,
+        archive_error_bound: 0.00025,
+        archive_attribute_error_bound: 1e-3,
+        fps: 24.0,
+        attributes: Default::default(),
+        cancel: cancel.clone(),
+    };
+    let plan = plan_frames(input, archive.to_str().unwrap(), None, None)?;
+    run_frames(
+        &plan,
+        &ReconstructOptions::new(0.025),
+        &job,
+        &mut |_, frame| {
+            if Some(frame.number) == cancel_at {
+                cancel.cancel();
+            }
+        },
+        &mut |_| {},
+        &mut |_| {},
+    )
+}
+
+#[test]
+fn an_interrupted_run_leaves_a_clean_archive() {
+    let dir = tempfile::tempdir().unwrap();
+    let sphere = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("datasets/analytic/sphere.xyz");
+    for k in 1..=4 {
+        std::fs::copy(&sphere, dir.path().join(format!("f_{k}.xyz"))).unwrap();
+    }
+    let input = format!("{}/f_{{}}.xyz", dir.path().display());
+    let archive = dir.path().join("run.mseq");
+    // A new archive, interrupted at frame 3.
+    let err = run_into_archive(&input, &archive, Some(3)).unwrap_err();
+    assert!(matches!(err, meniscus::Error::Interrupted), "{err}");
+    assert_clean(&archive, &[1, 2]);
+    let before = decoded(&archive);
+    // The re-run skips them, appends frame 3 and is interrupted at frame 4.
+    let err = run_into_archive(&input, &archive, Some(4)).unwrap_err();
+    assert!(matches!(err, meniscus::Error::Interrupted), "{err}");
+    assert_clean(&archive, &[1, 2, 3]);
+    assert_eq!(&decoded(&archive)[..2], &before[..]);
+    // A new archive interrupted at its first frame is not left behind.
+    let fresh = dir.path().join("fresh.mseq");
+    assert!(run_into_archive(&input, &fresh, Some(1)).is_err());
+    assert!(!fresh.exists());
+    // The last run completes it.
+    let reports = run_into_archive(&input, &archive, None).unwrap();
+    assert_eq!(reports.iter().filter(|r| r.skipped).count(), 3);
+    assert_clean(&archive, &[1, 2, 3, 4]);
 }

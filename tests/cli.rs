@@ -789,3 +789,187 @@ fn a_failed_run_leaves_no_empty_archive() {
     );
     assert!(!archive.exists(), "no archive is left behind");
 }
+
+/// Writes frame `k` of a small mesh sequence as OBJ text.
+fn write_obj(path: &Path, k: i64) {
+    let m = meniscus::isolated::icosphere(1, 1.0 + 0.1 * k as f32);
+    let mut text = String::new();
+    for p in &m.positions {
+        text.push_str(&format!("v {} {} {}\n", p.x + k as f32, p.y, p.z));
+    }
+    for t in &m.triangles {
+        text.push_str(&format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1));
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+/// Every frame of an archive, decoded: (number, positions, triangles).
+type Decoded = Vec<(i64, Vec<glam::Vec3>, Vec<[u32; 3]>)>;
+
+/// Opens the archive, checks that it verifies clean through its index and holds exactly
+/// `numbers`, and decodes it.
+fn clean_archive(path: &Path, numbers: &[i64]) -> Decoded {
+    let r = meniscus::archive::ArchiveReader::open(path).unwrap();
+    let v = r.verify();
+    assert!(v.is_clean() && !r.recovered_by_scan(), "{v:?}");
+    assert_eq!(v.good, numbers);
+    r.frames()
+        .iter()
+        .map(|f| {
+            let m = r.read_frame(f.number).unwrap();
+            (f.number, m.positions, m.triangles)
+        })
+        .collect()
+}
+
+/// Makes a mesh file unreadable.
+type Damage = fn(&Path);
+
+/// `archive pack` over five meshes whose 3rd is corrupt or missing fails naming it, and
+/// leaves the archive (new or existing) clean, with every frame packed before the failure
+/// and the earlier frames unchanged.
+#[test]
+fn a_failed_pack_leaves_a_clean_archive_with_every_complete_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pack = |pattern: &str, archive: &Path| {
+        let out = meniscus()
+            .args(["archive", "pack", pattern, "--error-bound", "0.001", "-o"])
+            .arg(archive)
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    // An archive that exists already, with frames 10 and 11.
+    std::fs::create_dir(d.join("old")).unwrap();
+    for k in [10, 11] {
+        write_obj(&d.join(format!("old/g_{k}.obj")), k);
+    }
+    let existing = d.join("existing.mseq");
+    let (code, err) = pack(&format!("{}/old/g_{{}}.obj", d.display()), &existing);
+    assert_eq!(code, Some(0), "{err}");
+    let old_frames = clean_archive(&existing, &[10, 11]);
+    let old_bytes = std::fs::read(&existing).unwrap();
+    let n = old_bytes.len();
+    let old_index = u64::from_le_bytes(old_bytes[n - 16..n - 8].try_into().unwrap()) as usize;
+    // What frames 1 and 2 pack to.
+    std::fs::create_dir(d.join("two")).unwrap();
+    for k in [1, 2] {
+        write_obj(&d.join(format!("two/f_{k}.obj")), k);
+    }
+    let reference = d.join("reference.mseq");
+    let (code, err) = pack(&format!("{}/two/f_{{}}.obj", d.display()), &reference);
+    assert_eq!(code, Some(0), "{err}");
+    let reference_frames = clean_archive(&reference, &[1, 2]);
+
+    let cases: &[(&str, Damage)] = &[
+        ("corrupt", |p| {
+            std::fs::write(p, "v 1 x 3\nf 1 2 3\n").unwrap()
+        }),
+        #[cfg(unix)]
+        ("missing", |p| {
+            // Listed by the pattern, gone when read.
+            std::os::unix::fs::symlink(p.with_extension("gone"), p).unwrap()
+        }),
+    ];
+    for (what, damage) in cases {
+        let seq = d.join(what);
+        std::fs::create_dir(&seq).unwrap();
+        for k in [1, 2, 4, 5] {
+            write_obj(&seq.join(format!("f_{k}.obj")), k);
+        }
+        let third = seq.join("f_3.obj");
+        damage(&third);
+        let pattern = format!("{}/f_{{}}.obj", seq.display());
+
+        // Into a new archive.
+        let archive = d.join(format!("{what}-new.mseq"));
+        let (code, err) = pack(&pattern, &archive);
+        assert_eq!(code, Some(1), "{what}: {err}");
+        assert!(err.contains("f_3.obj"), "{what}: names the file: {err}");
+        let frames = clean_archive(&archive, &[1, 2]);
+        assert_eq!(frames, reference_frames, "{what}");
+        assert_eq!(
+            std::fs::read(&archive).unwrap(),
+            std::fs::read(&reference).unwrap(),
+            "{what}: the archive a pack of frames 1 and 2 writes"
+        );
+        let verify = meniscus()
+            .args(["archive", "verify"])
+            .arg(&archive)
+            .output();
+        assert!(verify.unwrap().status.success(), "{what}: archive verify");
+
+        // Into an existing archive.
+        let archive = d.join(format!("{what}-existing.mseq"));
+        std::fs::copy(&existing, &archive).unwrap();
+        let (code, err) = pack(&pattern, &archive);
+        assert_eq!(code, Some(1), "{what}: {err}");
+        assert!(err.contains("f_3.obj"), "{what}: names the file: {err}");
+        let frames = clean_archive(&archive, &[10, 11, 1, 2]);
+        assert_eq!(frames[..2], old_frames[..], "{what}: earlier frames");
+        assert_eq!(frames[2..], reference_frames[..], "{what}: appended frames");
+        let bytes = std::fs::read(&archive).unwrap();
+        assert_eq!(bytes[..old_index], old_bytes[..old_index], "{what}");
+
+        // A new archive whose first mesh fails is not left behind.
+        let first = d.join(format!("{what}-first"));
+        std::fs::create_dir(&first).unwrap();
+        damage(&first.join("f_3.obj"));
+        write_obj(&first.join("f_4.obj"), 4);
+        let archive = d.join(format!("{what}-first.mseq"));
+        let (code, err) = pack(&format!("{}/f_{{}}.obj", first.display()), &archive);
+        assert_eq!(code, Some(1), "{what}: {err}");
+        assert!(!archive.exists(), "{what}: no archive without a frame");
+    }
+}
+
+/// `reconstruct -o run.mseq` whose 3rd frame fails leaves the archive clean with the
+/// frames before it; the re-run with --skip-existing continues after them.
+#[test]
+fn a_failed_reconstruct_into_an_archive_keeps_the_frames_before() {
+    let dir = tempfile::tempdir().unwrap();
+    let sphere = dataset("analytic/sphere.xyz");
+    for k in [1, 2, 3, 4] {
+        std::fs::copy(&sphere, dir.path().join(format!("f_{k}.xyz"))).unwrap();
+    }
+    std::fs::write(dir.path().join("f_3.xyz"), [0u8; 13]).unwrap();
+    let input = format!("{}/f_{{}}.xyz", dir.path().display());
+    let archive = dir.path().join("run.mseq");
+    let reconstruct = |extra: &[&str]| {
+        let out = meniscus()
+            .args(["reconstruct", &input, "-r", "0.025", "-q", "-o"])
+            .arg(&archive)
+            .args(extra)
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, err) = reconstruct(&[]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("f_3.xyz"), "{err}");
+    let before = clean_archive(&archive, &[1, 2]);
+    std::fs::copy(&sphere, dir.path().join("f_3.xyz")).unwrap();
+    let (code, err) = reconstruct(&["--skip-existing"]);
+    assert_eq!(code, Some(0), "{err}");
+    let after = clean_archive(&archive, &[1, 2, 3, 4]);
+    assert_eq!(after[..2], before[..]);
+    // Every frame held: nothing is opened for writing, so another error bound does not
+    // matter and the archive is untouched.
+    let bytes = std::fs::read(&archive).unwrap();
+    let (code, err) = reconstruct(&["--skip-existing", "--error-bound", "0.001"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert_eq!(std::fs::read(&archive).unwrap(), bytes, "untouched");
+    // With a frame to write, the bound is compared and refused.
+    std::fs::copy(&sphere, dir.path().join("f_5.xyz")).unwrap();
+    let (code, err) = reconstruct(&["--skip-existing", "--error-bound", "0.001"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("0.001") && err.contains("0.00025"), "{err}");
+    assert_eq!(std::fs::read(&archive).unwrap(), bytes, "untouched");
+}

@@ -4,10 +4,12 @@
 //! **Write:** [`ArchiveWriter::create`] or [`ArchiveWriter::open_append`], then
 //! [`ArchiveWriter::append`] per frame and [`ArchiveWriter::finish`] (writes the index).
 //! Frames are self-delimiting records with CRC-32 checksums, appended after the earlier
-//! ones, which are never rewritten. **Read:** [`ArchiveReader::open`] uses the index, or —
-//! after an interrupted append — scans the records and keeps every complete frame;
-//! [`ArchiveReader::read_frame`] is O(1) by frame number; [`ArchiveReader::verify`]
-//! decodes everything and names damaged frames.
+//! ones, which are never rewritten; a writer dropped without `finish` (an error, an
+//! interruption, a panic) writes the index of the complete frames itself, so a failed
+//! run leaves a consistent archive ([`ArchiveWriter`]). **Read:** [`ArchiveReader::open`]
+//! uses the index, or — after an interrupted append — scans the records and keeps every
+//! complete frame; [`ArchiveReader::read_frame`] is O(1) by frame number;
+//! [`ArchiveReader::verify`] decodes everything and names damaged frames.
 //!
 //! **Frames** ([`ArchiveFrame`]): the pipeline's fluid surface is stored as its Loop
 //! control mesh (the decimated mesh, a quarter of the triangles) and subdivided again on
@@ -829,6 +831,21 @@ impl ArchiveReader {
 }
 
 /// Appends frames to an archive.
+///
+/// **Failures leave a consistent archive.** An error returned by
+/// [`append`](Self::append) or [`append_frame`](Self::append_frame) (a frame refused, an
+/// encoding or write error) leaves the writer as it was before that call: the frame is
+/// not in the archive, every frame appended before it stays, and appending may go on.
+/// A writer dropped without [`finish`](Self::finish) — an error returned by the caller,
+/// an interruption ([`Error::Interrupted`]), a panic unwinding — finishes the archive
+/// itself: it cuts any partial record at the end and writes the index of every complete
+/// frame (those the archive held before and those appended), so the archive verifies
+/// clean and a re-run with `--skip-existing` continues after its last frame. Errors
+/// there cannot be returned; if the index cannot be written the frames are still
+/// recovered by the reader's scan (and the next append writes it). A writer that wrote
+/// nothing changes nothing: an archive opened for appending is left byte for byte as it
+/// was, and a new archive whose first frame never arrived does not exist. Only a process
+/// killed outright (`SIGKILL`, a power cut, a second Ctrl-C) leaves the index missing.
 pub struct ArchiveWriter {
     path: PathBuf,
     version: u32,
@@ -837,7 +854,19 @@ pub struct ArchiveWriter {
     file: Option<File>,
     options: ArchiveOptions,
     index: Vec<(i64, u64)>,
+    /// End of the last complete record: where the next record (or the index) goes.
     end: u64,
+    /// The file must be cut at `end` and its position set there before anything is
+    /// written: at first (an appended archive's old index or cut-off record; done lazily,
+    /// so that a writer that writes nothing changes nothing) and after a failed write.
+    reset: bool,
+    /// The file on disk has been changed (created, cut or written), so it needs an index.
+    touched: bool,
+    /// This writer made the file (a new archive): removed again when it is dropped
+    /// before a frame is complete.
+    created: bool,
+    /// `finish` ran (successfully or not): dropping does nothing more.
+    closed: bool,
 }
 
 impl ArchiveWriter {
@@ -858,12 +887,18 @@ impl ArchiveWriter {
             options: options.clone(),
             index: Vec::new(),
             end: HEADER_LEN,
+            reset: false,
+            touched: false,
+            created: false,
+            closed: false,
         })
     }
 
-    /// Opens an archive for appending. Earlier frames are kept as they are; an
-    /// incomplete last record left by an interrupted append is cut off (that frame was
-    /// never complete). An archive with a damaged frame is refused.
+    /// Opens an archive for appending. Earlier frames are kept as they are; the old
+    /// index, and an incomplete last record left by an interrupted append (that frame
+    /// was never complete), are cut off when the first frame is written (or by
+    /// `finish`): until then the file is not changed. An archive with a damaged frame is
+    /// refused.
     pub fn open_append(path: &Path, options: &ArchiveOptions) -> Result<ArchiveWriter> {
         let input = path.display().to_string();
         crate::error::guard(move || input, || Self::open_append_unguarded(path, options))
@@ -919,9 +954,6 @@ impl ArchiveWriter {
             .write(true)
             .open(path)
             .map_err(|e| Error::io(path, e))?;
-        // Drop the old index (and any cut-off record): everything before stays.
-        file.set_len(reader.data_end)
-            .map_err(|e| Error::io(path, e))?;
         // Records whose header is damaged keep their index entries, so that they stay
         // reported by frame number.
         let mut index: Vec<(i64, u64)> =
@@ -937,34 +969,61 @@ impl ArchiveWriter {
         if let Some(f) = reader.frames.first() {
             options.error_bound = f.step / 2.0;
         }
-        let mut writer = ArchiveWriter {
+        // The old index (and any cut-off record) is cut when the first frame is
+        // written: everything before it stays.
+        Ok(ArchiveWriter {
             path: path.to_path_buf(),
             version: reader.version,
             file: Some(file),
             options,
             index,
             end: reader.data_end,
-        };
-        let end = writer.end;
-        writer
-            .file()?
-            .seek(SeekFrom::Start(end))
-            .map_err(|e| Error::io(path, e))?;
-        Ok(writer)
+            reset: true,
+            touched: false,
+            created: false,
+            closed: false,
+        })
     }
 
-    /// The open file; a new archive's is created here, with its header.
+    /// The open file, positioned at `end` with nothing after it; a new archive's is
+    /// created here, with its header.
     fn file(&mut self) -> Result<&mut File> {
         if self.file.is_none() {
-            let mut file = File::create(&self.path).map_err(|e| Error::io(&self.path, e))?;
             let mut header = [0u8; HEADER_LEN as usize];
             header[0..8].copy_from_slice(MAGIC);
             header[8..12].copy_from_slice(&self.version.to_le_bytes());
-            file.write_all(&header)
-                .map_err(|e| Error::io(&self.path, e))?;
+            let mut file = File::create(&self.path).map_err(|e| Error::io(&self.path, e))?;
+            if let Err(e) = file.write_all(&header) {
+                // No archive rather than half a header.
+                drop(file);
+                let _ = std::fs::remove_file(&self.path);
+                return Err(Error::io(&self.path, e));
+            }
             self.file = Some(file);
+            self.touched = true;
+            self.created = true;
         }
-        Ok(self.file.as_mut().expect("created above"))
+        let file = self.file.as_mut().expect("created above");
+        if self.reset {
+            self.touched = true;
+            file.set_len(self.end)
+                .and_then(|_| file.seek(SeekFrom::Start(self.end)))
+                .map_err(|e| Error::io(&self.path, e))?;
+            self.reset = false;
+        }
+        Ok(file)
+    }
+
+    /// Writes `parts` at `end`; on failure the next write (or the index) cuts what was
+    /// written of them.
+    fn write_at_end(&mut self, parts: &[&[u8]]) -> Result<()> {
+        let file = self.file()?;
+        let written = parts.iter().try_for_each(|p| file.write_all(p));
+        if let Err(e) = written {
+            self.reset = true;
+            return Err(Error::io(&self.path, e));
+        }
+        Ok(())
     }
 
     /// Frame numbers already in the archive.
@@ -1046,18 +1105,15 @@ impl ArchiveWriter {
                     "a version-1 archive cannot store attributes (write a new archive)",
                 ));
             }
-            if self.version < ATTRIBUTES_VERSION {
-                // A file not yet written gets the version in its header when it is.
-                if let Some(file) = self.file.as_mut() {
-                    file.seek(SeekFrom::Start(8))
-                        .and_then(|_| file.write_all(&ATTRIBUTES_VERSION.to_le_bytes()))
-                        .and_then(|_| file.seek(SeekFrom::Start(self.end)))
-                        .map_err(|e| Error::io(&self.path, e))?;
-                }
-                self.version = ATTRIBUTES_VERSION;
-            }
         }
-        let encoded = if self.version == 1 {
+        // The archive's version once this frame is in it: the header is rewritten only
+        // when the frame is encoded, so that a frame that fails changes nothing.
+        let version = if with_attributes {
+            self.version.max(ATTRIBUTES_VERSION)
+        } else {
+            self.version
+        };
+        let encoded = if version == 1 {
             // An old archive keeps its format: one plain mesh per frame.
             let mut merged = frame.fluid.clone();
             crate::subdivision::subdivide(
@@ -1083,10 +1139,27 @@ impl ArchiveWriter {
                 step,
                 self.options.attribute_error_bound,
                 level,
-                self.version >= 3,
+                version >= 3,
             )
         }
         .map_err(|e| Error::io(&self.path, e))?;
+        if version != self.version {
+            // A file not yet written gets the version in its header when it is.
+            if self.file.is_none() {
+                self.version = version;
+            }
+            let end = self.end;
+            let file = self.file()?;
+            let rewritten = file
+                .seek(SeekFrom::Start(8))
+                .and_then(|_| file.write_all(&version.to_le_bytes()))
+                .and_then(|_| file.seek(SeekFrom::Start(end)));
+            if let Err(e) = rewritten {
+                self.reset = true;
+                return Err(Error::io(&self.path, e));
+            }
+            self.version = version;
+        }
         let payload = encoded.payload;
         let header = RecordHeader {
             number,
@@ -1097,23 +1170,26 @@ impl ArchiveWriter {
             payload_crc: crc32fast::hash(&payload),
             flags: encoded.flags,
         };
-        let file = self.file()?;
-        file.write_all(&header.to_bytes())
-            .and_then(|_| file.write_all(&payload))
-            .map_err(|e| Error::io(&self.path, e))?;
+        self.write_at_end(&[&header.to_bytes(), &payload])?;
         self.index.push((number, self.end));
         let bytes = (RECORD_HEADER_LEN + payload.len()) as u64;
         self.end += bytes;
         Ok(bytes)
     }
 
-    /// Writes the index and trailer and closes the archive.
-    pub fn finish(self) -> Result<()> {
+    /// Writes the index and trailer and closes the archive (a new archive without
+    /// frames is written too). A writer dropped without `finish` does the same, as far
+    /// as it can, but cannot report an error: see [`ArchiveWriter`].
+    pub fn finish(mut self) -> Result<()> {
         let input = self.path.display().to_string();
-        crate::error::guard(move || input, || self.finish_unguarded())
+        crate::error::guard(move || input, || self.close())
     }
 
-    fn finish_unguarded(mut self) -> Result<()> {
+    /// Cuts anything after the last complete record and writes the index and trailer
+    /// there; once only.
+    fn close(&mut self) -> Result<()> {
+        self.closed = true;
+        self.reset = true;
         let mut index = Vec::with_capacity(12 + 16 * self.index.len() + 20);
         index.extend_from_slice(INDEX_MAGIC);
         index.extend_from_slice(&(self.index.len() as u64).to_le_bytes());
@@ -1125,10 +1201,30 @@ impl ArchiveWriter {
         index.extend_from_slice(&crc.to_le_bytes());
         index.extend_from_slice(&self.end.to_le_bytes());
         index.extend_from_slice(TRAILER_MAGIC);
-        let file = self.file()?;
-        file.write_all(&index)
-            .and_then(|_| file.sync_all())
+        self.write_at_end(&[&index])?;
+        self.file()?
+            .sync_all()
             .map_err(|e| Error::io(&self.path, e))
+    }
+}
+
+impl Drop for ArchiveWriter {
+    /// Finishes an archive left unfinished by an error, an interruption or a panic: see
+    /// [`ArchiveWriter`].
+    fn drop(&mut self) {
+        if self.closed || !self.touched {
+            // Finished, or nothing written: the file is as it was (a new archive does
+            // not exist).
+            return;
+        }
+        if self.created && self.index.is_empty() {
+            // A new archive whose first frame was never complete: no archive.
+            self.file = None;
+            let _ = std::fs::remove_file(&self.path);
+            return;
+        }
+        // Errors cannot be reported here; the frames are still found by a scan.
+        let _ = self.close();
     }
 }
 
