@@ -39,15 +39,18 @@ pub enum Error {
         message: String,
     },
     /// An option with a value that cannot work.
-    #[error("invalid option {option}: {message}")]
+    #[error("invalid {option}: {message}")]
     InvalidOption {
-        /// Option name as the user sees it (`--particle-radius`).
+        /// The option's name in the library: the field of its options struct
+        /// (`particle_radius`; two names with a `/` when their combination is wrong;
+        /// `input`, `output` for the paths a job is given). The command line shows it as
+        /// its flag (`--particle-radius`).
         option: &'static str,
         /// Why the value is rejected.
         message: String,
     },
     /// The spill file of a tiled run could not be created, written or read.
-    #[error("spill file {path}: {source} (choose another directory with --temp-dir)")]
+    #[error("spill file {path}: {source} (another temporary directory may have room)")]
     Spill {
         /// The temporary directory or file.
         path: PathBuf,

@@ -240,7 +240,7 @@ pub fn plan_frames(
 ) -> Result<Vec<(Frame, PathBuf)>> {
     if sequence::is_pattern(output) && is_archive(Path::new(output)) {
         return Err(Error::InvalidOption {
-            option: "--output",
+            option: "output",
             message: format!(
                 "{output:?}: one .mseq archive holds the whole sequence; name it without {{}}"
             ),
@@ -257,7 +257,7 @@ pub fn plan_frames(
         (false, false) => {
             if start.is_some() || end.is_some() {
                 return Err(Error::InvalidOption {
-                    option: "--start/--end",
+                    option: "start/end",
                     message: "a frame range needs a {} pattern in INPUT and OUTPUT".into(),
                 });
             }
@@ -275,13 +275,13 @@ pub fn plan_frames(
             .map(|f| (f, PathBuf::from(output)))
             .collect()),
         (true, false) => Err(Error::InvalidOption {
-            option: "--output",
+            option: "output",
             message: format!(
                 "INPUT {input:?} is a sequence pattern, so OUTPUT {output:?} needs a {{}} too (or is one .mseq, .glb or .gltf for the whole sequence)"
             ),
         }),
         (false, true) => Err(Error::InvalidOption {
-            option: "--output",
+            option: "output",
             message: format!("OUTPUT {output:?} has a {{}} but INPUT {input:?} is a single file"),
         }),
     }
@@ -389,7 +389,7 @@ fn run_frames_unguarded(
         Some((_, out)) if kind == OutputKind::Archive => {
             if let Some((_, other)) = plan.iter().find(|(_, o)| o != out) {
                 return Err(Error::InvalidOption {
-                    option: "--output",
+                    option: "output",
                     message: format!(
                         "one .mseq archive holds the whole sequence, not {} and {}",
                         out.display(),

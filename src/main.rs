@@ -225,10 +225,25 @@ impl Failure {
 impl From<meniscus::Error> for Failure {
     fn from(e: meniscus::Error) -> Self {
         match e {
-            meniscus::Error::InvalidOption { .. } => Failure::Usage(e.to_string()),
+            meniscus::Error::InvalidOption { option, message } => {
+                Failure::option(&flag(option), message)
+            }
             e => Failure::Run(e.to_string()),
         }
     }
+}
+
+/// The flag of a library option name (`particle_radius` → `--particle-radius`,
+/// `t_low/t_high` → `--t-low/--t-high`, `input` → `INPUT`).
+fn flag(option: &str) -> String {
+    option
+        .split('/')
+        .map(|name| match name {
+            "input" => "INPUT".to_string(),
+            name => format!("--{}", name.replace('_', "-")),
+        })
+        .collect::<Vec<_>>()
+        .join("/")
 }
 
 fn main() -> ExitCode {

@@ -39,7 +39,7 @@ pub fn substitute(pattern: &str, label: &str) -> PathBuf {
 /// its file name.
 pub fn frames(pattern: &str, start: Option<i64>, end: Option<i64>) -> Result<Vec<Frame>> {
     let invalid = |message: String| Error::InvalidOption {
-        option: "INPUT",
+        option: "input",
         message,
     };
     if pattern.matches(PLACEHOLDER).count() != 1 {
@@ -62,7 +62,7 @@ pub fn frames(pattern: &str, start: Option<i64>, end: Option<i64>) -> Result<Vec
     if let (Some(s), Some(e)) = (start, end) {
         if s > e {
             return Err(Error::InvalidOption {
-                option: "--start/--end",
+                option: "start/end",
                 message: format!("start {s} is after end {e}"),
             });
         }

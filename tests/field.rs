@@ -258,26 +258,28 @@ fn field_does_not_depend_on_thread_count() {
 fn bad_options_are_rejected_with_the_option_name() {
     let pts = vec![Vec3::ZERO, Vec3::X];
     for (options, name) in [
-        (FieldOptions::new(0.0), "--particle-radius"),
-        (FieldOptions::new(-1.0), "--particle-radius"),
-        (FieldOptions::new(f32::NAN), "--particle-radius"),
+        (FieldOptions::new(0.0), "invalid particle_radius"),
+        (FieldOptions::new(-1.0), "invalid particle_radius"),
+        (FieldOptions::new(f32::NAN), "invalid particle_radius"),
         (
             FieldOptions {
                 cell_size: 0.0,
                 ..FieldOptions::new(0.1)
             },
-            "--cell-size",
+            "invalid cell_size",
         ),
         (
             FieldOptions {
                 influence_radius: -2.0,
                 ..FieldOptions::new(0.1)
             },
-            "--influence-radius",
+            "invalid influence_radius",
         ),
     ] {
         let err = compute_field(&pts, &options).unwrap_err().to_string();
         assert!(err.contains(name), "{err}");
+        // The library names its own option, never a command-line flag.
+        assert!(!err.contains("--"), "{err}");
     }
 }
 

@@ -113,8 +113,8 @@ impl ArchiveOptions {
 
     fn check(&self) -> Result<()> {
         for (option, value) in [
-            ("--error-bound", self.error_bound),
-            ("--attribute-error-bound", self.attribute_error_bound),
+            ("error_bound", self.error_bound),
+            ("attribute_error_bound", self.attribute_error_bound),
         ] {
             if !(value.is_finite() && value > 0.0 && 2.0 * value <= MAX_STEP) {
                 return Err(Error::InvalidOption {
@@ -757,7 +757,7 @@ impl ArchiveReader {
         let single = numbers.is_some_and(|n| n.len() == 1);
         if !single && !crate::sequence::is_pattern(output_pattern) {
             return Err(Error::InvalidOption {
-                option: "--output",
+                option: "output",
                 message: format!(
                     "{output_pattern:?} needs a {{}} for the frame number to hold several frames"
                 ),

@@ -110,13 +110,13 @@ impl FieldOptions {
         let positive = |v: f32| v.is_finite() && v > 0.0;
         if !positive(self.particle_radius) {
             return Err(Error::InvalidOption {
-                option: "--particle-radius",
+                option: "particle_radius",
                 message: format!("must be a finite number > 0, got {}", self.particle_radius),
             });
         }
         if !positive(self.influence_radius) {
             return Err(Error::InvalidOption {
-                option: "--influence-radius",
+                option: "influence_radius",
                 message: format!(
                     "must be > 0 (multiples of r), got {}",
                     self.influence_radius
@@ -125,14 +125,14 @@ impl FieldOptions {
         }
         if !positive(self.cell_size) {
             return Err(Error::InvalidOption {
-                option: "--cell-size",
+                option: "cell_size",
                 message: format!("must be > 0 (multiples of r), got {}", self.cell_size),
             });
         }
         // Either one may be the one the user set: the pair is named.
         if self.influence_radius / self.cell_size > 64.0 {
             return Err(Error::InvalidOption {
-                option: "--influence-radius/--cell-size",
+                option: "influence_radius/cell_size",
                 message: format!(
                     "the influence radius R = {} r spans more than 64 cells of {} r: a smaller R or larger cells",
                     self.influence_radius, self.cell_size
@@ -144,7 +144,7 @@ impl FieldOptions {
             && self.particle_coverage <= 6.0 * self.cell_size)
         {
             return Err(Error::InvalidOption {
-                option: "--particle-coverage",
+                option: "particle_coverage",
                 message: format!(
                     "must be between 0 and 6 cells ({} r), got {}",
                     6.0 * self.cell_size,
@@ -154,7 +154,7 @@ impl FieldOptions {
         }
         if !(self.iso_offset.is_finite() && self.iso_offset.abs() <= 1.0) {
             return Err(Error::InvalidOption {
-                option: "--iso-offset",
+                option: "iso_offset",
                 message: format!(
                     "must be between −1 and 1 (multiples of r), got {}",
                     self.iso_offset
@@ -163,7 +163,7 @@ impl FieldOptions {
         }
         if !(self.t_low.is_finite() && self.t_high.is_finite() && self.t_low < self.t_high) {
             return Err(Error::InvalidOption {
-                option: "--t-low/--t-high",
+                option: "t_low/t_high",
                 message: format!(
                     "need t_low < t_high, got {} and {}",
                     self.t_low, self.t_high

@@ -100,7 +100,7 @@ pub(crate) fn plan_tiles<S: ParticleSource + ?Sized>(
     let particles = source.particle_count();
     if particles > u32::MAX as usize {
         return Err(Error::InvalidOption {
-            option: "INPUT",
+            option: "input",
             message: format!("{particles} particles: at most 2^32 − 1 per frame"),
         });
     }

@@ -52,7 +52,7 @@ pub enum ParticleFormat {
 }
 
 const SUPPORTED: &str =
-    "supported: .xyz, .vtk, .ply, .bgeo, .bgeo.gz (or --input-format xyz|vtk|ply|bgeo)";
+    "supported: .xyz, .vtk, .ply, .bgeo, .bgeo.gz (or name the format: xyz, vtk, ply, bgeo)";
 
 impl ParticleFormat {
     /// The format named by a file's extension.
