@@ -10,7 +10,7 @@ use crate::io::particles::{read_particles, ParticleFormat};
 use crate::io::particles::{MappedXyz, Particles, SpooledParticles};
 use crate::mesh::TriMesh;
 use crate::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
-use crate::sequence::{self, Frame};
+use crate::sequence::{self, Frame, FrameChoice};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -230,13 +230,13 @@ pub fn reconstruct_file(
     })
 }
 
-/// The frames of a job: a single file, or every frame of a `{}` pattern. The output must
-/// be a pattern exactly when the input is.
+/// The frames of a job: a single file, or the frames of a `{}` pattern that `choice`
+/// takes ([`sequence::choose`]). The output must be a pattern exactly when the input is
+/// (or one `.mseq`, `.glb` or `.gltf` for the whole sequence).
 pub fn plan_frames(
     input: &str,
     output: &str,
-    start: Option<i64>,
-    end: Option<i64>,
+    choice: &FrameChoice,
 ) -> Result<Vec<(Frame, PathBuf)>> {
     if sequence::is_pattern(output) && is_archive(Path::new(output)) {
         return Err(Error::InvalidOption {
@@ -247,7 +247,7 @@ pub fn plan_frames(
         });
     }
     match (sequence::is_pattern(input), sequence::is_pattern(output)) {
-        (true, true) => Ok(sequence::frames(input, start, end)?
+        (true, true) => Ok(sequence::choose(input, choice)?
             .into_iter()
             .map(|f| {
                 let out = sequence::substitute(output, &f.label);
@@ -255,10 +255,19 @@ pub fn plan_frames(
             })
             .collect()),
         (false, false) => {
-            if start.is_some() || end.is_some() {
+            if choice.is_given() {
+                let option = if choice.frames.is_some() {
+                    "--frames"
+                } else if choice.shard.is_some() && choice.start.is_none() && choice.end.is_none() {
+                    "--shard"
+                } else {
+                    "--start/--end"
+                };
                 return Err(Error::InvalidOption {
-                    option: "--start/--end",
-                    message: "a frame range needs a {} pattern in INPUT and OUTPUT".into(),
+                    option,
+                    message: format!(
+                        "choosing frames needs a {{}} pattern in INPUT and OUTPUT; {input:?} is a single file"
+                    ),
                 });
             }
             Ok(vec![(
@@ -270,7 +279,7 @@ pub fn plan_frames(
                 PathBuf::from(output),
             )])
         }
-        (true, false) if is_archive(Path::new(output)) || is_gltf(Path::new(output)) => Ok(sequence::frames(input, start, end)?
+        (true, false) if is_archive(Path::new(output)) || is_gltf(Path::new(output)) => Ok(sequence::choose(input, choice)?
             .into_iter()
             .map(|f| (f, PathBuf::from(output)))
             .collect()),

@@ -93,7 +93,33 @@ enum ArchiveCommand {
         /// Last frame (inclusive).
         #[arg(long, allow_negative_numbers = true)]
         end: Option<i64>,
+        #[command(flatten)]
+        farm: FarmArgs,
     },
+}
+
+/// Frame selection as render farms give it.
+#[derive(Args)]
+struct FarmArgs {
+    /// Frames to take, instead of --start/--end: `1-100`, `1-100:2` (every second),
+    /// `1,5,7-20`; sorted, each once. Every selected frame needs a file.
+    #[arg(long, value_name = "LIST", allow_hyphen_values = true, conflicts_with_all = ["start", "end"])]
+    frames: Option<meniscus::sequence::FrameSelection>,
+    /// Take every N-th frame of the selection starting at the I-th (0-based): one of N
+    /// machines' share, round-robin.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<meniscus::sequence::Shard>,
+}
+
+impl FarmArgs {
+    fn choice(&self, start: Option<i64>, end: Option<i64>) -> meniscus::sequence::FrameChoice {
+        meniscus::sequence::FrameChoice {
+            start,
+            end,
+            frames: self.frames.clone(),
+            shard: self.shard,
+        }
+    }
 }
 
 #[derive(Args)]
@@ -172,6 +198,8 @@ struct ReconstructArgs {
     /// Last frame of a sequence (inclusive).
     #[arg(long, allow_negative_numbers = true)]
     end: Option<i64>,
+    #[command(flatten)]
+    farm: FarmArgs,
     /// Skip frames whose output already exists, or that the `.mseq` output holds (the
     /// others are appended).
     #[arg(long)]
@@ -397,8 +425,10 @@ fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<()
             attribute_error_bound,
             start,
             end,
+            farm,
         } => {
-            let frames = meniscus::sequence::frames(&input, start, end).map_err(text)?;
+            let frames =
+                meniscus::sequence::choose(&input, &farm.choice(start, end)).map_err(text)?;
             let options = ArchiveOptions {
                 attribute_error_bound,
                 ..ArchiveOptions::new(error_bound)
@@ -520,7 +550,11 @@ fn reconstruct(
         None => AttributeSelection::default(),
     };
     let error_bound = args.error_bound.unwrap_or(ARCHIVE_ERROR * radius(args));
-    let plan = plan_frames(&args.input, &args.output, args.start, args.end)?;
+    let plan = plan_frames(
+        &args.input,
+        &args.output,
+        &args.farm.choice(args.start, args.end),
+    )?;
     check_outputs(&plan).map_err(|e| Failure::Usage(e.to_string()))?;
     for warning in ineffective_options(args, given, &plan, &attributes) {
         eprintln!("warning: {warning}");
