@@ -54,6 +54,24 @@ pub struct JobOptions {
     pub attributes: AttributeSelection,
     /// Stops the job between tiles, stages and frames ([`crate::Error::Interrupted`]).
     pub cancel: CancelToken,
+    /// A frame that fails is reported (status [`FrameStatus::Failed`]) and the run goes
+    /// on with the next; otherwise the first failure stops the run. Either way a `.mseq`
+    /// output keeps the frames done (a failed frame is not appended) and is finished with
+    /// its index. An interruption, and an I/O error on the archive itself (which leaves
+    /// it unfit for more frames), always stop the run.
+    pub keep_going: bool,
+}
+
+/// What became of a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FrameStatus {
+    /// Reconstructed and written.
+    Done,
+    /// Not reconstructed: its output existed ([`JobOptions::skip_existing`]).
+    Skipped,
+    /// Reading, reconstructing or writing it failed ([`FrameReport::error`] says why).
+    Failed,
 }
 
 /// Where a reconstructed frame goes.
@@ -75,8 +93,14 @@ pub struct FrameReport {
     pub input: PathBuf,
     /// Output file.
     pub output: PathBuf,
+    /// Done, skipped or failed.
+    pub status: FrameStatus,
     /// True when the frame was skipped because its output existed.
     pub skipped: bool,
+    /// Why the frame failed (status [`FrameStatus::Failed`]).
+    pub error: Option<String>,
+    /// Wall time of the whole frame (read, reconstruct, write), seconds.
+    pub seconds: f64,
     /// Reading time, seconds.
     pub read_seconds: f64,
     /// Pipeline figures (stages, counts).
@@ -87,6 +111,34 @@ pub struct FrameReport {
     pub output_bytes: u64,
     /// Attributes the output format could not hold (an OBJ file holds none).
     pub dropped_attributes: Vec<String>,
+}
+
+impl FrameReport {
+    /// A frame that was not reconstructed: skipped, or failed with `error`.
+    fn not_done(frame: &Frame, output: &Path, error: Option<&Error>, seconds: f64) -> Self {
+        FrameReport {
+            frame: frame.number,
+            input: frame.input.clone(),
+            output: output.to_path_buf(),
+            status: match error {
+                Some(_) => FrameStatus::Failed,
+                None => FrameStatus::Skipped,
+            },
+            skipped: error.is_none(),
+            error: error.map(|e| e.to_string()),
+            seconds,
+            read_seconds: 0.0,
+            reconstruction: ReconstructionStats::default(),
+            write_seconds: 0.0,
+            output_bytes: 0,
+            dropped_attributes: Vec::new(),
+        }
+    }
+
+    /// Triangles written: fluid surface plus isolated-particle spheres.
+    pub fn triangles(&self) -> usize {
+        self.reconstruction.fluid_triangles + self.reconstruction.sphere_triangles
+    }
 }
 
 /// Reads `input`, reconstructs it and sends it to `sink`: the file `output`, an archive
@@ -103,7 +155,8 @@ pub fn reconstruct_file(
     on_stage: &mut dyn FnMut(&str),
 ) -> Result<FrameReport> {
     on_stage("read");
-    let clock = Instant::now();
+    let started = Instant::now();
+    let clock = started;
     if input.is_dir() {
         return Err(Error::io(
             input,
@@ -221,7 +274,10 @@ pub fn reconstruct_file(
         frame: frame_number,
         input: input.to_path_buf(),
         output: output.to_path_buf(),
+        status: FrameStatus::Done,
         skipped: false,
+        error: None,
+        seconds: started.elapsed().as_secs_f64(),
         read_seconds,
         reconstruction,
         write_seconds,
@@ -338,8 +394,11 @@ pub fn check_outputs(plan: &[(Frame, PathBuf)]) -> Result<()> {
     Ok(())
 }
 
-/// Runs every planned frame in order; stops at the first error. `on_frame` is called
-/// before each frame with its index in the plan, `on_stage` at each phase.
+/// Runs every planned frame in order. `on_frame` is called before each frame with its
+/// index in the plan, `on_stage` at each phase, `on_done` after each frame: done,
+/// skipped or failed. A failed frame stops the run with its error unless
+/// [`JobOptions::keep_going`]; then the reports say which frames failed (the caller
+/// decides the exit status).
 pub fn run_frames(
     plan: &[(Frame, PathBuf)],
     options: &ReconstructOptions,
@@ -399,44 +458,71 @@ pub fn run_frames(
             Some(_) => archived.contains(&frame.number),
             None => !sequence_gltf && output.exists(),
         };
-        let report = if job.skip_existing && exists {
-            FrameReport {
-                frame: frame.number,
-                input: frame.input.clone(),
-                output: output.clone(),
-                skipped: true,
-                read_seconds: 0.0,
-                reconstruction: ReconstructionStats::default(),
-                write_seconds: 0.0,
-                output_bytes: 0,
-                dropped_attributes: Vec::new(),
+        if job.skip_existing && exists {
+            let report = FrameReport::not_done(frame, output, None, 0.0);
+            on_done(&report);
+            reports.push(report);
+            continue;
+        }
+        let started = Instant::now();
+        let result = output
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .map_or(Ok(()), |dir| {
+                std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))
+            })
+            .and_then(|()| {
+                let sink = match archive.as_mut() {
+                    Some(writer) => Sink::Archive(writer),
+                    None if sequence_gltf => Sink::Collect(&mut collected),
+                    None => Sink::File,
+                };
+                reconstruct_file(
+                    &frame.input,
+                    output,
+                    options,
+                    job,
+                    sink,
+                    frame.number,
+                    on_stage,
+                )
+            });
+        match result {
+            Ok(report) => {
+                on_done(&report);
+                reports.push(report);
             }
-        } else {
-            if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+            Err(Error::Interrupted) => return Err(Error::Interrupted),
+            Err(e) => {
+                let report =
+                    FrameReport::not_done(frame, output, Some(&e), started.elapsed().as_secs_f64());
+                on_done(&report);
+                // A write that failed part-way may have left part of a record: the
+                // archive takes no more frames, and no index is written over it (the
+                // next open scans the complete records).
+                let archive_broken = matches!(&e, Error::Io { path, .. } if kind == OutputKind::Archive && *path == plan[0].1);
+                if archive_broken {
+                    return Err(e);
+                }
+                if !job.keep_going {
+                    if let Some(writer) = archive.take() {
+                        if writer.is_started() {
+                            writer.finish()?;
+                        }
+                    }
+                    return Err(e);
+                }
+                reports.push(report);
             }
-            let sink = match archive.as_mut() {
-                Some(writer) => Sink::Archive(writer),
-                None if sequence_gltf => Sink::Collect(&mut collected),
-                None => Sink::File,
-            };
-            reconstruct_file(
-                &frame.input,
-                output,
-                options,
-                job,
-                sink,
-                frame.number,
-                on_stage,
-            )?
-        };
-        on_done(&report);
-        reports.push(report);
+        }
     }
     if let Some(writer) = archive {
-        writer.finish()?;
+        // A new archive none of whose frames was done is not left behind, empty.
+        if writer.is_started() {
+            writer.finish()?;
+        }
     }
-    if sequence_gltf {
+    if sequence_gltf && reports.iter().any(|r| r.status == FrameStatus::Done) {
         let (_, out) = &plan[0];
         let written = write_sequence_gltf(out, &collected, job.fps, &job.write)?;
         if let Some(last) = reports.last_mut() {

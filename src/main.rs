@@ -11,8 +11,8 @@ use meniscus::io::mesh::read_mesh;
 use meniscus::io::mesh::MeshWriteOptions;
 use meniscus::io::particles::ParticleFormat;
 use meniscus::job::{
-    check_outputs, output_kind, peak_rss_bytes, plan_frames, run_frames, FrameReport, JobOptions,
-    OutputKind,
+    check_outputs, output_kind, peak_rss_bytes, plan_frames, run_frames, FrameReport, FrameStatus,
+    JobOptions, OutputKind,
 };
 use meniscus::pipeline::ReconstructOptions;
 
@@ -204,6 +204,14 @@ struct ReconstructArgs {
     /// others are appended).
     #[arg(long)]
     skip_existing: bool,
+    /// Print one JSON line per finished frame on stdout (frame, input, output, status
+    /// done/skipped/failed, triangles, seconds, peak_rss_bytes, error), for farm managers.
+    #[arg(long)]
+    json_progress: bool,
+    /// Report a frame that fails and go on with the next (default: stop at the first).
+    /// The exit status is 1 when any frame failed; a `.mseq` output keeps the others.
+    #[arg(long)]
+    keep_going: bool,
     /// Worker threads (default: all cores). Output does not depend on it.
     #[arg(long)]
     threads: Option<usize>,
@@ -577,6 +585,7 @@ fn reconstruct(
         fps: args.fps,
         attributes,
         cancel: cancel.clone(),
+        keep_going: args.keep_going,
     };
     let bar = if args.quiet {
         ProgressBar::hidden()
@@ -602,6 +611,14 @@ fn reconstruct(
         &mut |stage| bar.set_message(stage.to_string()),
         &mut |report: &FrameReport| {
             bar.inc(1);
+            if args.json_progress {
+                println!("{}", progress_line(report));
+            }
+            if args.keep_going {
+                if let Some(error) = &report.error {
+                    bar.suspend(|| eprintln!("error: frame {}: {error}", report.frame));
+                }
+            }
             if !warned && !report.dropped_attributes.is_empty() {
                 warned = true;
                 bar.suspend(|| {
@@ -628,6 +645,10 @@ fn reconstruct(
     if !args.quiet {
         summarize(&reports, total);
     }
+    let failed: Vec<&FrameReport> = reports
+        .iter()
+        .filter(|r| r.status == FrameStatus::Failed)
+        .collect();
     if let Some(path) = &args.stats {
         let json = serde_json::json!({
             "options": options,
@@ -638,7 +659,34 @@ fn reconstruct(
         let text = serde_json::to_string_pretty(&json).map_err(|e| Failure::Run(e.to_string()))?;
         std::fs::write(path, text).map_err(|e| Failure::from(meniscus::Error::io(path, e)))?;
     }
+    if !failed.is_empty() {
+        let numbers: Vec<String> = failed.iter().map(|r| r.frame.to_string()).collect();
+        return Err(Failure::Run(format!(
+            "{} of {} frames failed (frame{} {}); the others were written",
+            failed.len(),
+            reports.len(),
+            if failed.len() == 1 { "" } else { "s" },
+            numbers.join(", ")
+        )));
+    }
     Ok(())
+}
+
+/// One line of `--json-progress`: what a farm manager needs of a finished frame.
+fn progress_line(report: &FrameReport) -> serde_json::Value {
+    let mut line = serde_json::json!({
+        "frame": report.frame,
+        "input": report.input,
+        "output": report.output,
+        "status": report.status,
+        "triangles": (report.status == FrameStatus::Done).then(|| report.triangles()),
+        "seconds": report.seconds,
+        "peak_rss_bytes": peak_rss_bytes(),
+    });
+    if let Some(error) = &report.error {
+        line["error"] = error.as_str().into();
+    }
+    line
 }
 
 /// The particle radius as the user wrote it (0.025, not the f32's 0.02500000037…), so
@@ -739,17 +787,23 @@ fn ineffective_options(
 }
 
 fn summarize(reports: &[FrameReport], total: f64) {
-    let done: Vec<&FrameReport> = reports.iter().filter(|r| !r.skipped).collect();
-    let skipped = reports.len() - done.len();
-    let triangles: usize = done
-        .iter()
-        .map(|r| r.reconstruction.fluid_triangles + r.reconstruction.sphere_triangles)
-        .sum();
+    let count = |s| reports.iter().filter(|r| r.status == s).count();
+    let (done, skipped, failed) = (
+        count(FrameStatus::Done),
+        count(FrameStatus::Skipped),
+        count(FrameStatus::Failed),
+    );
+    let triangles: usize = reports.iter().map(|r| r.triangles()).sum();
     eprintln!(
-        "{} frame(s) reconstructed{} in {:.2} s, {} triangles written, peak memory {}",
-        done.len(),
+        "{} frame(s) reconstructed{}{} in {:.2} s, {} triangles written, peak memory {}",
+        done,
         if skipped > 0 {
             format!(", {skipped} skipped")
+        } else {
+            String::new()
+        },
+        if failed > 0 {
+            format!(", {failed} failed")
         } else {
             String::new()
         },

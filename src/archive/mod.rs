@@ -926,6 +926,11 @@ impl ArchiveWriter {
         Ok(self.file.as_mut().expect("created above"))
     }
 
+    /// False for a new archive before its first frame (its file is not yet written).
+    pub fn is_started(&self) -> bool {
+        self.file.is_some()
+    }
+
     /// Frame numbers already in the archive.
     pub fn frame_numbers(&self) -> Vec<i64> {
         self.index.iter().map(|e| e.0).collect()
