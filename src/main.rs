@@ -73,6 +73,16 @@ enum ArchiveCommand {
         #[arg(short, long)]
         output: String,
     },
+    /// Join archives (one per farm task, say) into one, frames in increasing order,
+    /// records copied as they are: the same bytes as one run writing every frame.
+    Merge {
+        /// The archives to join (each frame in exactly one, one error bound for all).
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// The merged archive; written whole under a temporary name, then renamed.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
     /// Pack existing mesh files (`{}` pattern; PLY, OBJ, glTF) into an archive.
     Pack {
         /// Mesh files, a pattern with `{}` for the frame number.
@@ -425,6 +435,16 @@ fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<()
             if frame.is_none() {
                 eprintln!("{} frame(s) written", written.len());
             }
+        }
+        ArchiveCommand::Merge { inputs, output } => {
+            let stats = meniscus::archive::merge(&inputs, &output).map_err(text)?;
+            eprintln!(
+                "{} frame(s) from {} archive(s) merged into {} ({} bytes)",
+                stats.frames,
+                stats.inputs,
+                output.display(),
+                stats.bytes
+            );
         }
         ArchiveCommand::Pack {
             input,

@@ -1008,3 +1008,73 @@ fn frames_and_shards_on_the_command_line() {
     );
     assert!(!dir.path().join("bad").exists());
 }
+
+#[test]
+fn shards_merged_are_byte_identical_to_one_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let pattern = dataset("dambreak_small/ParticleData_Fluid_{}.xyz");
+    let pattern = pattern.to_str().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let reconstruct = |output: &str, extra: &[&str]| {
+        let mut args = vec![
+            "reconstruct",
+            pattern,
+            "-r",
+            "0.012",
+            "-o",
+            output,
+            "--frames",
+            "1-25:8",
+            "-q",
+        ];
+        args.extend(extra);
+        let (code, _, stderr) = run_full(&args);
+        assert_eq!(code, Some(0), "{args:?}: {stderr}");
+    };
+    reconstruct(&p("one.mseq"), &["--threads", "1"]);
+    reconstruct(&p("shard0.mseq"), &["--shard", "0/2", "--threads", "2"]);
+    reconstruct(&p("shard1.mseq"), &["--shard", "1/2", "--threads", "2"]);
+    let frames = |path: &str| -> Vec<i64> {
+        meniscus::archive::ArchiveReader::open(Path::new(path))
+            .unwrap()
+            .frames()
+            .iter()
+            .map(|f| f.number)
+            .collect()
+    };
+    assert_eq!(frames(&p("one.mseq")), [1, 9, 17, 25]);
+    assert_eq!(frames(&p("shard0.mseq")), [1, 17]);
+    assert_eq!(frames(&p("shard1.mseq")), [9, 25]);
+    let (code, _, stderr) = run_full(&[
+        "archive",
+        "merge",
+        &p("shard1.mseq"),
+        &p("shard0.mseq"),
+        "-o",
+        &p("all.mseq"),
+    ]);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(
+        stderr.contains("4 frame(s) from 2 archive(s) merged"),
+        "{stderr}"
+    );
+    assert!(
+        std::fs::read(p("all.mseq")).unwrap() == std::fs::read(p("one.mseq")).unwrap(),
+        "the merged shards are the bytes of the single run"
+    );
+    // A frame in two inputs: exit 1, both files named, no output.
+    let (code, _, stderr) = run_full(&[
+        "archive",
+        "merge",
+        &p("shard0.mseq"),
+        &p("one.mseq"),
+        "-o",
+        &p("twice.mseq"),
+    ]);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(
+        stderr.contains("frame 1 is in both") && stderr.contains("shard0.mseq"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("twice.mseq").exists());
+}

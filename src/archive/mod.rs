@@ -40,10 +40,12 @@ mod attributes;
 mod codec;
 mod frame;
 mod fused;
+mod merge;
 mod parts;
 
 pub use attributes::{AttributeInfo, AttributeTarget};
 pub use frame::ArchiveFrame;
+pub use merge::{merge, MergeStats};
 
 use crate::error::{Error, Result};
 use crate::mesh::{SphereInstances, Surface, TriMesh};
@@ -1068,22 +1070,28 @@ impl ArchiveWriter {
 
     /// Writes the index and trailer and closes the archive.
     pub fn finish(mut self) -> Result<()> {
-        let mut index = Vec::with_capacity(12 + 16 * self.index.len() + 20);
-        index.extend_from_slice(INDEX_MAGIC);
-        index.extend_from_slice(&(self.index.len() as u64).to_le_bytes());
-        for (n, offset) in &self.index {
-            index.extend_from_slice(&n.to_le_bytes());
-            index.extend_from_slice(&offset.to_le_bytes());
-        }
-        let crc = crc32fast::hash(&index);
-        index.extend_from_slice(&crc.to_le_bytes());
-        index.extend_from_slice(&self.end.to_le_bytes());
-        index.extend_from_slice(TRAILER_MAGIC);
+        let index = index_bytes(&self.index, self.end);
         let file = self.file()?;
         file.write_all(&index)
             .and_then(|_| file.sync_all())
             .map_err(|e| Error::io(&self.path, e))
     }
+}
+
+/// The index of `entries` (frame, record offset) at offset `end`, and the trailer.
+fn index_bytes(entries: &[(i64, u64)], end: u64) -> Vec<u8> {
+    let mut index = Vec::with_capacity(12 + 16 * entries.len() + 20);
+    index.extend_from_slice(INDEX_MAGIC);
+    index.extend_from_slice(&(entries.len() as u64).to_le_bytes());
+    for (n, offset) in entries {
+        index.extend_from_slice(&n.to_le_bytes());
+        index.extend_from_slice(&offset.to_le_bytes());
+    }
+    let crc = crc32fast::hash(&index);
+    index.extend_from_slice(&crc.to_le_bytes());
+    index.extend_from_slice(&end.to_le_bytes());
+    index.extend_from_slice(TRAILER_MAGIC);
+    index
 }
 
 #[cfg(test)]
