@@ -1073,7 +1073,7 @@ fn shards_merged_are_byte_identical_to_one_run() {
     ]);
     assert_eq!(code, Some(1), "{stderr}");
     assert!(
-        stderr.contains("frame 1 is in both") && stderr.contains("shard0.mseq"),
+        stderr.contains("one.mseq: frame 1: also in") && stderr.contains("shard0.mseq"),
         "{stderr}"
     );
     assert!(!dir.path().join("twice.mseq").exists());

@@ -135,13 +135,11 @@ pub fn merge(inputs: &[PathBuf], output: &Path) -> Result<MergeStats> {
     if let Some(w) = entries.windows(2).find(|w| w[0].number == w[1].number) {
         let (a, b) = (&inputs[w[0].input], &inputs[w[1].input]);
         let message = if a == b {
-            format!("frame {} is in {} twice", w[0].number, a.display())
+            "given twice: the archive is named twice among the inputs".to_string()
         } else {
             format!(
-                "frame {} is in both {} and {}",
-                w[0].number,
-                a.display(),
-                b.display()
+                "also in {}; a frame may come from one input only",
+                a.display()
             )
         };
         return Err(archive_error(b, Some(w[1].number), message));
