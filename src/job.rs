@@ -1,5 +1,7 @@
 //! File-level jobs: read a particle file, reconstruct, write the surface; and whole
-//! sequences of frames. The CLI is a thin layer over [`run_frames`].
+//! sequences of frames, chosen by [`crate::sequence::FrameChoice`] (a range, a
+//! farm-style selection, a shard), each reported as done, skipped or failed
+//! ([`FrameReport`]). The CLI is a thin layer over [`run_frames`].
 
 use crate::archive::{ArchiveFrame, ArchiveOptions, ArchiveReader, ArchiveWriter};
 use crate::attributes::{select_attributes, AttributeSelection};

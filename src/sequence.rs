@@ -5,6 +5,9 @@
 //! (`7`, `10`); without one, the pattern's directory is scanned and every file whose name
 //! matches (with the number written in any way, such as `0007`) is taken, in increasing
 //! frame order. The output pattern receives the number exactly as the input file wrote it.
+//!
+//! Render farms name frames as [`FrameSelection`]s (`1-100:2,7`) and split them among
+//! machines as [`Shard`]s (`--shard I/N`, round-robin); [`choose`] applies both.
 
 use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};
