@@ -797,6 +797,12 @@ fn ineffective_options(
             "--skip-existing has no effect: {output:?} holds the whole sequence and is written whole"
         ));
     }
+    let single_file = plan.len() == 1 && plan[0].0.label.is_empty();
+    if given("keep_going") && single_file {
+        warnings.push(
+            "--keep-going has no effect: a single file has no other frames to go on with".into(),
+        );
+    }
     if given("decimate_error") && matches!(args.decimate.as_str(), "off" | "none" | "0") {
         warnings.push(format!(
             "--decimate-error has no effect: decimation is off (--decimate {})",

@@ -610,6 +610,12 @@ fn new_user_errors_name_the_real_cause() {
             vec!["error:"],
         ),
         (
+            vec!["reconstruct", sphere, "-q", "--keep-going", "-o", &out],
+            0,
+            vec!["warning: --keep-going has no effect: a single file"],
+            vec!["error:"],
+        ),
+        (
             vec![
                 "reconstruct",
                 sphere,
