@@ -1513,3 +1513,28 @@ fn merging_refuses_conflicts_and_damage_and_leaves_no_output() {
         names_in(dir.path())
     );
 }
+
+#[test]
+fn merging_a_version_4_input_gives_what_one_writer_gives() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n);
+    let plain = bumpy(2, 0.3);
+    let carried = with_attributes(bumpy(2, 0.4));
+    let write = |path: &Path, frames: &[(i64, &TriMesh)]| {
+        let mut w = ArchiveWriter::create(path, &ArchiveOptions::new(1e-4)).unwrap();
+        for (n, mesh) in frames {
+            w.append(*n, mesh).unwrap();
+        }
+        w.finish().unwrap();
+    };
+    write(&p("plain.mseq"), &[(0, &plain), (2, &plain)]);
+    write(&p("attrs.mseq"), &[(1, &carried)]);
+    // One writer: version 3 until frame 1 makes it version 4.
+    write(&p("one.mseq"), &[(0, &plain), (1, &carried), (2, &plain)]);
+    assert_eq!(ArchiveReader::open(&p("plain.mseq")).unwrap().version(), 3);
+    meniscus::archive::merge(&[p("plain.mseq"), p("attrs.mseq")], &p("merged.mseq")).unwrap();
+    let merged = ArchiveReader::open(&p("merged.mseq")).unwrap();
+    assert_eq!(merged.version(), 4);
+    assert!(merged.verify().is_clean());
+    assert!(std::fs::read(p("merged.mseq")).unwrap() == std::fs::read(p("one.mseq")).unwrap());
+}

@@ -48,8 +48,10 @@ impl Drop for TempFile {
 /// archive (one plain mesh per frame) together with later versions, and an `output`
 /// that exists and is none of the inputs. The output is written to a temporary file next
 /// to it and renamed into place when complete: on any error it is not created (nor an
-/// existing one changed). The archive's version is the highest of the inputs' (an input
-/// with attributes makes it version 4, as appending such a frame would).
+/// existing one changed). The archive's version is the highest of the inputs' (a
+/// version-4 input, whose frames carry attributes, makes it version 4, as appending such
+/// a frame would). Inputs are opened one at a time (each read whole, as
+/// [`ArchiveReader::open`] does), then their records are read one by one.
 pub fn merge(inputs: &[PathBuf], output: &Path) -> Result<MergeStats> {
     if inputs.is_empty() {
         return Err(Error::io(
@@ -103,7 +105,7 @@ pub fn merge(inputs: &[PathBuf], output: &Path) -> Result<MergeStats> {
             Some((v, first)) => version = Some((v.max(reader.version), first)),
             None => version = Some((reader.version, k)),
         }
-        for (f, info) in reader.frames.iter().enumerate() {
+        for info in &reader.frames {
             match step {
                 Some((s, first, number)) if s != info.step => {
                     return Err(archive_error(
@@ -125,7 +127,7 @@ pub fn merge(inputs: &[PathBuf], output: &Path) -> Result<MergeStats> {
                 input: k,
                 offset: info.offset,
                 len: RECORD_HEADER_LEN
-                    + usize::try_from(reader.frames[f].payload_bytes)
+                    + usize::try_from(info.payload_bytes)
                         .map_err(|_| archive_error(path, Some(info.number), "record too large"))?,
             });
         }
