@@ -1,5 +1,7 @@
 //! File-level jobs: read a particle file, reconstruct, write the surface; and whole
-//! sequences of frames. The CLI is a thin layer over [`run_frames`].
+//! sequences of frames, chosen by [`crate::sequence::FrameChoice`] (a range, a
+//! farm-style selection, a shard), each reported as done, skipped or failed
+//! ([`FrameReport`]). The CLI is a thin layer over [`run_frames`].
 
 use crate::archive::{ArchiveFrame, ArchiveOptions, ArchiveReader, ArchiveWriter};
 use crate::attributes::{select_attributes, AttributeSelection};
@@ -10,7 +12,7 @@ use crate::io::particles::{read_particles, ParticleFormat};
 use crate::io::particles::{MappedXyz, Particles, SpooledParticles};
 use crate::mesh::TriMesh;
 use crate::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
-use crate::sequence::{self, Frame};
+use crate::sequence::{self, Frame, FrameChoice};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -54,6 +56,24 @@ pub struct JobOptions {
     pub attributes: AttributeSelection,
     /// Stops the job between tiles, stages and frames ([`crate::Error::Interrupted`]).
     pub cancel: CancelToken,
+    /// A frame that fails is reported (status [`FrameStatus::Failed`]) and the run goes
+    /// on with the next; otherwise the first failure stops the run. Either way a `.mseq`
+    /// output keeps the frames done (a failed frame is not appended) and is finished with
+    /// its index. An interruption, and an I/O error on the archive itself (which leaves
+    /// it unfit for more frames), always stop the run.
+    pub keep_going: bool,
+}
+
+/// What became of a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FrameStatus {
+    /// Reconstructed and written.
+    Done,
+    /// Not reconstructed: its output existed ([`JobOptions::skip_existing`]).
+    Skipped,
+    /// Reading, reconstructing or writing it failed ([`FrameReport::error`] says why).
+    Failed,
 }
 
 /// Where a reconstructed frame goes.
@@ -75,8 +95,14 @@ pub struct FrameReport {
     pub input: PathBuf,
     /// Output file.
     pub output: PathBuf,
+    /// Done, skipped or failed.
+    pub status: FrameStatus,
     /// True when the frame was skipped because its output existed.
     pub skipped: bool,
+    /// Why the frame failed (status [`FrameStatus::Failed`]).
+    pub error: Option<String>,
+    /// Wall time of the whole frame (read, reconstruct, write), seconds.
+    pub seconds: f64,
     /// Reading time, seconds.
     pub read_seconds: f64,
     /// Pipeline figures (stages, counts).
@@ -87,6 +113,34 @@ pub struct FrameReport {
     pub output_bytes: u64,
     /// Attributes the output format could not hold (an OBJ file holds none).
     pub dropped_attributes: Vec<String>,
+}
+
+impl FrameReport {
+    /// A frame that was not reconstructed: skipped, or failed with `error`.
+    fn not_done(frame: &Frame, output: &Path, error: Option<&Error>, seconds: f64) -> Self {
+        FrameReport {
+            frame: frame.number,
+            input: frame.input.clone(),
+            output: output.to_path_buf(),
+            status: match error {
+                Some(_) => FrameStatus::Failed,
+                None => FrameStatus::Skipped,
+            },
+            skipped: error.is_none(),
+            error: error.map(|e| e.to_string()),
+            seconds,
+            read_seconds: 0.0,
+            reconstruction: ReconstructionStats::default(),
+            write_seconds: 0.0,
+            output_bytes: 0,
+            dropped_attributes: Vec::new(),
+        }
+    }
+
+    /// Triangles written: fluid surface plus isolated-particle spheres.
+    pub fn triangles(&self) -> usize {
+        self.reconstruction.fluid_triangles + self.reconstruction.sphere_triangles
+    }
 }
 
 /// Reads `input`, reconstructs it and sends it to `sink`: the file `output`, an archive
@@ -103,7 +157,8 @@ pub fn reconstruct_file(
     on_stage: &mut dyn FnMut(&str),
 ) -> Result<FrameReport> {
     on_stage("read");
-    let clock = Instant::now();
+    let started = Instant::now();
+    let clock = started;
     if input.is_dir() {
         return Err(Error::io(
             input,
@@ -221,7 +276,10 @@ pub fn reconstruct_file(
         frame: frame_number,
         input: input.to_path_buf(),
         output: output.to_path_buf(),
+        status: FrameStatus::Done,
         skipped: false,
+        error: None,
+        seconds: started.elapsed().as_secs_f64(),
         read_seconds,
         reconstruction,
         write_seconds,
@@ -230,13 +288,13 @@ pub fn reconstruct_file(
     })
 }
 
-/// The frames of a job: a single file, or every frame of a `{}` pattern. The output must
-/// be a pattern exactly when the input is.
+/// The frames of a job: a single file, or the frames of a `{}` pattern that `choice`
+/// takes ([`sequence::choose`]). The output must be a pattern exactly when the input is
+/// (or one `.mseq`, `.glb` or `.gltf` for the whole sequence).
 pub fn plan_frames(
     input: &str,
     output: &str,
-    start: Option<i64>,
-    end: Option<i64>,
+    choice: &FrameChoice,
 ) -> Result<Vec<(Frame, PathBuf)>> {
     if sequence::is_pattern(output) && is_archive(Path::new(output)) {
         return Err(Error::InvalidOption {
@@ -247,7 +305,7 @@ pub fn plan_frames(
         });
     }
     match (sequence::is_pattern(input), sequence::is_pattern(output)) {
-        (true, true) => Ok(sequence::frames(input, start, end)?
+        (true, true) => Ok(sequence::choose(input, choice)?
             .into_iter()
             .map(|f| {
                 let out = sequence::substitute(output, &f.label);
@@ -255,10 +313,19 @@ pub fn plan_frames(
             })
             .collect()),
         (false, false) => {
-            if start.is_some() || end.is_some() {
+            if choice.is_given() {
+                let option = if choice.frames.is_some() {
+                    "frames"
+                } else if choice.shard.is_some() && choice.start.is_none() && choice.end.is_none() {
+                    "shard"
+                } else {
+                    "start/end"
+                };
                 return Err(Error::InvalidOption {
-                    option: "start/end",
-                    message: "a frame range needs a {} pattern in INPUT and OUTPUT".into(),
+                    option,
+                    message: format!(
+                        "choosing frames needs a {{}} pattern in INPUT and OUTPUT; {input:?} is a single file"
+                    ),
                 });
             }
             Ok(vec![(
@@ -270,7 +337,7 @@ pub fn plan_frames(
                 PathBuf::from(output),
             )])
         }
-        (true, false) if is_archive(Path::new(output)) || is_gltf(Path::new(output)) => Ok(sequence::frames(input, start, end)?
+        (true, false) if is_archive(Path::new(output)) || is_gltf(Path::new(output)) => Ok(sequence::choose(input, choice)?
             .into_iter()
             .map(|f| (f, PathBuf::from(output)))
             .collect()),
@@ -329,8 +396,11 @@ pub fn check_outputs(plan: &[(Frame, PathBuf)]) -> Result<()> {
     Ok(())
 }
 
-/// Runs every planned frame in order; stops at the first error. `on_frame` is called
-/// before each frame with its index in the plan, `on_stage` at each phase.
+/// Runs every planned frame in order. `on_frame` is called before each frame with its
+/// index in the plan, `on_stage` at each phase, `on_done` after each frame: done,
+/// skipped or failed. A failed frame stops the run with its error unless
+/// [`JobOptions::keep_going`]; then the reports say which frames failed (the caller
+/// decides the exit status).
 pub fn run_frames(
     plan: &[(Frame, PathBuf)],
     options: &ReconstructOptions,
@@ -447,49 +517,76 @@ fn run_frames_unguarded(
             OutputKind::Archive => archived.contains(&frame.number),
             _ => !sequence_gltf && output.exists(),
         };
-        let report = if job.skip_existing && exists {
-            FrameReport {
-                frame: frame.number,
-                input: frame.input.clone(),
-                output: output.clone(),
-                skipped: true,
-                read_seconds: 0.0,
-                reconstruction: ReconstructionStats::default(),
-                write_seconds: 0.0,
-                output_bytes: 0,
-                dropped_attributes: Vec::new(),
+        if job.skip_existing && exists {
+            let report = FrameReport::not_done(frame, output, None, 0.0);
+            on_done(&report);
+            reports.push(report);
+            continue;
+        }
+        let started = Instant::now();
+        let result = output
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .map_or(Ok(()), |dir| {
+                std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))
+            })
+            .and_then(|()| {
+                let sink = match archive.as_mut() {
+                    Some(writer) => Sink::Archive(writer),
+                    None if kind == OutputKind::Archive => {
+                        unreachable!("the archive is opened when a frame is to be written")
+                    }
+                    None if sequence_gltf => Sink::Collect(&mut collected),
+                    None => Sink::File,
+                };
+                reconstruct_file(
+                    &frame.input,
+                    output,
+                    options,
+                    job,
+                    sink,
+                    frame.number,
+                    on_stage,
+                )
+            });
+        match result {
+            Ok(report) => {
+                on_done(&report);
+                reports.push(report);
             }
-        } else {
-            if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-            }
-            let sink = match archive.as_mut() {
-                Some(writer) => Sink::Archive(writer),
-                None if kind == OutputKind::Archive => {
-                    unreachable!("the archive is opened when a frame is to be written")
+            Err(Error::Interrupted) => return Err(Error::Interrupted),
+            Err(e) => {
+                let report =
+                    FrameReport::not_done(frame, output, Some(&e), started.elapsed().as_secs_f64());
+                on_done(&report);
+                // A write that failed part-way may have left part of a record: the
+                // archive takes no more frames (the dropped writer cuts the partial
+                // record and indexes the complete ones, as far as the disk lets it).
+                let archive_broken = matches!(&e, Error::Io { path, .. } if kind == OutputKind::Archive && *path == plan[0].1);
+                if archive_broken {
+                    return Err(e);
                 }
-                None if sequence_gltf => Sink::Collect(&mut collected),
-                None => Sink::File,
-            };
-            reconstruct_file(
-                &frame.input,
-                output,
-                options,
-                job,
-                sink,
-                frame.number,
-                on_stage,
-            )?
-        };
-        on_done(&report);
-        reports.push(report);
+                if !job.keep_going {
+                    if let Some(writer) = archive.take() {
+                        if writer.is_started() {
+                            writer.finish()?;
+                        }
+                    }
+                    return Err(e);
+                }
+                reports.push(report);
+            }
+        }
     }
     // Without finish (an error or an interruption above), dropping the writer still
     // writes the index of the frames appended (see `ArchiveWriter`).
     if let Some(writer) = archive {
-        writer.finish()?;
+        // A new archive none of whose frames was done is not left behind, empty.
+        if writer.is_started() {
+            writer.finish()?;
+        }
     }
-    if sequence_gltf {
+    if sequence_gltf && reports.iter().any(|r| r.status == FrameStatus::Done) {
         let (_, out) = &plan[0];
         let written = write_sequence_gltf(out, &collected, job.fps, &job.write)?;
         if let Some(last) = reports.last_mut() {

@@ -11,8 +11,8 @@ use meniscus::io::mesh::read_mesh;
 use meniscus::io::mesh::MeshWriteOptions;
 use meniscus::io::particles::ParticleFormat;
 use meniscus::job::{
-    check_outputs, output_kind, peak_rss_bytes, plan_frames, run_frames, FrameReport, JobOptions,
-    OutputKind,
+    check_outputs, output_kind, peak_rss_bytes, plan_frames, run_frames, FrameReport, FrameStatus,
+    JobOptions, OutputKind,
 };
 use meniscus::pipeline::ReconstructOptions;
 
@@ -73,6 +73,16 @@ enum ArchiveCommand {
         #[arg(short, long)]
         output: String,
     },
+    /// Join archives (one per farm task, say) into one, frames in increasing order,
+    /// records copied as they are: the same bytes as one run writing every frame.
+    Merge {
+        /// The archives to join (each frame in exactly one, one error bound for all).
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// The merged archive; written whole under a temporary name, then renamed.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
     /// Pack existing mesh files (`{}` pattern; PLY, OBJ, glTF) into an archive.
     Pack {
         /// Mesh files, a pattern with `{}` for the frame number.
@@ -93,7 +103,33 @@ enum ArchiveCommand {
         /// Last frame (inclusive).
         #[arg(long, allow_negative_numbers = true)]
         end: Option<i64>,
+        #[command(flatten)]
+        farm: FarmArgs,
     },
+}
+
+/// Frame selection as render farms give it.
+#[derive(Args)]
+struct FarmArgs {
+    /// Frames to take, instead of --start/--end: `1-100`, `1-100:2` (every second),
+    /// `1,5,7-20`; sorted, each once. Every selected frame needs a file.
+    #[arg(long, value_name = "LIST", allow_hyphen_values = true, conflicts_with_all = ["start", "end"])]
+    frames: Option<meniscus::sequence::FrameSelection>,
+    /// Take every N-th frame of the selection starting at the I-th (0-based): one of N
+    /// machines' share, round-robin.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<meniscus::sequence::Shard>,
+}
+
+impl FarmArgs {
+    fn choice(&self, start: Option<i64>, end: Option<i64>) -> meniscus::sequence::FrameChoice {
+        meniscus::sequence::FrameChoice {
+            start,
+            end,
+            frames: self.frames.clone(),
+            shard: self.shard,
+        }
+    }
 }
 
 #[derive(Args)]
@@ -172,10 +208,20 @@ struct ReconstructArgs {
     /// Last frame of a sequence (inclusive).
     #[arg(long, allow_negative_numbers = true)]
     end: Option<i64>,
+    #[command(flatten)]
+    farm: FarmArgs,
     /// Skip frames whose output already exists, or that the `.mseq` output holds (the
     /// others are appended).
     #[arg(long)]
     skip_existing: bool,
+    /// Print one JSON line per finished frame on stdout (frame, input, output, status
+    /// done/skipped/failed, triangles, seconds, peak_rss_bytes, error), for farm managers.
+    #[arg(long)]
+    json_progress: bool,
+    /// Report a frame that fails and go on with the next (default: stop at the first).
+    /// The exit status is 1 when any frame failed; a `.mseq` output keeps the others.
+    #[arg(long)]
+    keep_going: bool,
     /// Worker threads (default: all cores). Output does not depend on it.
     #[arg(long)]
     threads: Option<usize>,
@@ -414,6 +460,16 @@ fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<()
                 eprintln!("{} frame(s) written", written.len());
             }
         }
+        ArchiveCommand::Merge { inputs, output } => {
+            let stats = meniscus::archive::merge(&inputs, &output).map_err(text)?;
+            eprintln!(
+                "{} frame(s) from {} archive(s) merged into {} ({} bytes)",
+                stats.frames,
+                stats.inputs,
+                output.display(),
+                stats.bytes
+            );
+        }
         ArchiveCommand::Pack {
             input,
             output,
@@ -421,8 +477,10 @@ fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<()
             attribute_error_bound,
             start,
             end,
+            farm,
         } => {
-            let frames = meniscus::sequence::frames(&input, start, end).map_err(text)?;
+            let frames =
+                meniscus::sequence::choose(&input, &farm.choice(start, end)).map_err(text)?;
             let options = ArchiveOptions {
                 attribute_error_bound,
                 ..ArchiveOptions::new(error_bound)
@@ -547,7 +605,11 @@ fn reconstruct(
         None => AttributeSelection::default(),
     };
     let error_bound = args.error_bound.unwrap_or(ARCHIVE_ERROR * radius(args));
-    let plan = plan_frames(&args.input, &args.output, args.start, args.end)?;
+    let plan = plan_frames(
+        &args.input,
+        &args.output,
+        &args.farm.choice(args.start, args.end),
+    )?;
     check_outputs(&plan).map_err(|e| Failure::Usage(e.to_string()))?;
     for warning in ineffective_options(args, given, &plan, &attributes) {
         eprintln!("warning: {warning}");
@@ -570,6 +632,7 @@ fn reconstruct(
         fps: args.fps,
         attributes,
         cancel: cancel.clone(),
+        keep_going: args.keep_going,
     };
     let bar = if args.quiet {
         ProgressBar::hidden()
@@ -595,6 +658,14 @@ fn reconstruct(
         &mut |stage| bar.set_message(stage.to_string()),
         &mut |report: &FrameReport| {
             bar.inc(1);
+            if args.json_progress {
+                println!("{}", progress_line(report));
+            }
+            if args.keep_going {
+                if let Some(error) = &report.error {
+                    bar.suspend(|| eprintln!("error: frame {}: {error}", report.frame));
+                }
+            }
             if !warned && !report.dropped_attributes.is_empty() {
                 warned = true;
                 bar.suspend(|| {
@@ -621,6 +692,10 @@ fn reconstruct(
     if !args.quiet {
         summarize(&reports, total);
     }
+    let failed: Vec<&FrameReport> = reports
+        .iter()
+        .filter(|r| r.status == FrameStatus::Failed)
+        .collect();
     if let Some(path) = &args.stats {
         let json = serde_json::json!({
             "options": options,
@@ -631,7 +706,34 @@ fn reconstruct(
         let text = serde_json::to_string_pretty(&json).map_err(|e| Failure::Run(e.to_string()))?;
         std::fs::write(path, text).map_err(|e| Failure::from(meniscus::Error::io(path, e)))?;
     }
+    if !failed.is_empty() {
+        let numbers: Vec<String> = failed.iter().map(|r| r.frame.to_string()).collect();
+        return Err(Failure::Run(format!(
+            "{} of {} frames failed (frame{} {}); the others were written",
+            failed.len(),
+            reports.len(),
+            if failed.len() == 1 { "" } else { "s" },
+            numbers.join(", ")
+        )));
+    }
     Ok(())
+}
+
+/// One line of `--json-progress`: what a farm manager needs of a finished frame.
+fn progress_line(report: &FrameReport) -> serde_json::Value {
+    let mut line = serde_json::json!({
+        "frame": report.frame,
+        "input": report.input,
+        "output": report.output,
+        "status": report.status,
+        "triangles": (report.status == FrameStatus::Done).then(|| report.triangles()),
+        "seconds": report.seconds,
+        "peak_rss_bytes": peak_rss_bytes(),
+    });
+    if let Some(error) = &report.error {
+        line["error"] = error.as_str().into();
+    }
+    line
 }
 
 /// The particle radius as the user wrote it (0.025, not the f32's 0.02500000037…), so
@@ -722,6 +824,12 @@ fn ineffective_options(
             "--skip-existing has no effect: {output:?} holds the whole sequence and is written whole"
         ));
     }
+    let single_file = plan.len() == 1 && plan[0].0.label.is_empty();
+    if given("keep_going") && single_file {
+        warnings.push(
+            "--keep-going has no effect: a single file has no other frames to go on with".into(),
+        );
+    }
     if given("decimate_error") && matches!(args.decimate.as_str(), "off" | "none" | "0") {
         warnings.push(format!(
             "--decimate-error has no effect: decimation is off (--decimate {})",
@@ -732,17 +840,23 @@ fn ineffective_options(
 }
 
 fn summarize(reports: &[FrameReport], total: f64) {
-    let done: Vec<&FrameReport> = reports.iter().filter(|r| !r.skipped).collect();
-    let skipped = reports.len() - done.len();
-    let triangles: usize = done
-        .iter()
-        .map(|r| r.reconstruction.fluid_triangles + r.reconstruction.sphere_triangles)
-        .sum();
+    let count = |s| reports.iter().filter(|r| r.status == s).count();
+    let (done, skipped, failed) = (
+        count(FrameStatus::Done),
+        count(FrameStatus::Skipped),
+        count(FrameStatus::Failed),
+    );
+    let triangles: usize = reports.iter().map(|r| r.triangles()).sum();
     eprintln!(
-        "{} frame(s) reconstructed{} in {:.2} s, {} triangles written, peak memory {}",
-        done.len(),
+        "{} frame(s) reconstructed{}{} in {:.2} s, {} triangles written, peak memory {}",
+        done,
         if skipped > 0 {
             format!(", {skipped} skipped")
+        } else {
+            String::new()
+        },
+        if failed > 0 {
+            format!(", {failed} failed")
         } else {
             String::new()
         },

@@ -5,6 +5,9 @@
 //! (`7`, `10`); without one, the pattern's directory is scanned and every file whose name
 //! matches (with the number written in any way, such as `0007`) is taken, in increasing
 //! frame order. The output pattern receives the number exactly as the input file wrote it.
+//!
+//! Render farms name frames as [`FrameSelection`]s (`1-100:2,7`) and split them among
+//! machines as [`Shard`]s (`--shard I/N`, round-robin); [`choose`] applies both.
 
 use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -126,6 +129,269 @@ pub fn frames(pattern: &str, start: Option<i64>, end: Option<i64>) -> Result<Vec
     Ok(found)
 }
 
+/// The most frames a [`FrameSelection`] may name: a range such as `1-1000000000` is a
+/// typo, not a job.
+pub const MAX_SELECTED_FRAMES: usize = 10_000_000;
+
+/// Frames as render farms give them: `1-100` (inclusive), `1-100:2` (every second frame
+/// from 1), `1,5,7-20` (a list of ranges), any mix; numbers may be negative (`-5--1`).
+/// The frames are sorted and overlaps deduplicated (`1-10,5-20` is `1-20`). Parsed with
+/// [`str::parse`]; errors name the bad text.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FrameSelection {
+    numbers: Vec<i64>,
+}
+
+impl FrameSelection {
+    /// The selected frame numbers, increasing, each once.
+    pub fn numbers(&self) -> &[i64] {
+        &self.numbers
+    }
+
+    /// True when `number` is selected.
+    pub fn contains(&self, number: i64) -> bool {
+        self.numbers.binary_search(&number).is_ok()
+    }
+}
+
+/// `"1-x"`, or `"1-x" in "1-5,1-x"` when the item is part of a list.
+fn place(item: &str, whole: &str) -> String {
+    if item == whole.trim() {
+        format!("{item:?}")
+    } else {
+        format!("{item:?} in {whole:?}")
+    }
+}
+
+/// A number of the grammar: optional `-`, digits.
+fn parse_number(text: &str, item: &str, whole: &str) -> std::result::Result<i64, String> {
+    let digits = text.strip_prefix('-').unwrap_or(text);
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return Err(format!(
+            "{}: {text:?} is not a frame number (expected FIRST, FIRST-LAST or FIRST-LAST:STEP, separated by commas)",
+            place(item, whole)
+        ));
+    }
+    text.parse()
+        .map_err(|_| format!("{}: {text:?} is out of range", place(item, whole)))
+}
+
+impl std::str::FromStr for FrameSelection {
+    type Err = String;
+
+    fn from_str(whole: &str) -> std::result::Result<Self, String> {
+        if whole.trim().is_empty() {
+            return Err("an empty frame selection selects no frame".into());
+        }
+        let mut numbers: Vec<i64> = Vec::new();
+        for item in whole.split(',') {
+            let item = item.trim();
+            if item.is_empty() {
+                return Err(format!("{whole:?}: an empty item between commas"));
+            }
+            let (range, step) = match item.split_once(':') {
+                Some((range, step)) => {
+                    let step = parse_number(step, item, whole)?;
+                    if step < 1 {
+                        return Err(format!(
+                            "{}: the step must be at least 1, got {step}",
+                            place(item, whole)
+                        ));
+                    }
+                    (range, Some(step))
+                }
+                None => (item, None),
+            };
+            // FIRST or FIRST-LAST; a `-` after the first character separates the two
+            // (a leading one is FIRST's sign).
+            let (first, last) = match range.get(1..).and_then(|r| r.find('-')) {
+                Some(k) => (
+                    parse_number(&range[..k + 1], item, whole)?,
+                    parse_number(&range[k + 2..], item, whole)?,
+                ),
+                None => {
+                    if step.is_some() {
+                        return Err(format!(
+                            "{}: a step needs a range (FIRST-LAST:STEP)",
+                            place(item, whole)
+                        ));
+                    }
+                    let n = parse_number(range, item, whole)?;
+                    (n, n)
+                }
+            };
+            if first > last {
+                return Err(format!(
+                    "{}: the range is reversed ({first} is after {last})",
+                    place(item, whole)
+                ));
+            }
+            let step = step.unwrap_or(1);
+            let count = (last as i128 - first as i128) / step as i128 + 1;
+            if numbers.len() as i128 + count > MAX_SELECTED_FRAMES as i128 {
+                return Err(format!(
+                    "{whole:?} selects more than {MAX_SELECTED_FRAMES} frames"
+                ));
+            }
+            numbers.extend((0..count as i64).map(|k| first + k * step));
+        }
+        numbers.sort_unstable();
+        numbers.dedup();
+        Ok(FrameSelection { numbers })
+    }
+}
+
+/// One part of a selection split among `count` machines: `--shard I/N` takes every N-th
+/// frame of the selection, starting at the I-th (0-based). Round-robin rather than
+/// contiguous blocks: neighbouring frames cost about the same (a splash, a calm phase),
+/// so every shard gets a similar mix of cheap and expensive frames, and a sequence that
+/// grows at its end keeps every earlier frame in the shard it was in (blocks would move
+/// them all), so a re-run with `--skip-existing` redoes nothing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    /// This shard, `0..count`.
+    pub index: usize,
+    /// How many shards the selection is split into (at least 1).
+    pub count: usize,
+}
+
+impl Shard {
+    /// The items of `items` this shard takes: positions `index`, `index + count`, ...
+    pub fn take<T: Clone>(&self, items: &[T]) -> Vec<T> {
+        items
+            .iter()
+            .skip(self.index)
+            .step_by(self.count)
+            .cloned()
+            .collect()
+    }
+}
+
+impl std::fmt::Display for Shard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}/{}", self.index, self.count)
+    }
+}
+
+impl std::str::FromStr for Shard {
+    type Err = String;
+
+    fn from_str(text: &str) -> std::result::Result<Self, String> {
+        let bad = || format!("{text:?} is not a shard: expected I/N with 0 <= I < N (such as 0/4)");
+        let (index, count) = text.split_once('/').ok_or_else(bad)?;
+        let number = |t: &str| -> std::result::Result<usize, String> {
+            if t.is_empty() || !t.bytes().all(|b| b.is_ascii_digit()) {
+                return Err(bad());
+            }
+            t.parse().map_err(|_| bad())
+        };
+        let (index, count) = (number(index.trim())?, number(count.trim())?);
+        if count == 0 {
+            return Err(format!("{text:?}: the shard count must be at least 1"));
+        }
+        if index >= count {
+            return Err(format!(
+                "{text:?}: shard {index} does not exist among {count} shards (they are numbered 0 to {})",
+                count - 1
+            ));
+        }
+        Ok(Shard { index, count })
+    }
+}
+
+/// Which frames of a pattern a job takes: an inclusive `start`/`end` range, or a
+/// [`FrameSelection`] (not both), then optionally one [`Shard`] of them.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct FrameChoice {
+    /// First frame (inclusive).
+    pub start: Option<i64>,
+    /// Last frame (inclusive).
+    pub end: Option<i64>,
+    /// The frames, as a farm names them.
+    pub frames: Option<FrameSelection>,
+    /// The part of the frames this machine takes.
+    pub shard: Option<Shard>,
+}
+
+impl FrameChoice {
+    /// True when anything narrows the frames (a single file takes none of it).
+    pub fn is_given(&self) -> bool {
+        *self != FrameChoice::default()
+    }
+}
+
+/// The frames of `pattern` that `choice` takes, in increasing frame order. With a
+/// [`FrameSelection`] the pattern's directory is scanned (any zero padding is matched)
+/// and every selected frame must have a file; a [`Shard`] then takes its part. A shard
+/// that gets no frame is an error.
+pub fn choose(pattern: &str, choice: &FrameChoice) -> Result<Vec<Frame>> {
+    let found = match &choice.frames {
+        Some(selection) => {
+            if choice.start.is_some() || choice.end.is_some() {
+                return Err(Error::InvalidOption {
+                    option: "frames",
+                    message: "takes the place of --start/--end; give one or the other".into(),
+                });
+            }
+            let scanned = match frames(pattern, None, None) {
+                Ok(f) => f,
+                Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
+                    Vec::new()
+                }
+                Err(e) => return Err(e),
+            };
+            let found: Vec<Frame> = scanned
+                .into_iter()
+                .filter(|f| selection.contains(f.number))
+                .collect();
+            let missing: Vec<i64> = selection
+                .numbers()
+                .iter()
+                .copied()
+                .filter(|n| found.binary_search_by_key(n, |f| f.number).is_err())
+                .collect();
+            if !missing.is_empty() {
+                const SHOWN: usize = 10;
+                let mut list: Vec<String> =
+                    missing.iter().take(SHOWN).map(|n| n.to_string()).collect();
+                if missing.len() > SHOWN {
+                    list.push("…".into());
+                }
+                return Err(Error::io(
+                    Path::new(pattern),
+                    std::io::Error::new(
+                        std::io::ErrorKind::NotFound,
+                        format!(
+                            "no file for {} of the {} selected frames: {}",
+                            missing.len(),
+                            selection.numbers().len(),
+                            list.join(", ")
+                        ),
+                    ),
+                ));
+            }
+            found
+        }
+        None => frames(pattern, choice.start, choice.end)?,
+    };
+    match choice.shard {
+        Some(shard) => {
+            let taken = shard.take(&found);
+            if taken.is_empty() {
+                return Err(Error::InvalidOption {
+                    option: "shard",
+                    message: format!(
+                        "shard {shard} of {} frames is empty (more shards than frames)",
+                        found.len()
+                    ),
+                });
+            }
+            Ok(taken)
+        }
+        None => Ok(found),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -158,6 +424,163 @@ mod tests {
             substitute("out/s_{}.ply", "0002"),
             PathBuf::from("out/s_0002.ply")
         );
+    }
+
+    fn selected(text: &str) -> Vec<i64> {
+        text.parse::<FrameSelection>()
+            .unwrap_or_else(|e| panic!("{text:?}: {e}"))
+            .numbers()
+            .to_vec()
+    }
+
+    #[test]
+    fn frame_selection_grammar() {
+        assert_eq!(selected("7"), [7]);
+        assert_eq!(selected("1-5"), [1, 2, 3, 4, 5]);
+        assert_eq!(selected("1-10:3"), [1, 4, 7, 10]);
+        assert_eq!(selected("1-9:4"), [1, 5, 9]);
+        assert_eq!(selected("1-8:4"), [1, 5], "the last frame need not be hit");
+        assert_eq!(selected("1,5,7-9"), [1, 5, 7, 8, 9]);
+        assert_eq!(selected(" 1 , 3 "), [1, 3]);
+        assert_eq!(selected("-3--1,-5"), [-5, -3, -2, -1]);
+        assert_eq!(selected("-2-1"), [-2, -1, 0, 1]);
+        assert_eq!(selected("4-4"), [4]);
+        // Overlaps once each, sorted.
+        assert_eq!(selected("5-8,1-6,7,2"), [1, 2, 3, 4, 5, 6, 7, 8]);
+        assert_eq!(selected("1-9:2,2-10:2"), (1..=10).collect::<Vec<_>>());
+        assert_eq!(
+            selected("0-1000000:1000").len(),
+            1001,
+            "a step keeps large ranges small"
+        );
+    }
+
+    #[test]
+    fn frame_selection_refuses_what_selects_nothing_or_is_garbage() {
+        for (text, says) in [
+            ("", "empty"),
+            ("  ", "empty"),
+            ("1,,3", "empty item"),
+            ("1,", "empty item"),
+            ("10-1", "reversed"),
+            ("1-10:0", "step must be at least 1"),
+            ("1-10:-2", "step must be at least 1"),
+            ("5:2", "a step needs a range"),
+            ("a", "\"a\" is not a frame number"),
+            ("1-b", "\"b\" is not a frame number"),
+            ("1-", "\"\" is not a frame number"),
+            ("1-2-3", "\"2-3\" is not a frame number"),
+            ("1..5", "is not a frame number"),
+            ("1-5:x", "\"x\" is not a frame number"),
+            ("99999999999999999999", "out of range"),
+            ("0-100000000", "more than"),
+        ] {
+            let e = text.parse::<FrameSelection>().unwrap_err();
+            assert!(e.contains(says), "{text:?}: {e}");
+            if !text.trim().is_empty() {
+                assert!(e.contains(&format!("{text:?}")), "names the text: {e}");
+            }
+        }
+    }
+
+    #[test]
+    fn shards_grammar() {
+        assert_eq!("0/1".parse(), Ok(Shard { index: 0, count: 1 }));
+        assert_eq!("3/4".parse(), Ok(Shard { index: 3, count: 4 }));
+        for (text, says) in [
+            ("4/4", "does not exist"),
+            ("0/0", "at least 1"),
+            ("1", "not a shard"),
+            ("-1/4", "not a shard"),
+            ("a/4", "not a shard"),
+            ("1/4/2", "not a shard"),
+            ("/4", "not a shard"),
+        ] {
+            let e = text.parse::<Shard>().unwrap_err();
+            assert!(e.contains(says) && e.contains(text), "{text:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn shards_are_round_robin_and_their_union_is_the_selection() {
+        let selection: FrameSelection = "1-100:3,7,200-211".parse().unwrap();
+        let all = selection.numbers();
+        for count in 1..=9 {
+            let mut union: Vec<i64> = Vec::new();
+            let mut sizes = Vec::new();
+            for index in 0..count {
+                let part = Shard { index, count }.take(all);
+                assert!(part.windows(2).all(|w| w[0] < w[1]), "increasing");
+                sizes.push(part.len());
+                union.extend(part);
+            }
+            assert_eq!(union.len(), all.len(), "{count} shards: no frame twice");
+            union.sort_unstable();
+            assert_eq!(union, all, "{count} shards: every frame");
+            // Balanced: sizes differ by at most one.
+            assert!(sizes.iter().max().unwrap() - sizes.iter().min().unwrap() <= 1);
+        }
+        assert_eq!(
+            Shard { index: 1, count: 3 }.take(&[10, 20, 30, 40, 50]),
+            [20, 50]
+        );
+    }
+
+    #[test]
+    fn choosing_frames_by_selection_and_shard() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in [
+            "f_0001.xyz",
+            "f_0002.xyz",
+            "f_0003.xyz",
+            "f_0005.xyz",
+            "f_0009.xyz",
+        ] {
+            std::fs::write(dir.path().join(name), b"").unwrap();
+        }
+        let pattern = format!("{}/f_{{}}.xyz", dir.path().display());
+        let choice = |frames: Option<&str>, shard: Option<&str>| FrameChoice {
+            frames: frames.map(|f| f.parse().unwrap()),
+            shard: shard.map(|s| s.parse().unwrap()),
+            ..FrameChoice::default()
+        };
+        let numbers = |c: &FrameChoice| -> Vec<i64> {
+            choose(&pattern, c)
+                .unwrap()
+                .iter()
+                .map(|f| f.number)
+                .collect()
+        };
+        assert_eq!(numbers(&choice(Some("1-3,9"), None)), [1, 2, 3, 9]);
+        assert_eq!(numbers(&choice(Some("1-9:4"), None)), [1, 5, 9]);
+        assert_eq!(
+            choose(&pattern, &choice(Some("9"), None)).unwrap()[0].label,
+            "0009"
+        );
+        assert_eq!(numbers(&choice(Some("1-3,9"), Some("1/2"))), [2, 9]);
+        assert_eq!(numbers(&choice(None, Some("0/2"))), [1, 3, 9]);
+        let missing = choose(&pattern, &choice(Some("1-4,6"), None))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            missing.contains("no file for 2 of the 5 selected frames: 4, 6"),
+            "{missing}"
+        );
+        let empty = choose(&pattern, &choice(Some("1-2"), Some("2/3")))
+            .unwrap_err()
+            .to_string();
+        assert!(empty.contains("shard 2/3 of 2 frames is empty"), "{empty}");
+        let both = FrameChoice {
+            start: Some(1),
+            ..choice(Some("1"), None)
+        };
+        assert!(matches!(
+            choose(&pattern, &both),
+            Err(Error::InvalidOption {
+                option: "frames",
+                ..
+            })
+        ));
     }
 
     #[test]

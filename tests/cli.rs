@@ -610,6 +610,12 @@ fn new_user_errors_name_the_real_cause() {
             vec!["error:"],
         ),
         (
+            vec!["reconstruct", sphere, "-q", "--keep-going", "-o", &out],
+            0,
+            vec!["warning: --keep-going has no effect: a single file"],
+            vec!["error:"],
+        ),
+        (
             vec![
                 "reconstruct",
                 sphere,
@@ -972,4 +978,293 @@ fn a_failed_reconstruct_into_an_archive_keeps_the_frames_before() {
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains("0.001") && err.contains("0.00025"), "{err}");
     assert_eq!(std::fs::read(&archive).unwrap(), bytes, "untouched");
+}
+
+/// Runs `meniscus` and returns its exit code, stdout and stderr.
+fn run_full(args: &[&str]) -> (Option<i32>, String, String) {
+    let out = meniscus().args(args).output().unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// The `--json-progress` lines of stdout, parsed.
+fn progress_lines(stdout: &str) -> Vec<serde_json::Value> {
+    stdout
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{l:?}: {e}")))
+        .collect()
+}
+
+/// A 3-frame sequence (1, 6, 13) whose frame 6 is a truncated file.
+fn sequence_with_a_broken_frame(dir: &Path) -> String {
+    let pattern = sequence_in(dir, false);
+    std::fs::write(dir.join("f_6.xyz"), [0u8; 10]).unwrap();
+    pattern
+}
+
+#[test]
+fn keep_going_reports_a_broken_frame_as_json_and_writes_the_others() {
+    let dir = tempfile::tempdir().unwrap();
+    let pattern = sequence_with_a_broken_frame(dir.path());
+    let out = dir.path().join("out");
+    let (code, stdout, stderr) = run_full(&[
+        "reconstruct",
+        &pattern,
+        "-r",
+        "0.025",
+        "-o",
+        &format!("{}/s_{{}}.ply", out.display()),
+        "--json-progress",
+        "--keep-going",
+        "--threads",
+        "2",
+    ]);
+    assert_eq!(code, Some(1), "a failed frame makes the run fail: {stderr}");
+    let lines = progress_lines(&stdout);
+    let status: Vec<&str> = lines
+        .iter()
+        .map(|l| l["status"].as_str().unwrap())
+        .collect();
+    assert_eq!(status, ["done", "failed", "done"], "{stdout}");
+    let frames: Vec<i64> = lines.iter().map(|l| l["frame"].as_i64().unwrap()).collect();
+    assert_eq!(frames, [1, 6, 13]);
+    for line in [&lines[0], &lines[2]] {
+        assert!(line["triangles"].as_u64().unwrap() > 1000, "{line}");
+        assert!(line["seconds"].as_f64().unwrap() > 0.0, "{line}");
+        assert!(line["peak_rss_bytes"].as_u64().unwrap() > 0, "{line}");
+        assert!(line.get("error").is_none(), "{line}");
+        assert!(line["output"].as_str().unwrap().ends_with(".ply"), "{line}");
+    }
+    let failed = &lines[1];
+    assert!(failed["input"].as_str().unwrap().ends_with("f_6.xyz"));
+    let error = failed["error"].as_str().unwrap();
+    assert!(
+        error.contains("f_6.xyz") && error.contains("not a multiple of 12"),
+        "{error}"
+    );
+    assert!(failed["triangles"].is_null());
+    assert_eq!(files_in(&out), ["s_1.ply", "s_13.ply"]);
+    assert!(
+        stderr.contains("1 of 3 frames failed (frame 6)"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("--"), "names no flag: {stderr}");
+}
+
+#[test]
+fn a_failed_frame_is_not_appended_and_the_archive_stays_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let pattern = sequence_with_a_broken_frame(dir.path());
+    let list = |archive: &Path| -> Vec<i64> {
+        meniscus::archive::ArchiveReader::open(archive)
+            .unwrap()
+            .frames()
+            .iter()
+            .map(|f| f.number)
+            .collect()
+    };
+    let clean = |archive: &Path| {
+        let r = meniscus::archive::ArchiveReader::open(archive).unwrap();
+        assert!(!r.recovered_by_scan(), "finished with its index");
+        assert!(r.verify().is_clean());
+    };
+    // --keep-going: frames 1 and 13.
+    let kept = dir.path().join("kept.mseq");
+    let (code, stdout, stderr) = run_full(&[
+        "reconstruct",
+        &pattern,
+        "-r",
+        "0.025",
+        "-o",
+        kept.to_str().unwrap(),
+        "--json-progress",
+        "--keep-going",
+        "-q",
+    ]);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert_eq!(progress_lines(&stdout).len(), 3);
+    assert_eq!(list(&kept), [1, 13]);
+    clean(&kept);
+    // Default: the run stops at frame 6, with frame 1 archived and the failure reported.
+    let stopped = dir.path().join("stopped.mseq");
+    let (code, stdout, stderr) = run_full(&[
+        "reconstruct",
+        &pattern,
+        "-r",
+        "0.025",
+        "-o",
+        stopped.to_str().unwrap(),
+        "--json-progress",
+        "-q",
+    ]);
+    assert_eq!(code, Some(1), "{stderr}");
+    let lines = progress_lines(&stdout);
+    let status: Vec<&str> = lines
+        .iter()
+        .map(|l| l["status"].as_str().unwrap())
+        .collect();
+    assert_eq!(status, ["done", "failed"], "stops at the failure: {stdout}");
+    assert!(stderr.contains("f_6.xyz"), "{stderr}");
+    assert_eq!(list(&stopped), [1]);
+    clean(&stopped);
+    // Frame 6 repaired: a re-run with --skip-existing fills the gap; skipped frames are
+    // reported as such.
+    std::fs::copy(
+        dataset("double_dambreak/ParticleData_Fluid_6.xyz"),
+        dir.path().join("f_6.xyz"),
+    )
+    .unwrap();
+    let (code, stdout, stderr) = run_full(&[
+        "reconstruct",
+        &pattern,
+        "-r",
+        "0.025",
+        "-o",
+        kept.to_str().unwrap(),
+        "--json-progress",
+        "--skip-existing",
+        "-q",
+    ]);
+    assert_eq!(code, Some(0), "{stderr}");
+    let lines = progress_lines(&stdout);
+    let status: Vec<&str> = lines
+        .iter()
+        .map(|l| l["status"].as_str().unwrap())
+        .collect();
+    assert_eq!(status, ["skipped", "done", "skipped"]);
+    assert_eq!(list(&kept), [1, 13, 6]);
+    clean(&kept);
+}
+
+#[test]
+fn frames_and_shards_on_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let pattern = sequence_in(dir.path(), true);
+    let out = |name: &str| format!("{}/{name}/s_{{}}.ply", dir.path().display());
+    let base = |output: &str| {
+        vec![
+            "reconstruct".to_string(),
+            pattern.clone(),
+            "-r".into(),
+            "0.025".into(),
+            "-o".into(),
+            output.to_string(),
+            "-q".into(),
+        ]
+    };
+    let go = |extra: &[&str], output: &str| {
+        let mut args = base(output);
+        args.extend(extra.iter().map(|s| s.to_string()));
+        let args: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+        run_full(&args)
+    };
+    // A stepped range; padded names (`f_013.xyz`) are found.
+    let (code, _, stderr) = go(&["--frames", "1-13:12"], &out("a"));
+    assert_eq!(code, Some(0), "{stderr}");
+    assert_eq!(files_in(&dir.path().join("a")), ["s_001.ply", "s_013.ply"]);
+    // Shards: round-robin over the frames.
+    for (shard, expected) in [
+        ("0/2", vec!["s_001.ply", "s_013.ply"]),
+        ("1/2", vec!["s_006.ply"]),
+    ] {
+        let name = format!("shard{}", &shard[..1]);
+        let (code, _, stderr) = go(&["--shard", shard], &out(&name));
+        assert_eq!(code, Some(0), "{stderr}");
+        assert_eq!(files_in(&dir.path().join(&name)), expected);
+    }
+    // Usage errors (exit 2), naming the bad text; missing frames are an error (exit 1).
+    for (extra, says) in [
+        (
+            &["--frames", "1-13", "--start", "1"][..],
+            "cannot be used with",
+        ),
+        (&["--frames", "13-1"][..], "\"13-1\": the range is reversed"),
+        (&["--frames", "1,x"][..], "\"x\" is not a frame number"),
+        (&["--shard", "2/2"][..], "shard 2 does not exist"),
+        (&["--shard", "3/4"][..], "shard 3/4 of 3 frames is empty"),
+    ] {
+        let (code, _, stderr) = go(extra, &out("bad"));
+        assert_eq!(code, Some(2), "{extra:?}: {stderr}");
+        assert!(stderr.contains(says), "{extra:?}: {stderr}");
+    }
+    let (code, _, stderr) = go(&["--frames", "1-6"], &out("bad"));
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(
+        stderr.contains("no file for 4 of the 6 selected frames: 2, 3, 4, 5"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("bad").exists());
+}
+
+#[test]
+fn shards_merged_are_byte_identical_to_one_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let pattern = dataset("dambreak_small/ParticleData_Fluid_{}.xyz");
+    let pattern = pattern.to_str().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let reconstruct = |output: &str, extra: &[&str]| {
+        let mut args = vec![
+            "reconstruct",
+            pattern,
+            "-r",
+            "0.012",
+            "-o",
+            output,
+            "--frames",
+            "1-25:8",
+            "-q",
+        ];
+        args.extend(extra);
+        let (code, _, stderr) = run_full(&args);
+        assert_eq!(code, Some(0), "{args:?}: {stderr}");
+    };
+    reconstruct(&p("one.mseq"), &["--threads", "1"]);
+    reconstruct(&p("shard0.mseq"), &["--shard", "0/2", "--threads", "2"]);
+    reconstruct(&p("shard1.mseq"), &["--shard", "1/2", "--threads", "2"]);
+    let frames = |path: &str| -> Vec<i64> {
+        meniscus::archive::ArchiveReader::open(Path::new(path))
+            .unwrap()
+            .frames()
+            .iter()
+            .map(|f| f.number)
+            .collect()
+    };
+    assert_eq!(frames(&p("one.mseq")), [1, 9, 17, 25]);
+    assert_eq!(frames(&p("shard0.mseq")), [1, 17]);
+    assert_eq!(frames(&p("shard1.mseq")), [9, 25]);
+    let (code, _, stderr) = run_full(&[
+        "archive",
+        "merge",
+        &p("shard1.mseq"),
+        &p("shard0.mseq"),
+        "-o",
+        &p("all.mseq"),
+    ]);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(
+        stderr.contains("4 frame(s) from 2 archive(s) merged"),
+        "{stderr}"
+    );
+    assert!(
+        std::fs::read(p("all.mseq")).unwrap() == std::fs::read(p("one.mseq")).unwrap(),
+        "the merged shards are the bytes of the single run"
+    );
+    // A frame in two inputs: exit 1, both files named, no output.
+    let (code, _, stderr) = run_full(&[
+        "archive",
+        "merge",
+        &p("shard0.mseq"),
+        &p("one.mseq"),
+        "-o",
+        &p("twice.mseq"),
+    ]);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(
+        stderr.contains("one.mseq: frame 1: also in") && stderr.contains("shard0.mseq"),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("twice.mseq").exists());
 }

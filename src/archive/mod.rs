@@ -42,10 +42,12 @@ mod attributes;
 mod codec;
 mod frame;
 mod fused;
+mod merge;
 mod parts;
 
 pub use attributes::{AttributeInfo, AttributeTarget};
 pub use frame::ArchiveFrame;
+pub use merge::{merge, MergeStats};
 
 use crate::error::{Error, Result};
 use crate::mesh::{SphereInstances, Surface, TriMesh};
@@ -1026,6 +1028,11 @@ impl ArchiveWriter {
         Ok(())
     }
 
+    /// False for a new archive before its first frame (its file is not yet written).
+    pub fn is_started(&self) -> bool {
+        self.file.is_some()
+    }
+
     /// Frame numbers already in the archive.
     pub fn frame_numbers(&self) -> Vec<i64> {
         self.index.iter().map(|e| e.0).collect()
@@ -1190,17 +1197,7 @@ impl ArchiveWriter {
     fn close(&mut self) -> Result<()> {
         self.closed = true;
         self.reset = true;
-        let mut index = Vec::with_capacity(12 + 16 * self.index.len() + 20);
-        index.extend_from_slice(INDEX_MAGIC);
-        index.extend_from_slice(&(self.index.len() as u64).to_le_bytes());
-        for (n, offset) in &self.index {
-            index.extend_from_slice(&n.to_le_bytes());
-            index.extend_from_slice(&offset.to_le_bytes());
-        }
-        let crc = crc32fast::hash(&index);
-        index.extend_from_slice(&crc.to_le_bytes());
-        index.extend_from_slice(&self.end.to_le_bytes());
-        index.extend_from_slice(TRAILER_MAGIC);
+        let index = index_bytes(&self.index, self.end);
         self.write_at_end(&[&index])?;
         self.file()?
             .sync_all()
@@ -1226,6 +1223,22 @@ impl Drop for ArchiveWriter {
         // Errors cannot be reported here; the frames are still found by a scan.
         let _ = self.close();
     }
+}
+
+/// The index of `entries` (frame, record offset) at offset `end`, and the trailer.
+fn index_bytes(entries: &[(i64, u64)], end: u64) -> Vec<u8> {
+    let mut index = Vec::with_capacity(12 + 16 * entries.len() + 20);
+    index.extend_from_slice(INDEX_MAGIC);
+    index.extend_from_slice(&(entries.len() as u64).to_le_bytes());
+    for (n, offset) in entries {
+        index.extend_from_slice(&n.to_le_bytes());
+        index.extend_from_slice(&offset.to_le_bytes());
+    }
+    let crc = crc32fast::hash(&index);
+    index.extend_from_slice(&crc.to_le_bytes());
+    index.extend_from_slice(&end.to_le_bytes());
+    index.extend_from_slice(TRAILER_MAGIC);
+    index
 }
 
 #[cfg(test)]
