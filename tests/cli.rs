@@ -370,6 +370,14 @@ fn new_user_errors_name_the_real_cause() {
     // Text saved as .xyz (a multiple of 12 bytes, so only the content gives it away).
     std::fs::write(d.join("junk.xyz"), "0.5 1.5 2.5\n0.5 1.5 2.5\n").unwrap();
     let junk = path("junk.xyz");
+    // A PLY header announcing 2^64 - 1 vertices and no data: the counts are checked
+    // against the file before any room is sought for them.
+    std::fs::write(
+        d.join("huge.ply"),
+        "ply\nformat binary_little_endian 1.0\nelement vertex 18446744073709551615\nproperty float x\nproperty float y\nproperty float z\nend_header\n",
+    )
+    .unwrap();
+    let huge = path("huge.ply");
     let out = path("s.ply");
     let foo = path("s.foo");
     // A one-frame sequence, and an archive holding the sphere as frame 0.
@@ -409,6 +417,12 @@ fn new_user_errors_name_the_real_cause() {
             1,
             vec!["junk.xyz", "looks like text"],
             vec!["invalid option", "--particle-radius", "--input-format"],
+        ),
+        (
+            vec!["reconstruct", &huge, "-r", "0.025", "-o", &out],
+            1,
+            vec!["huge.ply", "claims 18446744073709551615 rows"],
+            vec!["free space", "invalid option"],
         ),
         // A radius far too small for the coordinates blames the radius, not --cell-size.
         (

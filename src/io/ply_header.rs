@@ -137,7 +137,16 @@ pub(crate) fn skip_row(c: &mut Cursor, element: &PlyElement, binary: Option<bool
 /// the sizes of its scalars and list-length prefixes, every ASCII value at least one byte.
 /// An element without properties may not claim more rows than there are bytes left.
 pub(crate) fn check_counts(c: &Cursor, header: &PlyHeader) -> Result<()> {
-    let left = c.bytes.len().saturating_sub(c.pos);
+    check_counts_within(c.path, header, c.bytes.len().saturating_sub(c.pos))
+}
+
+/// [`check_counts`] for a file whose `left` bytes after the header are not in memory (a
+/// streamed file: its length less the header's).
+pub(crate) fn check_counts_within(
+    path: &std::path::Path,
+    header: &PlyHeader,
+    left: usize,
+) -> Result<()> {
     let mut need: usize = 0;
     for element in &header.elements {
         let row: usize = match header.binary {
@@ -155,7 +164,7 @@ pub(crate) fn check_counts(c: &Cursor, header: &PlyHeader) -> Result<()> {
         };
         need = bytes.and_then(|b| need.checked_add(b)).ok_or_else(|| {
             Error::parse(
-                c.path,
+                path,
                 "header",
                 format!(
                     "element {:?} claims {} rows, more than the {left} bytes after the header can hold",
@@ -165,7 +174,7 @@ pub(crate) fn check_counts(c: &Cursor, header: &PlyHeader) -> Result<()> {
         })?;
         if need > left {
             return Err(Error::parse(
-                c.path,
+                path,
                 "header",
                 format!(
                     "truncated: element {:?} claims {} rows of at least {row} bytes each, but only {left} bytes follow the header",

@@ -191,6 +191,13 @@ pub(crate) fn stream(
     let Some(element) = h.elements.first().filter(|e| e.name == "vertex") else {
         return Ok(None);
     };
+    // The counts must fit in the file before anything is spooled (or room sought) for them.
+    let file_bytes = std::fs::metadata(path)
+        .map_err(|e| Error::io(path, e))?
+        .len();
+    let left =
+        usize::try_from(file_bytes.saturating_sub(header.len() as u64)).unwrap_or(usize::MAX);
+    crate::io::ply_header::check_counts_within(path, &h, left)?;
     if element.properties.iter().any(|p| p.list_count.is_some()) {
         return Ok(None);
     }
