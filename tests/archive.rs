@@ -1385,3 +1385,133 @@ fn a_new_archive_is_written_only_when_its_first_frame_is() {
     let r = ArchiveReader::open(&path).unwrap();
     assert!(r.frames().is_empty() && r.verify().is_clean());
 }
+
+/// A deterministic generator (xorshift), so that every run mutates the same way.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+}
+
+/// Recomputes the checksums of the records that follow each other from the file header
+/// on and of an index that ends at the trailer, so that a mutation reaches the frame
+/// decoders instead of stopping at a CRC mismatch.
+fn reseal(b: &mut [u8]) {
+    let u64_at = |b: &[u8], at: usize| u64::from_le_bytes(b[at..at + 8].try_into().unwrap());
+    let mut pos = 16;
+    while pos + 48 <= b.len() && &b[pos..pos + 4] == b"FRAM" {
+        let Some(end) = usize::try_from(u64_at(b, pos + 28))
+            .ok()
+            .and_then(|len| (pos + 48).checked_add(len))
+            .filter(|&end| end <= b.len())
+        else {
+            break;
+        };
+        let crc = crc32fast::hash(&b[pos + 48..end]);
+        b[pos + 36..pos + 40].copy_from_slice(&crc.to_le_bytes());
+        let crc = crc32fast::hash(&b[pos..pos + 44]);
+        b[pos + 44..pos + 48].copy_from_slice(&crc.to_le_bytes());
+        pos = end;
+    }
+    let len = b.len();
+    if len >= 48 && &b[len - 8..] == b"MSEQEND!" {
+        let index = usize::try_from(u64_at(b, len - 16)).unwrap_or(usize::MAX);
+        if index >= 16 && index.checked_add(16).is_some_and(|e| e <= len - 16) {
+            let crc = crc32fast::hash(&b[index..len - 20]);
+            b[len - 20..len - 16].copy_from_slice(&crc.to_le_bytes());
+        }
+    }
+}
+
+/// Opens `path` and decodes everything in it; every error names the file.
+fn read_everything(path: &Path, name: &str) {
+    let r = match ArchiveReader::open(path) {
+        Ok(r) => r,
+        Err(e) => return assert!(e.to_string().contains(name), "{e}"),
+    };
+    let numbers: Vec<i64> = r.frames().iter().map(|f| f.number).collect();
+    let report = r.verify();
+    assert!(report.good.len() + report.damaged.len() >= numbers.len());
+    for n in numbers {
+        match r.read_surface(n) {
+            Ok(s) => {
+                let v = s.fluid.positions.len() as u32;
+                assert!(s.fluid.triangles.iter().flatten().all(|&i| i < v));
+            }
+            Err(e) => assert!(e.to_string().contains(name), "{e}"),
+        }
+    }
+}
+
+#[test]
+fn mutated_archives_are_read_or_rejected_never_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.mseq");
+    // A frame with attributes, a Loop step and spheres, and a plain mesh: version 4.
+    let fluid = with_attributes(bumpy(1, 1.0));
+    let spheres = spheres_with_attributes(3);
+    let mut w = ArchiveWriter::create(&path, &ArchiveOptions::new(1e-3)).unwrap();
+    w.append_frame(
+        7,
+        &ArchiveFrame {
+            fluid: &fluid,
+            subdivision_levels: 1,
+            spheres: &spheres,
+        },
+    )
+    .unwrap();
+    w.append(8, &icosphere(0, 0.5)).unwrap();
+    w.finish().unwrap();
+    let base = std::fs::read(&path).unwrap();
+    assert!(base.len() < 8192, "{}", base.len());
+    assert_eq!(ArchiveReader::open(&path).unwrap().verify().good, [7, 8]);
+    let mut rng = Rng(0x6a09_e667_f3bc_c909);
+    for round in 0..5000 {
+        let mut b = base.clone();
+        match rng.below(4) {
+            0 => {
+                for _ in 0..1 + rng.below(4) {
+                    let i = rng.below(b.len());
+                    b[i] ^= 1 << rng.below(8);
+                }
+            }
+            1 => b.truncate(rng.below(b.len())),
+            2 => {
+                let i = rng.below(b.len() + 1);
+                let n = 1 + rng.below(8);
+                let bytes: Vec<u8> = (0..n).map(|_| rng.next() as u8).collect();
+                b.splice(i..i, bytes);
+            }
+            _ => {
+                // A header field or count: a little-endian u32 or u64 of extreme value.
+                let i = rng.below(b.len() - 8);
+                match rng.below(3) {
+                    0 => b[i..i + 4].copy_from_slice(&u32::MAX.to_le_bytes()),
+                    1 => b[i..i + 8]
+                        .copy_from_slice(&(u64::MAX - rng.below(64) as u64).to_le_bytes()),
+                    _ => b[i] = 0xff,
+                }
+            }
+        }
+        // Half the cases with their checksums recomputed, to reach the decoders.
+        if round % 2 == 1 {
+            reseal(&mut b);
+        }
+        std::fs::write(&path, &b).unwrap();
+        if std::panic::catch_unwind(|| read_everything(&path, "m.mseq")).is_err() {
+            let keep = std::env::temp_dir().join(format!("meniscus-crash-{round}-m.mseq"));
+            std::fs::write(&keep, &b).unwrap();
+            panic!(
+                "round {round}: reading a mutated archive panicked (kept as {})",
+                keep.display()
+            );
+        }
+    }
+}
