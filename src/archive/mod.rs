@@ -439,15 +439,22 @@ impl ArchiveReader {
     /// Takes the frames from a valid index and checks it against the records before it.
     fn use_index(&mut self, index_offset: usize, entries: &[(i64, u64)]) {
         let spans = scan_records(&self.bytes, index_offset);
+        // By start offset (spans start at distinct, increasing offsets): looking each
+        // entry up must not walk every span, or an index of many entries over many
+        // records takes quadratic time.
+        let at: std::collections::HashMap<u64, &Span> = spans
+            .iter()
+            .map(|s| match s {
+                Span::Record(p, _) | Span::Damaged(p, _) => (*p as u64, s),
+            })
+            .collect();
         let mut indexed = std::collections::HashSet::new();
         for &(number, offset) in entries {
             indexed.insert(offset);
-            let found = usize::try_from(offset).ok().and_then(|o| {
-                spans.iter().find_map(|s| match s {
-                    Span::Record(p, h) if *p == o => Some((o, h)),
-                    _ => None,
-                })
-            });
+            let found = match at.get(&offset) {
+                Some(Span::Record(p, h)) => Some((*p, h)),
+                _ => None,
+            };
             match found {
                 Some((o, h)) if h.number == number => {
                     let h = h.clone();
@@ -463,9 +470,7 @@ impl ArchiveReader {
                     ),
                 }),
                 None => {
-                    let at_damaged = spans
-                        .iter()
-                        .any(|s| matches!(s, Span::Damaged(p, _) if *p as u64 == offset));
+                    let at_damaged = matches!(at.get(&offset), Some(Span::Damaged(..)));
                     self.damage.push(if at_damaged {
                         Damage {
                             kind: DamageKind::Record,
