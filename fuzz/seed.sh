@@ -9,7 +9,7 @@ cd "$(dirname "$0")"
 BIN=${1:-${CARGO_TARGET_DIR:-../target}/release/meniscus}
 OUT=seeds
 rm -rf "$OUT"
-mkdir -p "$OUT"/{particles_xyz,particles_ply,particles_bgeo,particles_vtk,mesh_ply,mesh_obj,mesh_gltf,mesh_vtk,archive}
+mkdir -p "$OUT"/{particles_xyz,particles_ply,particles_bgeo,particles_vtk,mesh_ply,mesh_obj,mesh_gltf,mesh_vtk,archive,archive_payload}
 
 python3 - "$OUT" <<'EOF'
 import gzip, struct, sys
@@ -60,7 +60,7 @@ for name, size, typ, default in ((b"v", 3, 5, b"\0" * 12), (b"density", 1, 0, b"
 for i, (p, v, d) in enumerate(zip(pts, vel, dens)):
     b += struct.pack(">4f", *p, 1.0) + struct.pack(">3f", *v) + struct.pack(">f", d) + struct.pack(">i", i)
 w("particles_bgeo/plain.bgeo", b)
-w("particles_bgeo/gzip.bgeo", gzip.compress(b, 6))
+w("particles_bgeo/gzip.bgeo", gzip.compress(b, 6, mtime=0))
 EOF
 
 # Meshes and archives from the release binary: the fluid blocks plus an isolated-particle
@@ -70,15 +70,41 @@ trap 'rm -rf "$work"' EXIT
 in=$OUT/particles_ply/binary_little_endian.ply
 r=(--particle-radius 0.05 --threads 1)
 for m in m.ply m.vtk m.obj m.glb m.gltf; do
-  "$BIN" reconstruct "$in" "${r[@]}" --attributes all --subdivide 0 -o "$work/$m" >/dev/null
+  "$BIN" reconstruct "$in" "${r[@]}" --attributes all --subdivide 0 -o "$work/$m" >/dev/null 2>&1
 done
-"$BIN" reconstruct "$in" "${r[@]}" --attributes all -o "$work/a.mseq" >/dev/null
-"$BIN" reconstruct "$in" "${r[@]}" --attributes none --subdivide 0 -o "$work/plain.mseq" >/dev/null
+"$BIN" reconstruct "$in" "${r[@]}" --attributes all -o "$work/a.mseq" >/dev/null 2>&1
+"$BIN" reconstruct "$in" "${r[@]}" --attributes none --subdivide 0 -o "$work/plain.mseq" >/dev/null 2>&1
 cp "$work/m.ply" "$OUT/mesh_ply/"
 cp "$work/m.vtk" "$OUT/mesh_vtk/"
 cp "$work/m.obj" "$OUT/mesh_obj/"
 cp "$work/m.glb" "$work/m.gltf" "$OUT/mesh_gltf/"
 cp "$work/a.mseq" "$work/plain.mseq" "$OUT/archive/"
+# archive_payload: each frame of those archives with its zstd sections decompressed, in
+# the layout fuzz_targets/archive_payload.rs documents (needs the zstd command).
+python3 - "$OUT" <<'EOF'
+import struct, subprocess, sys
+out = sys.argv[1]
+unzstd = lambda b: subprocess.run(["zstd", "-d", "-c", "-q"], input=b, stdout=subprocess.PIPE, check=True).stdout
+for name in ("a", "plain"):
+    b = open(f"{out}/archive/{name}.mseq", "rb").read()
+    pos = 16
+    while b[pos:pos + 4] == b"FRAM":
+        number, nv, nt, step, plen, crc, flags = struct.unpack_from("<qIIdQII", b, pos + 4)
+        payload = b[pos + 48:pos + 48 + plen]
+        head = struct.pack("<BII", 2 if flags else 1, nv, nt)
+        if flags:
+            (dlen,) = struct.unpack_from("<I", payload, 0)
+            desc = payload[4:4 + dlen]
+            (glen,) = struct.unpack_from("<Q", payload, 8 + dlen)
+            geometry = unzstd(payload[16 + dlen:16 + dlen + glen])
+            streams = unzstd(payload[16 + dlen + glen:])
+            body = struct.pack("<H", dlen) + desc + struct.pack("<H", len(geometry)) + geometry + streams
+        else:
+            body = unzstd(payload)
+        open(f"{out}/archive_payload/{name}-{number}.bin", "wb").write(head + body)
+        pos += 48 + plen
+EOF
+
 # Hand-made small meshes in the variants the binary does not write.
 printf 'ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty double density\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0 0 0 1 1\n1 0 0 0 0 1 2\n1 1 0 0 0 1 3\n0 1 0 0 0 1 4\n4 0 1 2 3\n' >"$OUT/mesh_ply/quad.ply"
 printf 'v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\nf 1 2 3\nf 1/1 3/1 4/1\nf -4//1 -3//1 -2//1\nf 1/1/1 2/1/1 3/1/1 4/1/1\n' >"$OUT/mesh_obj/forms.obj"
