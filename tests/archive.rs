@@ -1559,3 +1559,124 @@ fn an_index_of_many_entries_over_many_records_opens_in_linear_time() {
     // Linear: well under a second; quadratic: minutes.
     assert!(took.as_secs() < 30, "opening took {took:?}");
 }
+
+/// The first record's decompressed payload (`raw` of src/archive/frame.rs) and its
+/// header's vertex and triangle counts.
+fn first_raw(path: &Path) -> (Vec<u8>, u32, u32) {
+    let b = std::fs::read(path).unwrap();
+    let u32_at = |at: usize| u32::from_le_bytes(b[at..at + 4].try_into().unwrap());
+    let len = u64::from_le_bytes(b[16 + 28..16 + 36].try_into().unwrap()) as usize;
+    let raw = zstd::bulk::decompress(&b[64..64 + len], 1 << 24).unwrap();
+    (raw, u32_at(16 + 12), u32_at(16 + 16))
+}
+
+fn read_varint(raw: &[u8], pos: &mut usize) -> u64 {
+    let (mut v, mut shift) = (0u64, 0);
+    loop {
+        let b = raw[*pos];
+        *pos += 1;
+        v |= ((b & 0x7f) as u64) << shift;
+        if b < 0x80 {
+            return v;
+        }
+        shift += 7;
+    }
+}
+
+/// Moves `pos` past the three length-prefixed streams of a mesh.
+fn skip_streams(raw: &[u8], pos: &mut usize) {
+    for _ in 0..3 {
+        let len = read_varint(raw, pos) as usize;
+        *pos += len;
+    }
+}
+
+/// `raw` with the position stream of the mesh whose streams start at `*pos` replaced by
+/// `n` residuals of `value` each.
+fn replace_residuals(raw: &[u8], mut pos: usize, n: usize, value: u64) -> Vec<u8> {
+    for _ in 0..2 {
+        let len = read_varint(raw, &mut pos) as usize;
+        pos += len;
+    }
+    let start = pos;
+    let len = read_varint(raw, &mut pos) as usize;
+    pos += len;
+    let residuals = varints(&vec![value; n]);
+    let mut out = raw[..start].to_vec();
+    out.extend(varints(&[residuals.len() as u64]));
+    out.extend(residuals);
+    out.extend_from_slice(&raw[pos..]);
+    out
+}
+
+#[test]
+fn lattice_coordinates_that_overflow_are_decoded_or_refused_never_panic() {
+    // Found by fuzzing (archive_payload): residuals of ±2^63 made `prediction + residual`
+    // overflow i64 in the fused Loop decoder (a panic with overflow checks, as `cargo
+    // test` builds; wrapped garbage otherwise). Predictions and residuals are now modular
+    // on both sides, and a frame decoding to coordinates beyond f32 is refused.
+    let dir = tempfile::tempdir().unwrap();
+    let zigzag_max = u64::MAX - 1; // zigzag(i64::MAX)
+    let spheres = SphereInstances {
+        template: icosphere(0, 0.1),
+        centers: vec![glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y],
+        attributes: Vec::new(),
+    };
+    let none = SphereInstances::default();
+    let closed = icosphere(0, 1.0);
+    let mut open = icosphere(0, 1.0);
+    open.triangles.truncate(5);
+    // (fluid, Loop steps, spheres, what is damaged): the fused Loop decoder (closed mesh,
+    // one step), the plain stream decoder (open mesh), the sphere centres.
+    for (fluid, levels, spheres, centres) in [
+        (&closed, 1, &none, false),
+        (&open, 0, &none, false),
+        (&closed, 0, &spheres, true),
+    ] {
+        let path = dir.path().join("real.mseq");
+        let mut w = ArchiveWriter::create(&path, &ArchiveOptions::new(1e-3)).unwrap();
+        let frame = ArchiveFrame {
+            fluid,
+            subdivision_levels: levels,
+            spheres,
+        };
+        w.append_frame(0, &frame).unwrap();
+        w.finish().unwrap();
+        let (raw, vertices, triangles) = first_raw(&path);
+        let mut pos = 0;
+        let _levels = read_varint(&raw, &mut pos);
+        pos += 1; // shape
+        let fluid_vertices = read_varint(&raw, &mut pos) as usize;
+        let _ = read_varint(&raw, &mut pos);
+        let damaged = if centres {
+            let mut raw = raw.clone();
+            skip_streams(&raw, &mut pos);
+            let count = read_varint(&raw, &mut pos) as usize;
+            let _template_counts = (read_varint(&raw, &mut pos), read_varint(&raw, &mut pos));
+            skip_streams(&raw, &mut pos);
+            let centres = varints(&vec![zigzag_max; 3 * count]);
+            raw.truncate(pos);
+            raw.extend(centres);
+            raw
+        } else {
+            replace_residuals(&raw, pos, 3 * fluid_vertices, zigzag_max)
+        };
+        // A step of 1e-3 keeps the wrapped coordinates within f32, one of f32::MAX
+        // does not: decoded or refused, never a panic.
+        for (step, refused) in [(2e-3, false), (f32::MAX as f64, true)] {
+            let payload = zstd::bulk::compress(&damaged, 3).unwrap();
+            let path = hostile_archive(dir.path(), &payload, vertices, triangles, step);
+            let r = ArchiveReader::open(&path).unwrap();
+            let result = r.read_surface(0);
+            if refused {
+                let e = result.unwrap_err().to_string();
+                assert!(
+                    e.contains("hostile.mseq") && e.contains("frame 0") && e.contains("beyond f32"),
+                    "{e}"
+                );
+            } else if let Err(e) = result {
+                panic!("levels {levels}, centres {centres}: {e}");
+            }
+        }
+    }
+}

@@ -327,6 +327,33 @@ fn claimed_frame(bytes: &[u8], pos: usize) -> String {
     }
 }
 
+/// A decoded frame whose coordinates or attribute values are not all finite f32s: lattice
+/// coordinates a writer cannot produce (a crafted record), refused rather than returned.
+fn check_decoded(s: Surface) -> std::result::Result<Surface, String> {
+    let positions = [
+        ("fluid vertex", &s.fluid.positions),
+        ("sphere template vertex", &s.spheres.template.positions),
+        ("sphere centre", &s.spheres.centers),
+    ];
+    for (what, list) in positions {
+        if let Some(i) = list.iter().position(|p| !p.is_finite()) {
+            return Err(format!(
+                "{what} {i} decodes to {}: coordinates beyond f32 (damaged record)",
+                list[i]
+            ));
+        }
+    }
+    for a in s.fluid.attributes.iter().chain(&s.spheres.attributes) {
+        if let Some(i) = a.values.iter().position(|v| !v.is_finite()) {
+            return Err(format!(
+                "attribute {:?}: value {i} decodes to {}: beyond f32 (damaged record)",
+                a.name, a.values[i]
+            ));
+        }
+    }
+    Ok(s)
+}
+
 /// Reads an archive.
 pub struct ArchiveReader {
     path: PathBuf,
@@ -698,6 +725,7 @@ impl ArchiveReader {
                 "record flags {flags:#x} unknown to this build in a version-{version} archive"
             )),
         }
+        .and_then(check_decoded)
         .map_err(|m| archive_error(&self.path, Some(f.number), m))
     }
 
