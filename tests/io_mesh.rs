@@ -623,3 +623,67 @@ fn a_gltf_whose_position_accessor_index_is_out_of_range_is_an_error() {
         .to_string();
     assert!(e.contains("m.gltf") && e.contains("glTF"), "{e}");
 }
+
+#[test]
+fn a_gltf_index_past_its_primitive_is_an_error() {
+    // Found by fuzzing (mesh_gltf): the second primitive's index 2^32 − 1, offset by the
+    // first primitive's 3 vertices, overflowed (a panic with overflow checks; without,
+    // it wrapped to vertex 2 and the file read as a mesh it does not hold).
+    let mut bin = Vec::new();
+    for v in [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    for i in [0u32, 1, 2, 0, 1, u32::MAX] {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    let json = serde_json::json!({
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [
+            {"attributes": {"POSITION": 0}, "indices": 1},
+            {"attributes": {"POSITION": 0}, "indices": 2}
+        ]}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+             "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]},
+            {"bufferView": 1, "componentType": 5125, "count": 3, "type": "SCALAR"},
+            {"bufferView": 2, "componentType": 5125, "count": 3, "type": "SCALAR"}
+        ],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 36},
+            {"buffer": 0, "byteOffset": 36, "byteLength": 12},
+            {"buffer": 0, "byteOffset": 48, "byteLength": 12}
+        ],
+        "buffers": [{"byteLength": 60}]
+    });
+    let mut text = serde_json::to_vec(&json).unwrap();
+    while text.len() % 4 != 0 {
+        text.push(b' ');
+    }
+    let mut glb = Vec::new();
+    glb.extend_from_slice(b"glTF");
+    glb.extend_from_slice(&2u32.to_le_bytes());
+    glb.extend_from_slice(&((12 + 8 + text.len() + 8 + bin.len()) as u32).to_le_bytes());
+    glb.extend_from_slice(&(text.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"JSON");
+    glb.extend_from_slice(&text);
+    glb.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"BIN\0");
+    glb.extend_from_slice(&bin);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("index.glb");
+    std::fs::write(&path, &glb).unwrap();
+    let e = read_mesh(&path)
+        .expect_err("index past the primitive")
+        .to_string();
+    assert!(
+        e.contains("index.glb") && e.contains("4294967295") && e.contains("3 vertices"),
+        "{e}"
+    );
+    // With an index in range both primitives read.
+    let at = glb.len() - 4;
+    glb[at..].copy_from_slice(&2u32.to_le_bytes());
+    std::fs::write(&path, &glb).unwrap();
+    let mesh = read_mesh(&path).unwrap();
+    assert_eq!(mesh.triangles, vec![[0, 1, 2], [3, 4, 5]]);
+}

@@ -230,7 +230,12 @@ fn read_gltf(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
                         .collect(),
                     ..TriMesh::default()
                 };
-                let n = piece.positions.len() as u32;
+                // Indices are offset by the vertices before this primitive: the total
+                // must fit u32.
+                let n = u32::try_from(piece.positions.len())
+                    .ok()
+                    .filter(|&n| n.checked_add(mesh.positions.len() as u32).is_some())
+                    .ok_or_else(|| bad("more than 2^32 vertices".into()))?;
                 if let Some(ns) = reader.read_normals() {
                     piece.normals = ns
                         .map(|v| {
@@ -243,6 +248,14 @@ fn read_gltf(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
                 match reader.read_indices() {
                     Some(ix) => {
                         let ix: Vec<u32> = ix.into_u32().collect();
+                        // Checked per primitive: once offset (TriMesh::append), an index
+                        // past this primitive would name another primitive's vertex, or
+                        // overflow.
+                        if let Some(&i) = ix.iter().find(|&&i| i >= n) {
+                            return Err(bad(format!(
+                                "primitive index {i} out of range (the primitive has {n} vertices)"
+                            )));
+                        }
                         piece.triangles = ix.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
                     }
                     None => {
