@@ -687,3 +687,26 @@ fn a_gltf_index_past_its_primitive_is_an_error() {
     let mesh = read_mesh(&path).unwrap();
     assert_eq!(mesh.triangles, vec![[0, 1, 2], [3, 4, 5]]);
 }
+
+#[test]
+fn a_vtk_mesh_point_count_whose_triple_overflows_is_an_error() {
+    // Found by fuzzing (mesh_vtk): 3·n overflowed (a panic with overflow checks). Without
+    // them it wrapped: this n made the reader take 10 values as the points and read a
+    // 3-vertex mesh from a file claiming 1.2·10^19 points.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("count.vtk");
+    let n: u64 = 12_297_829_382_473_034_414;
+    assert_eq!(n.wrapping_mul(3), 10);
+    std::fs::write(
+        &path,
+        format!(
+            "# vtk DataFile Version 3.0\nx\nASCII\nDATASET POLYDATA\nPOINTS {n} float\n0 0 0 1 0 0 0 1 0 7\nPOLYGONS 1 4\n3 0 1 2\n"
+        ),
+    )
+    .unwrap();
+    let e = read_mesh(&path).expect_err("overflowing count").to_string();
+    assert!(
+        e.contains("count.vtk") && e.contains("point count") && e.contains("overflows"),
+        "{e}"
+    );
+}

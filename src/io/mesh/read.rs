@@ -394,7 +394,11 @@ fn read_vtk(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
                 if binary.is_some() {
                     c.finish_line();
                 }
-                let v = c.values(npoints * 3, scalar, binary)?;
+                // Checked: a wrapped product would read a few values as the points.
+                let values = npoints
+                    .checked_mul(3)
+                    .ok_or_else(|| c.error(format!("the point count {n} overflows")))?;
+                let v = c.values(values, scalar, binary)?;
                 mesh.positions = v
                     .chunks_exact(3)
                     .map(|p| Vec3::new(p[0], p[1], p[2]))
