@@ -656,20 +656,7 @@ fn a_gltf_index_past_its_primitive_is_an_error() {
         ],
         "buffers": [{"byteLength": 60}]
     });
-    let mut text = serde_json::to_vec(&json).unwrap();
-    while text.len() % 4 != 0 {
-        text.push(b' ');
-    }
-    let mut glb = Vec::new();
-    glb.extend_from_slice(b"glTF");
-    glb.extend_from_slice(&2u32.to_le_bytes());
-    glb.extend_from_slice(&((12 + 8 + text.len() + 8 + bin.len()) as u32).to_le_bytes());
-    glb.extend_from_slice(&(text.len() as u32).to_le_bytes());
-    glb.extend_from_slice(b"JSON");
-    glb.extend_from_slice(&text);
-    glb.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-    glb.extend_from_slice(b"BIN\0");
-    glb.extend_from_slice(&bin);
+    let mut glb = glb_of(&json, &bin);
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("index.glb");
     std::fs::write(&path, &glb).unwrap();
@@ -709,4 +696,69 @@ fn a_vtk_mesh_point_count_whose_triple_overflows_is_an_error() {
         e.contains("count.vtk") && e.contains("point count") && e.contains("overflows"),
         "{e}"
     );
+}
+
+/// A GLB of `json` and the binary chunk `bin`.
+fn glb_of(json: &serde_json::Value, bin: &[u8]) -> Vec<u8> {
+    let mut text = serde_json::to_vec(json).unwrap();
+    while text.len() % 4 != 0 {
+        text.push(b' ');
+    }
+    let mut glb = Vec::new();
+    glb.extend_from_slice(b"glTF");
+    glb.extend_from_slice(&2u32.to_le_bytes());
+    glb.extend_from_slice(&((12 + 8 + text.len() + 8 + bin.len()) as u32).to_le_bytes());
+    glb.extend_from_slice(&(text.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"JSON");
+    glb.extend_from_slice(&text);
+    glb.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"BIN\0");
+    glb.extend_from_slice(bin);
+    glb
+}
+
+#[test]
+fn gltf_accessors_of_the_wrong_type_or_layout_are_errors() {
+    // Found by fuzzing (mesh_gltf): a NORMAL accessor of scalars tripped the gltf
+    // crate's debug assertion (12-byte items expected, 4 found); in release builds it
+    // read the scalars as vectors. A byte stride shorter than the element made its reader
+    // index out of range, in any build. Both are checked before reading.
+    let mut bin = Vec::new();
+    for v in [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    let document = |normal_type: &str, stride: Option<u32>| {
+        let mut view = serde_json::json!({"buffer": 0, "byteOffset": 0, "byteLength": 36});
+        if let Some(s) = stride {
+            view["byteStride"] = s.into();
+        }
+        serde_json::json!({
+            "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+            "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1}}]}],
+            "accessors": [
+                {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                 "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]},
+                {"bufferView": 1, "componentType": 5126, "count": 3, "type": normal_type}
+            ],
+            "bufferViews": [view, {"buffer": 0, "byteOffset": 0, "byteLength": 36}],
+            "buffers": [{"byteLength": 36}]
+        })
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("acc.glb");
+    for (normal_type, stride, what) in [
+        ("SCALAR", None, "NORMAL accessor 1"),
+        ("VEC3", Some(4), "POSITION accessor 0"),
+    ] {
+        std::fs::write(&path, glb_of(&document(normal_type, stride), &bin)).unwrap();
+        let e = std::panic::catch_unwind(|| read_mesh(&path))
+            .unwrap_or_else(|_| panic!("{what}: the reader panicked"))
+            .expect_err(what)
+            .to_string();
+        assert!(e.contains("acc.glb") && e.contains(what), "{e}");
+    }
+    // The same document with VEC3 normals and no stride reads.
+    std::fs::write(&path, glb_of(&document("VEC3", None), &bin)).unwrap();
+    assert_eq!(read_mesh(&path).unwrap().positions.len(), 3);
 }
