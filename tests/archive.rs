@@ -1762,3 +1762,298 @@ fn merging_a_version_4_input_gives_what_one_writer_gives() {
     assert!(merged.verify().is_clean());
     assert!(std::fs::read(p("merged.mseq")).unwrap() == std::fs::read(p("one.mseq")).unwrap());
 }
+
+/// A deterministic generator (xorshift), so that every run mutates the same way.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+}
+
+/// Recomputes the checksums of the records that follow each other from the file header
+/// on and of an index that ends at the trailer, so that a mutation reaches the frame
+/// decoders instead of stopping at a CRC mismatch.
+fn reseal(b: &mut [u8]) {
+    let u64_at = |b: &[u8], at: usize| u64::from_le_bytes(b[at..at + 8].try_into().unwrap());
+    let mut pos = 16;
+    while pos + 48 <= b.len() && &b[pos..pos + 4] == b"FRAM" {
+        let Some(end) = usize::try_from(u64_at(b, pos + 28))
+            .ok()
+            .and_then(|len| (pos + 48).checked_add(len))
+            .filter(|&end| end <= b.len())
+        else {
+            break;
+        };
+        let crc = crc32fast::hash(&b[pos + 48..end]);
+        b[pos + 36..pos + 40].copy_from_slice(&crc.to_le_bytes());
+        let crc = crc32fast::hash(&b[pos..pos + 44]);
+        b[pos + 44..pos + 48].copy_from_slice(&crc.to_le_bytes());
+        pos = end;
+    }
+    let len = b.len();
+    if len >= 48 && &b[len - 8..] == b"MSEQEND!" {
+        let index = usize::try_from(u64_at(b, len - 16)).unwrap_or(usize::MAX);
+        if index >= 16 && index.checked_add(16).is_some_and(|e| e <= len - 16) {
+            let crc = crc32fast::hash(&b[index..len - 20]);
+            b[len - 20..len - 16].copy_from_slice(&crc.to_le_bytes());
+        }
+    }
+}
+
+/// Opens `path` and decodes everything in it; every error names the file.
+fn read_everything(path: &Path, name: &str) {
+    let r = match ArchiveReader::open(path) {
+        Ok(r) => r,
+        Err(e) => return assert!(e.to_string().contains(name), "{e}"),
+    };
+    let numbers: Vec<i64> = r.frames().iter().map(|f| f.number).collect();
+    let report = r.verify();
+    assert!(report.good.len() + report.damaged.len() >= numbers.len());
+    for n in numbers {
+        match r.read_surface(n) {
+            Ok(s) => {
+                let v = s.fluid.positions.len() as u32;
+                assert!(s.fluid.triangles.iter().flatten().all(|&i| i < v));
+            }
+            Err(e) => assert!(e.to_string().contains(name), "{e}"),
+        }
+    }
+}
+
+#[test]
+fn mutated_archives_are_read_or_rejected_never_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.mseq");
+    // A frame with attributes, a Loop step and spheres, and a plain mesh: version 4.
+    let fluid = with_attributes(bumpy(1, 1.0));
+    let spheres = spheres_with_attributes(3);
+    let mut w = ArchiveWriter::create(&path, &ArchiveOptions::new(1e-3)).unwrap();
+    w.append_frame(
+        7,
+        &ArchiveFrame {
+            fluid: &fluid,
+            subdivision_levels: 1,
+            spheres: &spheres,
+        },
+    )
+    .unwrap();
+    w.append(8, &icosphere(0, 0.5)).unwrap();
+    w.finish().unwrap();
+    let base = std::fs::read(&path).unwrap();
+    assert!(base.len() < 8192, "{}", base.len());
+    assert_eq!(ArchiveReader::open(&path).unwrap().verify().good, [7, 8]);
+    let mut rng = Rng(0x6a09_e667_f3bc_c909);
+    for round in 0..5000 {
+        let mut b = base.clone();
+        match rng.below(4) {
+            0 => {
+                for _ in 0..1 + rng.below(4) {
+                    let i = rng.below(b.len());
+                    b[i] ^= 1 << rng.below(8);
+                }
+            }
+            1 => b.truncate(rng.below(b.len())),
+            2 => {
+                let i = rng.below(b.len() + 1);
+                let n = 1 + rng.below(8);
+                let bytes: Vec<u8> = (0..n).map(|_| rng.next() as u8).collect();
+                b.splice(i..i, bytes);
+            }
+            _ => {
+                // A header field or count: a little-endian u32 or u64 of extreme value.
+                let i = rng.below(b.len() - 8);
+                match rng.below(3) {
+                    0 => b[i..i + 4].copy_from_slice(&u32::MAX.to_le_bytes()),
+                    1 => b[i..i + 8]
+                        .copy_from_slice(&(u64::MAX - rng.below(64) as u64).to_le_bytes()),
+                    _ => b[i] = 0xff,
+                }
+            }
+        }
+        // Half the cases with their checksums recomputed, to reach the decoders.
+        if round % 2 == 1 {
+            reseal(&mut b);
+        }
+        std::fs::write(&path, &b).unwrap();
+        if std::panic::catch_unwind(|| read_everything(&path, "m.mseq")).is_err() {
+            let keep = std::env::temp_dir().join(format!("meniscus-crash-{round}-m.mseq"));
+            std::fs::write(&keep, &b).unwrap();
+            panic!(
+                "round {round}: reading a mutated archive panicked (kept as {})",
+                keep.display()
+            );
+        }
+    }
+}
+
+#[test]
+fn an_index_of_many_entries_over_many_records_opens_in_linear_time() {
+    // 400 000 empty records and an index listing each: matching every entry against
+    // every record (as the reader used to) is 8·10^10 comparisons.
+    let n = 400_000usize;
+    let mut bytes = Vec::with_capacity(16 + n * 64 + 36);
+    bytes.extend_from_slice(b"MNSCMSEQ");
+    bytes.extend_from_slice(&3u32.to_le_bytes());
+    bytes.extend_from_slice(&0u32.to_le_bytes());
+    let mut index = Vec::with_capacity(12 + 16 * n);
+    index.extend_from_slice(b"INDX");
+    index.extend_from_slice(&(n as u64).to_le_bytes());
+    for k in 0..n {
+        index.extend_from_slice(&(k as i64).to_le_bytes());
+        index.extend_from_slice(&(bytes.len() as u64).to_le_bytes());
+        let mut h = Vec::with_capacity(48);
+        h.extend_from_slice(b"FRAM");
+        h.extend_from_slice(&(k as i64).to_le_bytes());
+        h.extend_from_slice(&[0; 8]); // vertices, triangles
+        h.extend_from_slice(&1e-3f64.to_le_bytes());
+        h.extend_from_slice(&0u64.to_le_bytes()); // payload length
+        h.extend_from_slice(&crc32fast::hash(&[]).to_le_bytes());
+        h.extend_from_slice(&0u32.to_le_bytes());
+        h.extend_from_slice(&crc32fast::hash(&h).to_le_bytes());
+        bytes.extend_from_slice(&h);
+    }
+    let index_offset = bytes.len() as u64;
+    let crc = crc32fast::hash(&index);
+    bytes.extend_from_slice(&index);
+    bytes.extend_from_slice(&crc.to_le_bytes());
+    bytes.extend_from_slice(&index_offset.to_le_bytes());
+    bytes.extend_from_slice(b"MSEQEND!");
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("many.mseq");
+    std::fs::write(&path, &bytes).unwrap();
+    let start = std::time::Instant::now();
+    let r = ArchiveReader::open(&path).unwrap();
+    let took = start.elapsed();
+    assert!(!r.recovered_by_scan());
+    assert_eq!(r.frames().len(), n);
+    // Linear: well under a second; quadratic: minutes.
+    assert!(took.as_secs() < 30, "opening took {took:?}");
+}
+
+/// The first record's decompressed payload (`raw` of src/archive/frame.rs) and its
+/// header's vertex and triangle counts.
+fn first_raw(path: &Path) -> (Vec<u8>, u32, u32) {
+    let b = std::fs::read(path).unwrap();
+    let u32_at = |at: usize| u32::from_le_bytes(b[at..at + 4].try_into().unwrap());
+    let len = u64::from_le_bytes(b[16 + 28..16 + 36].try_into().unwrap()) as usize;
+    let raw = zstd::bulk::decompress(&b[64..64 + len], 1 << 24).unwrap();
+    (raw, u32_at(16 + 12), u32_at(16 + 16))
+}
+
+fn read_varint(raw: &[u8], pos: &mut usize) -> u64 {
+    let (mut v, mut shift) = (0u64, 0);
+    loop {
+        let b = raw[*pos];
+        *pos += 1;
+        v |= ((b & 0x7f) as u64) << shift;
+        if b < 0x80 {
+            return v;
+        }
+        shift += 7;
+    }
+}
+
+/// Moves `pos` past the three length-prefixed streams of a mesh.
+fn skip_streams(raw: &[u8], pos: &mut usize) {
+    for _ in 0..3 {
+        let len = read_varint(raw, pos) as usize;
+        *pos += len;
+    }
+}
+
+/// `raw` with the position stream of the mesh whose streams start at `*pos` replaced by
+/// `n` residuals of `value` each.
+fn replace_residuals(raw: &[u8], mut pos: usize, n: usize, value: u64) -> Vec<u8> {
+    for _ in 0..2 {
+        let len = read_varint(raw, &mut pos) as usize;
+        pos += len;
+    }
+    let start = pos;
+    let len = read_varint(raw, &mut pos) as usize;
+    pos += len;
+    let residuals = varints(&vec![value; n]);
+    let mut out = raw[..start].to_vec();
+    out.extend(varints(&[residuals.len() as u64]));
+    out.extend(residuals);
+    out.extend_from_slice(&raw[pos..]);
+    out
+}
+
+#[test]
+fn lattice_coordinates_that_overflow_are_decoded_or_refused_never_panic() {
+    // Found by fuzzing (archive_payload): residuals of ±2^63 made `prediction + residual`
+    // overflow i64 in the fused Loop decoder (a panic with overflow checks, as `cargo
+    // test` builds; wrapped garbage otherwise). Predictions and residuals are now modular
+    // on both sides, and a frame decoding to coordinates beyond f32 is refused.
+    let dir = tempfile::tempdir().unwrap();
+    let zigzag_max = u64::MAX - 1; // zigzag(i64::MAX)
+    let spheres = SphereInstances {
+        template: icosphere(0, 0.1),
+        centers: vec![glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y],
+        attributes: Vec::new(),
+    };
+    let none = SphereInstances::default();
+    let closed = icosphere(0, 1.0);
+    let mut open = icosphere(0, 1.0);
+    open.triangles.truncate(5);
+    // (fluid, Loop steps, spheres, what is damaged): the fused Loop decoder (closed mesh,
+    // one step), the plain stream decoder (open mesh), the sphere centres.
+    for (fluid, levels, spheres, centres) in [
+        (&closed, 1, &none, false),
+        (&open, 0, &none, false),
+        (&closed, 0, &spheres, true),
+    ] {
+        let path = dir.path().join("real.mseq");
+        let mut w = ArchiveWriter::create(&path, &ArchiveOptions::new(1e-3)).unwrap();
+        let frame = ArchiveFrame {
+            fluid,
+            subdivision_levels: levels,
+            spheres,
+        };
+        w.append_frame(0, &frame).unwrap();
+        w.finish().unwrap();
+        let (raw, vertices, triangles) = first_raw(&path);
+        let mut pos = 0;
+        let _levels = read_varint(&raw, &mut pos);
+        pos += 1; // shape
+        let fluid_vertices = read_varint(&raw, &mut pos) as usize;
+        let _ = read_varint(&raw, &mut pos);
+        let damaged = if centres {
+            let mut raw = raw.clone();
+            skip_streams(&raw, &mut pos);
+            let count = read_varint(&raw, &mut pos) as usize;
+            let _template_counts = (read_varint(&raw, &mut pos), read_varint(&raw, &mut pos));
+            skip_streams(&raw, &mut pos);
+            let centres = varints(&vec![zigzag_max; 3 * count]);
+            raw.truncate(pos);
+            raw.extend(centres);
+            raw
+        } else {
+            replace_residuals(&raw, pos, 3 * fluid_vertices, zigzag_max)
+        };
+        // A step of 1e-3 keeps the wrapped coordinates within f32, one of f32::MAX
+        // does not: decoded or refused, never a panic.
+        for (step, refused) in [(2e-3, false), (f32::MAX as f64, true)] {
+            let payload = zstd::bulk::compress(&damaged, 3).unwrap();
+            let path = hostile_archive(dir.path(), &payload, vertices, triangles, step);
+            let r = ArchiveReader::open(&path).unwrap();
+            let result = r.read_surface(0);
+            if refused {
+                let e = result.unwrap_err().to_string();
+                assert!(
+                    e.contains("hostile.mseq") && e.contains("frame 0") && e.contains("beyond f32"),
+                    "{e}"
+                );
+            } else if let Err(e) = result {
+                panic!("levels {levels}, centres {centres}: {e}");
+            }
+        }
+    }
+}

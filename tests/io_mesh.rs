@@ -822,3 +822,142 @@ fn a_gltf_scene_that_would_walk_or_allocate_without_end_is_an_error() {
     let e = gltf_error(&doc);
     assert!(e.contains("instantiates 4300000000 vertices"), "{e}");
 }
+
+#[test]
+fn a_gltf_index_past_its_primitive_is_an_error() {
+    // Found by fuzzing (mesh_gltf): the second primitive's index 2^32 − 1, offset by the
+    // first primitive's 3 vertices, overflowed (a panic with overflow checks; without,
+    // it wrapped to vertex 2 and the file read as a mesh it does not hold).
+    let mut bin = Vec::new();
+    for v in [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    for i in [0u32, 1, 2, 0, 1, u32::MAX] {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    let json = serde_json::json!({
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [
+            {"attributes": {"POSITION": 0}, "indices": 1},
+            {"attributes": {"POSITION": 0}, "indices": 2}
+        ]}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+             "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]},
+            {"bufferView": 1, "componentType": 5125, "count": 3, "type": "SCALAR"},
+            {"bufferView": 2, "componentType": 5125, "count": 3, "type": "SCALAR"}
+        ],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 36},
+            {"buffer": 0, "byteOffset": 36, "byteLength": 12},
+            {"buffer": 0, "byteOffset": 48, "byteLength": 12}
+        ],
+        "buffers": [{"byteLength": 60}]
+    });
+    let mut glb = glb_of(&json, &bin);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("index.glb");
+    std::fs::write(&path, &glb).unwrap();
+    let e = read_mesh(&path)
+        .expect_err("index past the primitive")
+        .to_string();
+    assert!(
+        e.contains("index.glb") && e.contains("4294967295") && e.contains("3 vertices"),
+        "{e}"
+    );
+    // With an index in range both primitives read.
+    let at = glb.len() - 4;
+    glb[at..].copy_from_slice(&2u32.to_le_bytes());
+    std::fs::write(&path, &glb).unwrap();
+    let mesh = read_mesh(&path).unwrap();
+    assert_eq!(mesh.triangles, vec![[0, 1, 2], [3, 4, 5]]);
+}
+
+#[test]
+fn a_vtk_mesh_point_count_whose_triple_overflows_is_an_error() {
+    // Found by fuzzing (mesh_vtk): 3·n overflowed (a panic with overflow checks). Without
+    // them it wrapped: this n made the reader take 10 values as the points and read a
+    // 3-vertex mesh from a file claiming 1.2·10^19 points.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("count.vtk");
+    let n: u64 = 12_297_829_382_473_034_414;
+    assert_eq!(n.wrapping_mul(3), 10);
+    std::fs::write(
+        &path,
+        format!(
+            "# vtk DataFile Version 3.0\nx\nASCII\nDATASET POLYDATA\nPOINTS {n} float\n0 0 0 1 0 0 0 1 0 7\nPOLYGONS 1 4\n3 0 1 2\n"
+        ),
+    )
+    .unwrap();
+    let e = read_mesh(&path).expect_err("overflowing count").to_string();
+    assert!(
+        e.contains("count.vtk") && e.contains("point count") && e.contains("overflows"),
+        "{e}"
+    );
+}
+
+/// A GLB of `json` and the binary chunk `bin`.
+fn glb_of(json: &serde_json::Value, bin: &[u8]) -> Vec<u8> {
+    let mut text = serde_json::to_vec(json).unwrap();
+    while text.len() % 4 != 0 {
+        text.push(b' ');
+    }
+    let mut glb = Vec::new();
+    glb.extend_from_slice(b"glTF");
+    glb.extend_from_slice(&2u32.to_le_bytes());
+    glb.extend_from_slice(&((12 + 8 + text.len() + 8 + bin.len()) as u32).to_le_bytes());
+    glb.extend_from_slice(&(text.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"JSON");
+    glb.extend_from_slice(&text);
+    glb.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    glb.extend_from_slice(b"BIN\0");
+    glb.extend_from_slice(bin);
+    glb
+}
+
+#[test]
+fn gltf_accessors_of_the_wrong_type_or_layout_are_errors() {
+    // Found by fuzzing (mesh_gltf): a NORMAL accessor of scalars tripped the gltf
+    // crate's debug assertion (12-byte items expected, 4 found); in release builds it
+    // read the scalars as vectors. A byte stride shorter than the element made its reader
+    // index out of range, in any build. Both are checked before reading.
+    let mut bin = Vec::new();
+    for v in [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    let document = |normal_type: &str, stride: Option<u32>| {
+        let mut view = serde_json::json!({"buffer": 0, "byteOffset": 0, "byteLength": 36});
+        if let Some(s) = stride {
+            view["byteStride"] = s.into();
+        }
+        serde_json::json!({
+            "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+            "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1}}]}],
+            "accessors": [
+                {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                 "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]},
+                {"bufferView": 1, "componentType": 5126, "count": 3, "type": normal_type}
+            ],
+            "bufferViews": [view, {"buffer": 0, "byteOffset": 0, "byteLength": 36}],
+            "buffers": [{"byteLength": 36}]
+        })
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("acc.glb");
+    for (normal_type, stride, what) in [
+        ("SCALAR", None, "accessor 1 (SCALAR"),
+        ("VEC3", Some(4), "accessors[0]: buffer view 0 has byteStride 4"),
+    ] {
+        std::fs::write(&path, glb_of(&document(normal_type, stride), &bin)).unwrap();
+        let e = std::panic::catch_unwind(|| read_mesh(&path))
+            .unwrap_or_else(|_| panic!("{what}: the reader panicked"))
+            .expect_err(what)
+            .to_string();
+        assert!(e.contains("acc.glb") && e.contains(what), "{e}");
+    }
+    // The same document with VEC3 normals and no stride reads.
+    std::fs::write(&path, glb_of(&document("VEC3", None), &bin)).unwrap();
+    assert_eq!(read_mesh(&path).unwrap().positions.len(), 3);
+}

@@ -72,13 +72,16 @@ pub(crate) enum Prediction {
 }
 
 impl Prediction {
+    /// The predicted lattice coordinates. Predictions and residuals are computed modulo
+    /// 2^64 (wrapping) on both sides: exact for every coordinate, and a damaged stream
+    /// decodes to some coordinates instead of overflowing.
     pub(crate) fn resolve(self, q: &[[i64; 3]]) -> [i64; 3] {
         match self {
             Prediction::Origin => [0; 3],
             Prediction::Vertex(v) => q[v as usize],
             Prediction::Parallelogram(a, b, c) => {
                 let (a, b, c) = (q[a as usize], q[b as usize], q[c as usize]);
-                [0, 1, 2].map(|k| a[k] + b[k] - c[k])
+                [0, 1, 2].map(|k| a[k].wrapping_add(b[k]).wrapping_sub(c[k]))
             }
         }
     }
@@ -294,7 +297,7 @@ impl HalfEdges {
         for (v, q) in quantized.iter().enumerate() {
             let pred = numbering.plan[v].resolve(&quantized);
             for k in 0..3 {
-                put_varint(&mut residuals, zigzag(q[k] - pred[k]));
+                put_varint(&mut residuals, zigzag(q[k].wrapping_sub(pred[k])));
             }
         }
         out.reserve(flags.len() + codes.len() + residuals.len() + 16);
@@ -536,7 +539,7 @@ pub(crate) fn decode_streams(
         let mut q = [0i64; 3];
         for k in 0..3 {
             let d = get_varint(residual_bytes, &mut rpos).ok_or("position stream ends early")?;
-            q[k] = pred[k] + unzigzag(d);
+            q[k] = pred[k].wrapping_add(unzigzag(d));
         }
         quantized.push(q);
     }

@@ -159,7 +159,7 @@ pub(crate) fn encode_frame(
         for c in &spheres.centers {
             let q = c.to_array().map(|x| (x as f64 / half).round() as i64);
             for k in 0..3 {
-                put_varint(&mut raw, zigzag(q[k] - previous[k]));
+                put_varint(&mut raw, zigzag(q[k].wrapping_sub(previous[k])));
             }
             previous = q;
         }
@@ -270,7 +270,8 @@ pub(crate) fn decode_frame(
         let mut q = [0i64; 3];
         for _ in 0..count {
             for c in &mut q {
-                *c += unzigzag(get_varint(&raw, pos).ok_or("sphere centres cut off")?);
+                let d = get_varint(&raw, pos).ok_or("sphere centres cut off")?;
+                *c = c.wrapping_add(unzigzag(d));
             }
             spheres
                 .centers

@@ -76,7 +76,7 @@ impl State<'_> {
         for k in 0..3 {
             let r =
                 get_varint(self.residuals, &mut self.rpos).ok_or("position stream ends early")?;
-            q[k] = pred[k] + unzigzag(r);
+            q[k] = pred[k].wrapping_add(unzigzag(r));
         }
         self.quantized.push(q);
         let p = Vec3::from_array(q.map(|c| (c as f64 * self.step) as f32));

@@ -331,6 +331,33 @@ fn claimed_frame(bytes: &[u8], pos: usize) -> String {
     }
 }
 
+/// A decoded frame whose coordinates or attribute values are not all finite f32s: lattice
+/// coordinates a writer cannot produce (a crafted record), refused rather than returned.
+fn check_decoded(s: Surface) -> std::result::Result<Surface, String> {
+    let positions = [
+        ("fluid vertex", &s.fluid.positions),
+        ("sphere template vertex", &s.spheres.template.positions),
+        ("sphere centre", &s.spheres.centers),
+    ];
+    for (what, list) in positions {
+        if let Some(i) = list.iter().position(|p| !p.is_finite()) {
+            return Err(format!(
+                "{what} {i} decodes to {}: coordinates beyond f32 (damaged record)",
+                list[i]
+            ));
+        }
+    }
+    for a in s.fluid.attributes.iter().chain(&s.spheres.attributes) {
+        if let Some(i) = a.values.iter().position(|v| !v.is_finite()) {
+            return Err(format!(
+                "attribute {:?}: value {i} decodes to {}: beyond f32 (damaged record)",
+                a.name, a.values[i]
+            ));
+        }
+    }
+    Ok(s)
+}
+
 /// Reads an archive.
 pub struct ArchiveReader {
     path: PathBuf,
@@ -466,15 +493,22 @@ impl ArchiveReader {
     /// Takes the frames from a valid index and checks it against the records before it.
     fn use_index(&mut self, index_offset: usize, entries: &[(i64, u64)]) {
         let spans = scan_records(&self.bytes, index_offset);
+        // By start offset (spans start at distinct, increasing offsets): looking each
+        // entry up must not walk every span, or an index of many entries over many
+        // records takes quadratic time.
+        let at: std::collections::HashMap<u64, &Span> = spans
+            .iter()
+            .map(|s| match s {
+                Span::Record(p, _) | Span::Damaged(p, _) => (*p as u64, s),
+            })
+            .collect();
         let mut indexed = std::collections::HashSet::new();
         for &(number, offset) in entries {
             indexed.insert(offset);
-            let found = usize::try_from(offset).ok().and_then(|o| {
-                spans.iter().find_map(|s| match s {
-                    Span::Record(p, h) if *p == o => Some((o, h)),
-                    _ => None,
-                })
-            });
+            let found = match at.get(&offset) {
+                Some(Span::Record(p, h)) => Some((*p, h)),
+                _ => None,
+            };
             match found {
                 Some((o, h)) if h.number == number => {
                     let h = h.clone();
@@ -490,9 +524,7 @@ impl ArchiveReader {
                     ),
                 }),
                 None => {
-                    let at_damaged = spans
-                        .iter()
-                        .any(|s| matches!(s, Span::Damaged(p, _) if *p as u64 == offset));
+                    let at_damaged = matches!(at.get(&offset), Some(Span::Damaged(..)));
                     self.damage.push(if at_damaged {
                         Damage {
                             kind: DamageKind::Record,
@@ -725,6 +757,7 @@ impl ArchiveReader {
                 "record flags {flags:#x} unknown to this build in a version-{version} archive"
             )),
         }
+        .and_then(check_decoded)
         .map_err(|m| archive_error(&self.path, Some(f.number), m))
     }
 

@@ -231,9 +231,15 @@ fn read_layout(
         let count = read_count(raw, pos, "copy count", spans[p].vertices as u64)?;
         let (mut previous, mut previous_there) = (0u64, 0i64);
         for i in 0..count {
-            let k = previous + get_varint(raw, pos).ok_or("copy list cut off")?;
+            let k = get_varint(raw, pos).ok_or("copy list cut off")?;
             let back = get_varint(raw, pos).ok_or("copy list cut off")?;
-            let there = previous_there + unzigzag(get_varint(raw, pos).ok_or("copy list cut off")?);
+            let there = get_varint(raw, pos).ok_or("copy list cut off")?;
+            let (Some(k), Some(there)) = (
+                previous.checked_add(k),
+                previous_there.checked_add(unzigzag(there)),
+            ) else {
+                return Err(format!("part {p}: copy {i} is out of range"));
+            };
             if (i > 0 && k == previous) || k >= spans[p].vertices as u64 || back >= p as u64 {
                 return Err(format!("part {p}: copy {i} is out of range"));
             }

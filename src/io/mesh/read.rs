@@ -229,6 +229,26 @@ fn read_gltf(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
                 if prim.mode() != gltf::mesh::Mode::Triangles {
                     continue;
                 }
+                // The gltf crate's readers assume accessors of the right type and
+                // layout (they panic otherwise): checked first.
+                use gltf::accessor::{DataType, Dimensions};
+                let position = prim
+                    .get(&gltf::Semantic::Positions)
+                    .ok_or_else(|| bad("a primitive has no POSITION".into()))?;
+                check_accessor(
+                    path,
+                    &position,
+                    "POSITION",
+                    Dimensions::Vec3,
+                    &[DataType::F32],
+                )?;
+                if let Some(a) = prim.get(&gltf::Semantic::Normals) {
+                    check_accessor(path, &a, "NORMAL", Dimensions::Vec3, &[DataType::F32])?;
+                }
+                if let Some(a) = prim.indices() {
+                    let types = [DataType::U8, DataType::U16, DataType::U32];
+                    check_accessor(path, &a, "indices", Dimensions::Scalar, &types)?;
+                }
                 let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
                 let mut piece = TriMesh {
                     positions: reader
@@ -238,7 +258,12 @@ fn read_gltf(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
                         .collect(),
                     ..TriMesh::default()
                 };
-                let n = piece.positions.len() as u32;
+                // Indices are offset by the vertices before this primitive: the total
+                // must fit u32.
+                let n = u32::try_from(piece.positions.len())
+                    .ok()
+                    .filter(|&n| n.checked_add(mesh.positions.len() as u32).is_some())
+                    .ok_or_else(|| bad("more than 2^32 vertices".into()))?;
                 if let Some(ns) = reader.read_normals() {
                     piece.normals = ns
                         .map(|v| {
@@ -251,6 +276,14 @@ fn read_gltf(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
                 match reader.read_indices() {
                     Some(ix) => {
                         let ix: Vec<u32> = ix.into_u32().collect();
+                        // Checked per primitive: once offset (TriMesh::append), an index
+                        // past this primitive would name another primitive's vertex, or
+                        // overflow.
+                        if let Some(&i) = ix.iter().find(|&&i| i >= n) {
+                            return Err(bad(format!(
+                                "primitive index {i} out of range (the primitive has {n} vertices)"
+                            )));
+                        }
                         piece.triangles = ix.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
                     }
                     None => {
@@ -271,6 +304,51 @@ fn read_gltf(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
         }
     }
     Ok(mesh)
+}
+
+/// Refuses an accessor the gltf crate's readers would panic on: another element type than
+/// `dimensions` of one of `types`, no elements, a buffer-view stride shorter than an
+/// element, or (sparse) no substituted elements.
+fn check_accessor(
+    path: &Path,
+    accessor: &gltf::Accessor,
+    what: &str,
+    dimensions: gltf::accessor::Dimensions,
+    types: &[gltf::accessor::DataType],
+) -> Result<()> {
+    let fail = |m: String| {
+        Err(Error::parse(
+            path,
+            "glTF",
+            format!("{what} accessor {}: {m}", accessor.index()),
+        ))
+    };
+    if accessor.dimensions() != dimensions || !types.contains(&accessor.data_type()) {
+        return fail(format!(
+            "elements of {:?} {:?}, expected {dimensions:?} of {types:?}",
+            accessor.dimensions(),
+            accessor.data_type()
+        ));
+    }
+    if accessor.count() == 0 {
+        return fail("no elements".into());
+    }
+    let short = |view: Option<gltf::buffer::View>, size: usize| {
+        view.and_then(|v| v.stride()).is_some_and(|s| s < size)
+    };
+    if short(accessor.view(), accessor.size()) {
+        return fail("buffer view stride shorter than an element".into());
+    }
+    if let Some(sparse) = accessor.sparse() {
+        let index_size = sparse.indices().index_type().size();
+        if sparse.count() == 0
+            || short(Some(sparse.indices().view()), index_size)
+            || short(Some(sparse.values().view()), accessor.size())
+        {
+            return fail("malformed sparse storage".into());
+        }
+    }
+    Ok(())
 }
 
 /// The application-specific float attributes (`_NAME`) of a primitive with `vertices`
@@ -300,6 +378,14 @@ fn gltf_attributes(
         if accessor.data_type() != DataType::F32 {
             continue;
         }
+        let dimensions = accessor.dimensions();
+        check_accessor(
+            path,
+            &accessor,
+            &format!("_{name}"),
+            dimensions,
+            &[DataType::F32],
+        )?;
         if accessor.count() != vertices {
             return Err(Error::parse(
                 path,
@@ -389,7 +475,11 @@ fn read_vtk(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
                 if binary.is_some() {
                     c.finish_line();
                 }
-                let v = c.values(npoints * 3, scalar, binary)?;
+                // Checked: a wrapped product would read a few values as the points.
+                let values = npoints
+                    .checked_mul(3)
+                    .ok_or_else(|| c.error(format!("the point count {n} overflows")))?;
+                let v = c.values(values, scalar, binary)?;
                 mesh.positions = v
                     .chunks_exact(3)
                     .map(|p| Vec3::new(p[0], p[1], p[2]))

@@ -1,0 +1,85 @@
+//! `.mseq` archive reader: `ArchiveReader::open`, `frames()`, `verify()` and decoding
+//! every frame, on the input as it is and on a copy whose checksums are recomputed
+//! ("resealed"), so that mutations reach the frame decoders behind the CRC-32 checks.
+#![no_main]
+
+#[path = "../common/mod.rs"]
+mod common;
+
+use libfuzzer_sys::fuzz_target;
+use meniscus::archive::ArchiveReader;
+
+const HEADER_LEN: usize = 16;
+const RECORD_HEADER_LEN: usize = 48;
+
+fn u64_at(b: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(b[at..at + 8].try_into().unwrap())
+}
+
+/// Recomputes the payload and header checksums of the records that follow each other
+/// from the file header on, and the index checksum when the trailer points at an index
+/// that ends where the trailer starts (docs/archive-format.md).
+fn reseal(bytes: &mut [u8]) {
+    let mut pos = HEADER_LEN;
+    while pos + RECORD_HEADER_LEN <= bytes.len() && &bytes[pos..pos + 4] == b"FRAM" {
+        let start = pos + RECORD_HEADER_LEN;
+        let Some(end) = usize::try_from(u64_at(bytes, pos + 28))
+            .ok()
+            .and_then(|len| start.checked_add(len))
+            .filter(|&end| end <= bytes.len())
+        else {
+            break;
+        };
+        let crc = crc32fast::hash(&bytes[start..end]);
+        bytes[pos + 36..pos + 40].copy_from_slice(&crc.to_le_bytes());
+        let crc = crc32fast::hash(&bytes[pos..pos + 44]);
+        bytes[pos + 44..pos + 48].copy_from_slice(&crc.to_le_bytes());
+        pos = end;
+    }
+    let len = bytes.len();
+    if len >= HEADER_LEN + 32 && &bytes[len - 8..] == b"MSEQEND!" {
+        let index = usize::try_from(u64_at(bytes, len - 16)).unwrap_or(usize::MAX);
+        if index >= HEADER_LEN
+            && index.checked_add(16).is_some_and(|end| end <= len - 16)
+            && &bytes[index..index + 4] == b"INDX"
+        {
+            let crc = crc32fast::hash(&bytes[index..len - 20]);
+            bytes[len - 20..len - 16].copy_from_slice(&crc.to_le_bytes());
+        }
+    }
+}
+
+fn read(name: &str, data: &[u8]) {
+    let path = common::input_file(name, data);
+    let reader = match ArchiveReader::open(&path) {
+        Ok(r) => r,
+        Err(e) => return common::check_error(&path, &e),
+    };
+    let numbers: Vec<i64> = reader.frames().iter().map(|f| f.number).collect();
+    let report = reader.verify();
+    assert!(
+        report.good.len() + report.damaged.len() >= numbers.len(),
+        "verify lost frames"
+    );
+    for n in numbers {
+        match reader.read_frame(n) {
+            Ok(mesh) => {
+                let v = mesh.positions.len() as u32;
+                assert!(mesh.triangles.iter().flatten().all(|&i| i < v));
+            }
+            Err(e) => common::check_error(&path, &e),
+        }
+    }
+}
+
+fuzz_target!(|data: &[u8]| {
+    // One decoding thread: the fuzzer runs beside other work.
+    static ONE_THREAD: std::sync::Once = std::sync::Once::new();
+    ONE_THREAD.call_once(|| std::env::set_var("RAYON_NUM_THREADS", "1"));
+    read("input.mseq", data);
+    let mut resealed = data.to_vec();
+    reseal(&mut resealed);
+    if resealed != data {
+        read("resealed.mseq", &resealed);
+    }
+});

@@ -1,0 +1,11 @@
+//! Mesh reader, ply: `read_mesh` on a `.ply` file.
+#![no_main]
+
+#[path = "../common/mod.rs"]
+mod common;
+
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    common::mesh::run("input.ply", data);
+});

@@ -1,0 +1,12 @@
+//! Particle reader, bgeo: `read_particles`, the streaming reader and the spooled source.
+#![no_main]
+
+#[path = "../common/mod.rs"]
+mod common;
+
+use libfuzzer_sys::fuzz_target;
+use meniscus::io::particles::ParticleFormat;
+
+fuzz_target!(|data: &[u8]| {
+    common::particles::run("input.bgeo", ParticleFormat::Bgeo, data);
+});
