@@ -948,7 +948,11 @@ fn gltf_accessors_of_the_wrong_type_or_layout_are_errors() {
     let path = dir.path().join("acc.glb");
     for (normal_type, stride, what) in [
         ("SCALAR", None, "accessor 1 (SCALAR"),
-        ("VEC3", Some(4), "accessors[0]: buffer view 0 has byteStride 4"),
+        (
+            "VEC3",
+            Some(4),
+            "accessors[0]: buffer view 0 has byteStride 4",
+        ),
     ] {
         std::fs::write(&path, glb_of(&document(normal_type, stride), &bin)).unwrap();
         let e = std::panic::catch_unwind(|| read_mesh(&path))
