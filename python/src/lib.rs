@@ -7,12 +7,16 @@
 #![allow(clippy::useless_conversion)]
 
 use glam::Vec3;
+use meniscus::archive::{ArchiveFrame, ArchiveOptions, ArchiveReader, ArchiveWriter};
+use meniscus::attributes::AttributeSelection;
 use meniscus::attributes::{Attribute, AttributeLayout};
 use meniscus::decimation::DecimateOptions;
 use meniscus::io::mesh::{write_surface, MeshWriteOptions};
 use meniscus::io::particles::{ParticleChunk, ParticleSource};
+use meniscus::job::{plan_frames, run_frames, JobOptions};
 use meniscus::mesh::{Surface, TriMesh};
 use meniscus::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
+use meniscus::sequence::FrameChoice;
 use meniscus::{CancelToken, Error};
 use numpy::ndarray::Array2;
 use numpy::{
@@ -20,10 +24,10 @@ use numpy::{
 };
 use pyo3::create_exception;
 use pyo3::exceptions::{
-    PyFileExistsError, PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError,
+    PyFileExistsError, PyKeyError, PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError,
 };
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::PyDict;
 use std::path::PathBuf;
 use std::sync::mpsc;
 use std::time::Duration;
@@ -272,9 +276,11 @@ fn attribute_of(name: String, array: &Bound<'_, PyAny>, count: usize) -> PyResul
     let components = match shape.as_slice() {
         [n] if *n == count => 1,
         [n, k] if *n == count && *k > 0 => *k,
-        _ => return Err(PyValueError::new_err(format!(
+        _ => {
+            return Err(PyValueError::new_err(format!(
             "invalid attributes: {name:?} has shape {shape:?}; expected ({count},) or ({count}, k)"
-        ))),
+        )))
+        }
     };
     let values = a.as_slice()?.to_vec();
     if let Some(i) = values.iter().position(|v| !v.is_finite()) {
@@ -349,15 +355,22 @@ struct Mesh {
     surface: Surface,
     merged: TriMesh,
     stats: Option<ReconstructionStats>,
+    /// The particle radius it was reconstructed with (unknown for an archive's frame).
+    particle_radius: Option<f32>,
 }
 
 impl Mesh {
-    fn new(surface: Surface, stats: Option<ReconstructionStats>) -> Self {
+    fn new(
+        surface: Surface,
+        stats: Option<ReconstructionStats>,
+        particle_radius: Option<f32>,
+    ) -> Self {
         let merged = surface.merged();
         Mesh {
             surface,
             merged,
             stats,
+            particle_radius,
         }
     }
 }
@@ -522,7 +535,7 @@ fn reconstruct(
             reconstruct_source(source, &options, &|_| {}, cancel)
         })
     })?;
-    Ok(Mesh::new(surface, Some(stats)))
+    Ok(Mesh::new(surface, Some(stats), Some(particle_radius)))
 }
 
 fn check_threads(threads: Option<usize>) -> PyResult<()> {
@@ -534,6 +547,265 @@ fn check_threads(threads: Option<usize>) -> PyResult<()> {
     Ok(())
 }
 
+/// Reads a particle file (.xyz, .vtk, .ply, .bgeo, by extension): positions (N, 3)
+/// float32 and every point attribute, name → (N,) or (N, k) float32.
+#[pyfunction]
+fn read_particles<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+) -> PyResult<(Bound<'py, PyArray2<f32>>, Bound<'py, PyDict>)> {
+    let particles =
+        run_interruptible(py, |_| meniscus::io::particles::read_particles(&path, None))?;
+    let attributes = PyDict::new_bound(py);
+    for a in &particles.attributes {
+        attributes.set_item(&a.name, attribute_array(py, a))?;
+    }
+    Ok((vec3s(py, &particles.positions), attributes))
+}
+
+/// The attribute selection of the CLI's --attributes: None (velocity when the input has
+/// one), "none", "all", "a,b" or a list of names.
+fn selection(attributes: Option<&Bound<'_, PyAny>>) -> PyResult<AttributeSelection> {
+    let bad = |e: String| PyValueError::new_err(format!("invalid attributes: {e}"));
+    match attributes {
+        None => Ok(AttributeSelection::default()),
+        Some(a) if a.is_none() => Ok(AttributeSelection::default()),
+        Some(a) => {
+            if let Ok(text) = a.extract::<String>() {
+                text.parse().map_err(bad)
+            } else if let Ok(names) = a.extract::<Vec<String>>() {
+                if names.is_empty() {
+                    Ok(AttributeSelection::None)
+                } else {
+                    Ok(AttributeSelection::Names(names))
+                }
+            } else {
+                Err(bad(
+                    "\"none\", \"all\", \"a,b\" or a list of names".to_string()
+                ))
+            }
+        }
+    }
+}
+
+/// Reconstructs a particle file (or a `{}` frame sequence) into `output` as the CLI's
+/// `meniscus reconstruct INPUT -o OUTPUT` does (a mesh file, a `{}` pattern of them, a
+/// `.mseq` archive or one `.glb` for a sequence). Returns one report per frame (dicts as
+/// the CLI's `--stats` JSON).
+#[pyfunction]
+#[pyo3(signature = (input, output, particle_radius, *, attributes = None,
+    influence_radius = 4.0, cell_size = 1.0, decimate = Some(0.8), subdivide = 1,
+    isolated_spheres = Some(2), iso_offset = 0.0, threads = None, memory_budget = None,
+    normals = true, skip_existing = false, error_bound = None,
+    attribute_error_bound = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND, fps = 24.0))]
+#[allow(clippy::too_many_arguments)]
+fn reconstruct_file<'py>(
+    py: Python<'py>,
+    input: String,
+    output: String,
+    particle_radius: f32,
+    attributes: Option<&Bound<'_, PyAny>>,
+    influence_radius: f32,
+    cell_size: f32,
+    decimate: Option<f32>,
+    subdivide: u32,
+    isolated_spheres: Option<u32>,
+    iso_offset: f32,
+    threads: Option<usize>,
+    memory_budget: Option<&Bound<'_, PyAny>>,
+    normals: bool,
+    skip_existing: bool,
+    error_bound: Option<f64>,
+    attribute_error_bound: f64,
+    fps: f32,
+) -> PyResult<Bound<'py, PyAny>> {
+    check_threads(threads)?;
+    if !(fps.is_finite() && fps > 0.0) {
+        return Err(PyValueError::new_err(format!(
+            "invalid fps: must be > 0 (frames per second), got {fps}"
+        )));
+    }
+    let options = options(
+        particle_radius,
+        influence_radius,
+        cell_size,
+        decimate,
+        subdivide,
+        isolated_spheres,
+        iso_offset,
+        memory_budget,
+    )?;
+    let attributes = selection(attributes)?;
+    let reports = run_interruptible(py, |cancel| {
+        let plan = plan_frames(&input, &output, &FrameChoice::default())?;
+        let job = JobOptions {
+            input_format: None,
+            write: MeshWriteOptions {
+                normals,
+                ..MeshWriteOptions::default()
+            },
+            skip_existing,
+            archive_error_bound: error_bound.unwrap_or(ARCHIVE_ERROR * particle_radius as f64),
+            archive_attribute_error_bound: attribute_error_bound,
+            fps,
+            attributes,
+            cancel: cancel.clone(),
+            keep_going: false,
+        };
+        with_threads(threads, || {
+            run_frames(
+                &plan,
+                &options,
+                &job,
+                &mut |_, _| {},
+                &mut |_| {},
+                &mut |_| {},
+            )
+        })
+    })?;
+    let text =
+        serde_json::to_string(&reports).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    py.import_bound("json")?.call_method1("loads", (text,))
+}
+
+/// The CLI's default archive error bound, multiples of the particle radius.
+const ARCHIVE_ERROR: f64 = 0.01;
+
+/// A `.mseq` archive of meshes, one per frame number: `len(a)`, `a.frames`, `a[frame]`,
+/// `a.append(frame, mesh)`, `a.verify()`. The file is created by the first append.
+#[pyclass(module = "meniscus")]
+struct Archive {
+    path: PathBuf,
+    error_bound: Option<f64>,
+    attribute_error_bound: f64,
+}
+
+impl Archive {
+    fn reader(&self, py: Python<'_>) -> PyResult<Option<ArchiveReader>> {
+        if !self.path.exists() {
+            return Ok(None);
+        }
+        let path = &self.path;
+        run_interruptible(py, |_| ArchiveReader::open(path)).map(Some)
+    }
+}
+
+#[pymethods]
+impl Archive {
+    /// Opens (or names, for a new archive) the archive at `path`. `error_bound` (world
+    /// units) bounds the positions of appended frames (default 0.01 × the particle
+    /// radius of the mesh); `attribute_error_bound` their attributes.
+    #[new]
+    #[pyo3(signature = (path, *, error_bound = None,
+        attribute_error_bound = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND))]
+    fn new(path: PathBuf, error_bound: Option<f64>, attribute_error_bound: f64) -> Self {
+        Archive {
+            path,
+            error_bound,
+            attribute_error_bound,
+        }
+    }
+
+    fn __len__(&self, py: Python<'_>) -> PyResult<usize> {
+        Ok(self.reader(py)?.map_or(0, |r| r.frames().len()))
+    }
+
+    /// The frame numbers held, in file order.
+    #[getter]
+    fn frames(&self, py: Python<'_>) -> PyResult<Vec<i64>> {
+        Ok(self
+            .reader(py)?
+            .map_or_else(Vec::new, |r| r.frames().iter().map(|f| f.number).collect()))
+    }
+
+    fn __contains__(&self, py: Python<'_>, frame: i64) -> PyResult<bool> {
+        Ok(self.frames(py)?.contains(&frame))
+    }
+
+    /// The mesh of frame `frame` (decoded, with normals); KeyError when not held.
+    fn __getitem__(&self, py: Python<'_>, frame: i64) -> PyResult<Mesh> {
+        let reader = self.reader(py)?;
+        let Some(reader) = reader.filter(|r| r.frames().iter().any(|f| f.number == frame)) else {
+            return Err(PyKeyError::new_err(frame));
+        };
+        let surface = run_interruptible(py, |_| reader.read_surface(frame))?;
+        Ok(Mesh::new(surface, None, None))
+    }
+
+    /// Appends `mesh` as frame `frame` (creating the archive); returns the bytes
+    /// written. A frame number already held is refused (FileExistsError).
+    #[pyo3(signature = (frame, mesh, *, error_bound = None))]
+    fn append(
+        &self,
+        py: Python<'_>,
+        frame: i64,
+        mesh: &Mesh,
+        error_bound: Option<f64>,
+    ) -> PyResult<u64> {
+        let given = error_bound.or(self.error_bound);
+        let path = &self.path;
+        let surface = &mesh.surface;
+        let radius = mesh.particle_radius;
+        let attribute_error_bound = self.attribute_error_bound;
+        run_interruptible(py, |_| {
+            let held = if path.exists() {
+                let reader = ArchiveReader::open(path)?;
+                reader.check_new_frames(&[frame])?;
+                // One archive, one bound: by default, the one its frames have.
+                reader.frames().first().map(|f| f.step / 2.0)
+            } else {
+                None
+            };
+            let error_bound = given
+                .or(held)
+                .or(radius.map(|r| ARCHIVE_ERROR * r as f64))
+                .ok_or(Error::InvalidOption {
+                    option: "error_bound",
+                    message: "a mesh read from an archive has no particle radius; give the bound (world units)".into(),
+                })?;
+            let options = ArchiveOptions {
+                attribute_error_bound,
+                ..ArchiveOptions::new(error_bound)
+            };
+            let mut writer = if path.exists() {
+                ArchiveWriter::open_append(path, &options)?
+            } else {
+                ArchiveWriter::create(path, &options)?
+            };
+            let bytes = writer.append_frame(
+                frame,
+                &ArchiveFrame {
+                    fluid: &surface.fluid,
+                    subdivision_levels: 0,
+                    spheres: &surface.spheres,
+                },
+            )?;
+            writer.finish()?;
+            Ok(bytes)
+        })
+    }
+
+    /// Decodes every frame and checks it: a dict with `clean` (bool), `good` (frame
+    /// numbers), `damaged` ([frame, why]), `damage` (other damage), `trailing_bytes`,
+    /// `recovered_by_scan`.
+    fn verify<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let path = &self.path;
+        let report = run_interruptible(py, |_| Ok(ArchiveReader::open(path)?.verify()))?;
+        let d = PyDict::new_bound(py);
+        d.set_item("clean", report.is_clean())?;
+        d.set_item("good", report.good)?;
+        d.set_item("damaged", report.damaged)?;
+        d.set_item("damage", report.damage)?;
+        d.set_item("trailing_bytes", report.trailing_bytes)?;
+        d.set_item("recovered_by_scan", report.recovered_by_scan)?;
+        Ok(d)
+    }
+
+    fn __repr__(&self) -> String {
+        format!("<meniscus.Archive {}>", self.path.display())
+    }
+}
+
 /// Surface reconstruction for particle-based fluids (Akinci et al. 2013 pipeline), in
 /// process.
 #[pymodule]
@@ -542,7 +814,9 @@ fn meniscus_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("FormatError", m.py().get_type_bound::<FormatError>())?;
     m.add_class::<Mesh>()?;
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
+    m.add_function(wrap_pyfunction!(read_particles, m)?)?;
+    m.add_function(wrap_pyfunction!(reconstruct_file, m)?)?;
+    m.add_class::<Archive>()?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
-    let _ = PyList::empty_bound(m.py());
     Ok(())
 }
