@@ -31,6 +31,9 @@ def test_attributes_round_trip_through_reconstruct(tmp_path):
     run_cli("reconstruct", VTK, "--particle-radius", RADIUS, "-o", cli, "--quiet")
     mesh.write(tmp_path / "a.ply")
     assert (tmp_path / "a.ply").read_bytes() == cli.read_bytes()
+    run_cli("reconstruct", VTK, "--particle-radius", RADIUS, "-o", tmp_path / "b.glb", "--quiet")
+    mesh.write(tmp_path / "a.glb")
+    assert (tmp_path / "a.glb").read_bytes() == (tmp_path / "b.glb").read_bytes()
 
 
 def test_missing_file_is_an_os_error(tmp_path):
