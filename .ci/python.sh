@@ -10,6 +10,7 @@ python3 -m venv "$venv"
 . "$venv/bin/activate"
 pip install -q --upgrade pip
 pip install -q maturin pytest numpy
+cargo clippy --release -p meniscus-python --all-targets -- -D warnings
 (cd python && maturin develop --release)
 cargo build --release --quiet --bin meniscus
 pytest python/tests -q
