@@ -1,0 +1,822 @@
+//! `meniscus` for Python: the reconstruction pipeline in-process (pyo3), numpy arrays in,
+//! a [`Mesh`] out. Options are named as the command line's, with the same defaults and
+//! units (multiples of the particle radius `r`). The GIL is released while the library
+//! works; Ctrl-C cancels the run (KeyboardInterrupt).
+
+// pyo3 0.22's #[pymethods]/#[pyfunction] expansion converts a returned PyErr into itself.
+#![allow(clippy::useless_conversion)]
+
+use glam::Vec3;
+use meniscus::archive::{ArchiveFrame, ArchiveOptions, ArchiveReader, ArchiveWriter};
+use meniscus::attributes::AttributeSelection;
+use meniscus::attributes::{Attribute, AttributeLayout};
+use meniscus::decimation::DecimateOptions;
+use meniscus::io::mesh::{write_surface, MeshWriteOptions};
+use meniscus::io::particles::{ParticleChunk, ParticleSource};
+use meniscus::job::{plan_frames, run_frames, JobOptions};
+use meniscus::mesh::{Surface, TriMesh};
+use meniscus::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
+use meniscus::sequence::FrameChoice;
+use meniscus::{CancelToken, Error};
+use numpy::ndarray::Array2;
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods,
+};
+use pyo3::create_exception;
+use pyo3::exceptions::{
+    PyFileExistsError, PyKeyError, PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError,
+};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+use std::sync::mpsc;
+use std::time::Duration;
+
+create_exception!(
+    meniscus,
+    FormatError,
+    PyValueError,
+    "A particle, mesh or archive file whose content is malformed or whose format is not supported."
+);
+
+/// How often the caller's thread looks for a pending signal (Ctrl-C) while the library
+/// works.
+const SIGNAL_POLL: Duration = Duration::from_millis(100);
+
+/// The Python exception for a library error.
+fn to_py(e: Error) -> PyErr {
+    let message = e.to_string();
+    match e {
+        Error::InvalidOption { .. }
+        | Error::ParticleOutOfRange { .. }
+        | Error::MemoryBudget { .. } => PyValueError::new_err(message),
+        Error::Io { path, source } | Error::Spill { path, source } => match source.raw_os_error() {
+            // OSError(errno, strerror, filename) becomes FileNotFoundError, PermissionError, ...
+            Some(errno) => PyOSError::new_err((errno, source.to_string(), path)),
+            None => PyOSError::new_err(message),
+        },
+        Error::NoSpace { .. } => PyOSError::new_err(message),
+        Error::Parse { .. }
+        | Error::UnsupportedFormat { .. }
+        | Error::Attribute { .. }
+        | Error::EmptyInput { .. } => FormatError::new_err(message),
+        Error::FramesExist { .. } => PyFileExistsError::new_err(message),
+        Error::Interrupted => PyKeyboardInterrupt::new_err(message),
+        _ => PyRuntimeError::new_err(message),
+    }
+}
+
+/// Runs `work` without the GIL on a scoped worker thread while the calling thread waits,
+/// taking the GIL every [`SIGNAL_POLL`] to run Python's signal handlers. A handler that
+/// raises (Ctrl-C: KeyboardInterrupt) cancels the token; the worker stops at its next
+/// check, and the handler's exception is raised once it has (its temporary files
+/// removed).
+fn run_interruptible<T: Send>(
+    py: Python<'_>,
+    work: impl FnOnce(&CancelToken) -> meniscus::Result<T> + Send,
+) -> PyResult<T> {
+    let cancel = CancelToken::new();
+    std::thread::scope(|scope| {
+        let (done_tx, done_rx) = mpsc::channel::<()>();
+        // Shared with each waiting closure, which must be Sync-captured.
+        let done_rx = std::sync::Mutex::new(done_rx);
+        let token = &cancel;
+        let worker = scope.spawn(move || {
+            let result = work(token);
+            let _ = done_tx.send(());
+            result
+        });
+        let mut raised: Option<PyErr> = None;
+        loop {
+            let finished = py.allow_threads(|| {
+                match done_rx
+                    .lock()
+                    .expect("not poisoned")
+                    .recv_timeout(SIGNAL_POLL)
+                {
+                    Ok(()) | Err(mpsc::RecvTimeoutError::Disconnected) => true,
+                    Err(mpsc::RecvTimeoutError::Timeout) => false,
+                }
+            });
+            if finished {
+                break;
+            }
+            if raised.is_none() {
+                if let Err(e) = py.check_signals() {
+                    cancel.cancel();
+                    raised = Some(e);
+                }
+            }
+        }
+        let result = py.allow_threads(|| worker.join());
+        let result = match result {
+            Ok(r) => r,
+            Err(panic) => std::panic::resume_unwind(panic),
+        };
+        match (raised, result) {
+            // The signal handler's exception (KeyboardInterrupt) wins over the
+            // cancelled run's Error::Interrupted.
+            (Some(e), Err(_)) => Err(e),
+            (Some(e), Ok(_)) => Err(e),
+            (None, r) => r.map_err(to_py),
+        }
+    })
+}
+
+/// Runs `f` on a pool of `threads` workers, or on the global pool.
+fn with_threads<T: Send>(
+    threads: Option<usize>,
+    f: impl FnOnce() -> meniscus::Result<T> + Send,
+) -> meniscus::Result<T> {
+    match threads {
+        None => f(),
+        Some(n) => {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .map_err(|e| Error::InvalidOption {
+                    option: "threads",
+                    message: e.to_string(),
+                })?;
+            pool.install(f)
+        }
+    }
+}
+
+/// Positions borrowed from a numpy array (or owned when converted), with attributes as
+/// payload.
+struct ArraySource<'a> {
+    positions: &'a [Vec3],
+    attributes: Vec<Attribute>,
+}
+
+const CHUNK: usize = 1 << 16;
+
+impl ParticleSource for ArraySource<'_> {
+    fn particle_count(&self) -> usize {
+        self.positions.len()
+    }
+    fn attribute_layout(&self) -> Vec<AttributeLayout> {
+        self.attributes.iter().map(AttributeLayout::of).collect()
+    }
+    fn visit_chunks(
+        &self,
+        visit: &mut dyn FnMut(ParticleChunk<'_>) -> meniscus::Result<()>,
+    ) -> meniscus::Result<()> {
+        let mut rows = Vec::new();
+        for (n, chunk) in self.positions.chunks(CHUNK).enumerate() {
+            let first = n * CHUNK;
+            rows.clear();
+            if !self.attributes.is_empty() {
+                for i in first..first + chunk.len() {
+                    for a in &self.attributes {
+                        rows.extend_from_slice(a.item(i));
+                    }
+                }
+            }
+            visit(ParticleChunk {
+                first,
+                positions: chunk,
+                payload: &rows,
+            })?;
+        }
+        Ok(())
+    }
+    fn as_slices(&self) -> Option<(&[Vec3], &[f32])> {
+        self.attributes
+            .is_empty()
+            .then_some((self.positions, &[][..]))
+    }
+}
+
+/// An (N, 3) array's rows as `Vec3`: borrowed when it is C-contiguous float32, else
+/// converted (float64, strided).
+enum Positions<'py> {
+    Borrowed(numpy::PyReadonlyArray2<'py, f32>),
+    Owned(Vec<Vec3>),
+}
+
+fn positions_of<'py>(array: &Bound<'py, PyAny>) -> PyResult<Positions<'py>> {
+    let bad = |what: String| {
+        PyValueError::new_err(format!(
+            "invalid positions: expected an (N, 3) float32 or float64 array, got {what}"
+        ))
+    };
+    if let Ok(a) = array.downcast::<PyArray2<f32>>() {
+        let shape = a.shape();
+        if shape[1] != 3 {
+            return Err(bad(format!("shape {shape:?}")));
+        }
+        let a = a.readonly();
+        if a.is_c_contiguous() {
+            return Ok(Positions::Borrowed(a));
+        }
+        let v = a.as_array();
+        return Ok(Positions::Owned(
+            v.rows()
+                .into_iter()
+                .map(|r| Vec3::new(r[0], r[1], r[2]))
+                .collect(),
+        ));
+    }
+    if let Ok(a) = array.downcast::<PyArray2<f64>>() {
+        let shape = a.shape();
+        if shape[1] != 3 {
+            return Err(bad(format!("shape {shape:?}")));
+        }
+        let a = a.readonly();
+        let v = a.as_array();
+        return Ok(Positions::Owned(
+            v.rows()
+                .into_iter()
+                .map(|r| Vec3::new(r[0] as f32, r[1] as f32, r[2] as f32))
+                .collect(),
+        ));
+    }
+    match array.downcast::<numpy::PyUntypedArray>() {
+        Ok(a) => Err(bad(format!(
+            "shape {:?} of dtype {}",
+            a.shape(),
+            a.dtype().str()?
+        ))),
+        Err(_) => Err(bad(format!("{}", array.get_type().name()?))),
+    }
+}
+
+impl Positions<'_> {
+    fn as_slice(&self) -> &[Vec3] {
+        match self {
+            Positions::Borrowed(a) => {
+                let flat = a.as_slice().expect("C-contiguous");
+                // SAFETY: Vec3 is three f32 (repr(C), align 4); the array holds 3 × N
+                // floats, row-major.
+                unsafe { std::slice::from_raw_parts(flat.as_ptr().cast::<Vec3>(), flat.len() / 3) }
+            }
+            Positions::Owned(v) => v,
+        }
+    }
+}
+
+/// One attribute from an (N,) or (N, k) array of any float dtype.
+fn attribute_of(name: String, array: &Bound<'_, PyAny>, count: usize) -> PyResult<Attribute> {
+    let np = array.py().import_bound("numpy")?;
+    let converted = np
+        .getattr("ascontiguousarray")?
+        .call(
+            (array,),
+            Some(&[("dtype", "float32")].into_py_dict_bound(array.py())),
+        )
+        .map_err(|e| {
+            PyValueError::new_err(format!(
+                "invalid attributes: {name:?} is not a float array: {e}"
+            ))
+        })?;
+    let a: PyReadonlyArrayDyn<f32> = converted.extract()?;
+    let shape = a.shape().to_vec();
+    let components = match shape.as_slice() {
+        [n] if *n == count => 1,
+        [n, k] if *n == count && *k > 0 => *k,
+        _ => {
+            return Err(PyValueError::new_err(format!(
+            "invalid attributes: {name:?} has shape {shape:?}; expected ({count},) or ({count}, k)"
+        )))
+        }
+    };
+    let values = a.as_slice()?.to_vec();
+    if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+        return Err(PyValueError::new_err(format!(
+            "invalid attributes: {name:?} of particle {} has a non-finite value {}",
+            i / components,
+            values[i]
+        )));
+    }
+    Ok(Attribute {
+        name,
+        components,
+        values,
+    })
+}
+
+use pyo3::types::IntoPyDict;
+
+/// The options of the command line, in its units.
+#[allow(clippy::too_many_arguments)]
+fn options(
+    particle_radius: f32,
+    influence_radius: f32,
+    cell_size: f32,
+    decimate: Option<f32>,
+    subdivide: u32,
+    isolated_spheres: Option<u32>,
+    iso_offset: f32,
+    memory_budget: Option<&Bound<'_, PyAny>>,
+) -> PyResult<ReconstructOptions> {
+    let mut o = ReconstructOptions::new(particle_radius);
+    o.field.influence_radius = influence_radius;
+    o.field.cell_size = cell_size;
+    o.field.iso_offset = iso_offset;
+    o.isolated_sphere_level = isolated_spheres;
+    o.subdivide.levels = subdivide;
+    o.decimate = match decimate {
+        None => None,
+        Some(f) if (0.0..1.0).contains(&f) => Some(DecimateOptions {
+            target_reduction: Some(f),
+            ..Default::default()
+        }),
+        Some(f) => {
+            return Err(PyValueError::new_err(format!(
+                "invalid decimate: takes a fraction in [0, 1) or None, got {f}"
+            )))
+        }
+    };
+    o.tiles.memory_budget_bytes = match memory_budget {
+        None => meniscus::tiles::default_memory_budget(),
+        Some(b) if b.is_none() => meniscus::tiles::default_memory_budget(),
+        Some(b) => Some(if let Ok(bytes) = b.extract::<u64>() {
+            bytes
+        } else {
+            let text: String = b.extract().map_err(|_| {
+                PyValueError::new_err(
+                    "invalid memory_budget: bytes (int) or a size such as \"2GiB\"",
+                )
+            })?;
+            meniscus::tiles::parse_memory_size(&text)
+                .map_err(|e| PyValueError::new_err(format!("invalid memory_budget: {e}")))?
+        }),
+    };
+    o.field.validate().map_err(to_py)?;
+    Ok(o)
+}
+
+/// A reconstructed surface: the fluid and the isolated-particle spheres, merged into
+/// `vertices` / `triangles` as the CLI's PLY/OBJ/VTK output holds them.
+#[pyclass(module = "meniscus", frozen)]
+struct Mesh {
+    surface: Surface,
+    merged: TriMesh,
+    stats: Option<ReconstructionStats>,
+    /// The particle radius it was reconstructed with (unknown for an archive's frame).
+    particle_radius: Option<f32>,
+}
+
+impl Mesh {
+    fn new(
+        surface: Surface,
+        stats: Option<ReconstructionStats>,
+        particle_radius: Option<f32>,
+    ) -> Self {
+        let merged = surface.merged();
+        Mesh {
+            surface,
+            merged,
+            stats,
+            particle_radius,
+        }
+    }
+}
+
+fn vec3s<'py>(py: Python<'py>, v: &[Vec3]) -> Bound<'py, PyArray2<f32>> {
+    let flat: Vec<f32> = v.iter().flat_map(|p| p.to_array()).collect();
+    Array2::from_shape_vec((v.len(), 3), flat)
+        .expect("3 per row")
+        .into_pyarray_bound(py)
+}
+
+fn attribute_array<'py>(py: Python<'py>, a: &Attribute) -> Bound<'py, PyAny> {
+    if a.components == 1 {
+        PyArray1::from_slice_bound(py, &a.values).into_any()
+    } else {
+        Array2::from_shape_vec((a.len(), a.components), a.values.clone())
+            .expect("components per row")
+            .into_pyarray_bound(py)
+            .into_any()
+    }
+}
+
+#[pymethods]
+impl Mesh {
+    /// Vertex positions, (V, 3) float32: the fluid surface, then every sphere.
+    #[getter]
+    fn vertices<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f32>> {
+        vec3s(py, &self.merged.positions)
+    }
+
+    /// Triangles, (T, 3) uint32 vertex indices, counter-clockwise seen from outside.
+    #[getter]
+    fn triangles<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<u32>> {
+        let flat: Vec<u32> = self.merged.triangles.iter().flatten().copied().collect();
+        Array2::from_shape_vec((self.merged.triangles.len(), 3), flat)
+            .expect("3 per row")
+            .into_pyarray_bound(py)
+    }
+
+    /// Unit vertex normals, (V, 3) float32 ((0, 3) when the mesh has none).
+    #[getter]
+    fn normals<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f32>> {
+        vec3s(py, &self.merged.normals)
+    }
+
+    /// Per-vertex attributes carried from the particles: name → (V,) or (V, k) float32.
+    #[getter]
+    fn attributes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new_bound(py);
+        for a in &self.merged.attributes {
+            d.set_item(&a.name, attribute_array(py, a))?;
+        }
+        Ok(d)
+    }
+
+    /// The run's figures: counts and the per-stage table (`stages`: stage, seconds,
+    /// triangles, peak_rss_bytes), as the CLI's `--stats` JSON; empty for a mesh read
+    /// from an archive.
+    #[getter]
+    fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        match &self.stats {
+            None => Ok(PyDict::new_bound(py).into_any()),
+            Some(s) => {
+                let text =
+                    serde_json::to_string(s).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+                py.import_bound("json")?.call_method1("loads", (text,))
+            }
+        }
+    }
+
+    /// Number of vertices.
+    #[getter]
+    fn vertex_count(&self) -> usize {
+        self.merged.positions.len()
+    }
+
+    /// Number of triangles.
+    #[getter]
+    fn triangle_count(&self) -> usize {
+        self.merged.triangles.len()
+    }
+
+    /// Writes the surface to `path` (.ply, .obj, .glb, .gltf or .vtk by extension), as
+    /// the CLI writes it (glTF keeps the spheres instanced). Returns the bytes written.
+    #[pyo3(signature = (path, *, normals = true))]
+    fn write(&self, py: Python<'_>, path: PathBuf, normals: bool) -> PyResult<u64> {
+        let options = MeshWriteOptions {
+            normals,
+            ..MeshWriteOptions::default()
+        };
+        let surface = &self.surface;
+        run_interruptible(py, |_| {
+            write_surface(&path, surface, &options).map(|s| s.bytes)
+        })
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "<meniscus.Mesh: {} vertices, {} triangles, {} spheres, attributes {:?}>",
+            self.merged.positions.len(),
+            self.merged.triangles.len(),
+            self.surface.spheres.centers.len(),
+            self.merged
+                .attributes
+                .iter()
+                .map(|a| a.name.as_str())
+                .collect::<Vec<_>>()
+        )
+    }
+}
+
+/// Reconstructs the surface of particles at `positions` ((N, 3) float32 or float64;
+/// a C-contiguous float32 array is not copied) of radius `particle_radius` (world
+/// units). See the module documentation for the options.
+#[pyfunction]
+#[pyo3(signature = (positions, particle_radius, *, attributes = None, influence_radius = 4.0,
+    cell_size = 1.0, decimate = Some(0.8), subdivide = 1, isolated_spheres = Some(2),
+    iso_offset = 0.0, threads = None, memory_budget = None))]
+#[allow(clippy::too_many_arguments)]
+fn reconstruct(
+    py: Python<'_>,
+    positions: &Bound<'_, PyAny>,
+    particle_radius: f32,
+    attributes: Option<&Bound<'_, PyDict>>,
+    influence_radius: f32,
+    cell_size: f32,
+    decimate: Option<f32>,
+    subdivide: u32,
+    isolated_spheres: Option<u32>,
+    iso_offset: f32,
+    threads: Option<usize>,
+    memory_budget: Option<&Bound<'_, PyAny>>,
+) -> PyResult<Mesh> {
+    check_threads(threads)?;
+    let options = options(
+        particle_radius,
+        influence_radius,
+        cell_size,
+        decimate,
+        subdivide,
+        isolated_spheres,
+        iso_offset,
+        memory_budget,
+    )?;
+    let positions = positions_of(positions)?;
+    let slice = positions.as_slice();
+    let mut columns = Vec::new();
+    if let Some(d) = attributes {
+        for (k, v) in d.iter() {
+            let name: String = k
+                .extract()
+                .map_err(|_| PyValueError::new_err("invalid attributes: names must be strings"))?;
+            columns.push(attribute_of(name, &v, slice.len())?);
+        }
+    }
+    let source = ArraySource {
+        positions: slice,
+        attributes: columns,
+    };
+    let (surface, stats) = run_interruptible(py, |cancel| {
+        with_threads(threads, || {
+            reconstruct_source(source, &options, &|_| {}, cancel)
+        })
+    })?;
+    Ok(Mesh::new(surface, Some(stats), Some(particle_radius)))
+}
+
+fn check_threads(threads: Option<usize>) -> PyResult<()> {
+    if threads == Some(0) {
+        return Err(PyValueError::new_err(
+            "invalid threads: must be at least 1, got 0",
+        ));
+    }
+    Ok(())
+}
+
+/// Reads a particle file (.xyz, .vtk, .ply, .bgeo, by extension): positions (N, 3)
+/// float32 and every point attribute, name → (N,) or (N, k) float32.
+#[pyfunction]
+fn read_particles<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+) -> PyResult<(Bound<'py, PyArray2<f32>>, Bound<'py, PyDict>)> {
+    let particles =
+        run_interruptible(py, |_| meniscus::io::particles::read_particles(&path, None))?;
+    let attributes = PyDict::new_bound(py);
+    for a in &particles.attributes {
+        attributes.set_item(&a.name, attribute_array(py, a))?;
+    }
+    Ok((vec3s(py, &particles.positions), attributes))
+}
+
+/// The attribute selection of the CLI's --attributes: None (velocity when the input has
+/// one), "none", "all", "a,b" or a list of names.
+fn selection(attributes: Option<&Bound<'_, PyAny>>) -> PyResult<AttributeSelection> {
+    let bad = |e: String| PyValueError::new_err(format!("invalid attributes: {e}"));
+    match attributes {
+        None => Ok(AttributeSelection::default()),
+        Some(a) if a.is_none() => Ok(AttributeSelection::default()),
+        Some(a) => {
+            if let Ok(text) = a.extract::<String>() {
+                text.parse().map_err(bad)
+            } else if let Ok(names) = a.extract::<Vec<String>>() {
+                if names.is_empty() {
+                    Ok(AttributeSelection::None)
+                } else {
+                    Ok(AttributeSelection::Names(names))
+                }
+            } else {
+                Err(bad(
+                    "\"none\", \"all\", \"a,b\" or a list of names".to_string()
+                ))
+            }
+        }
+    }
+}
+
+/// Reconstructs a particle file (or a `{}` frame sequence) into `output` as the CLI's
+/// `meniscus reconstruct INPUT -o OUTPUT` does (a mesh file, a `{}` pattern of them, a
+/// `.mseq` archive or one `.glb` for a sequence). Returns one report per frame (dicts as
+/// the CLI's `--stats` JSON).
+#[pyfunction]
+#[pyo3(signature = (input, output, particle_radius, *, attributes = None,
+    influence_radius = 4.0, cell_size = 1.0, decimate = Some(0.8), subdivide = 1,
+    isolated_spheres = Some(2), iso_offset = 0.0, threads = None, memory_budget = None,
+    normals = true, skip_existing = false, error_bound = None,
+    attribute_error_bound = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND, fps = 24.0))]
+#[allow(clippy::too_many_arguments)]
+fn reconstruct_file<'py>(
+    py: Python<'py>,
+    input: String,
+    output: String,
+    particle_radius: f32,
+    attributes: Option<&Bound<'_, PyAny>>,
+    influence_radius: f32,
+    cell_size: f32,
+    decimate: Option<f32>,
+    subdivide: u32,
+    isolated_spheres: Option<u32>,
+    iso_offset: f32,
+    threads: Option<usize>,
+    memory_budget: Option<&Bound<'_, PyAny>>,
+    normals: bool,
+    skip_existing: bool,
+    error_bound: Option<f64>,
+    attribute_error_bound: f64,
+    fps: f32,
+) -> PyResult<Bound<'py, PyAny>> {
+    check_threads(threads)?;
+    if !(fps.is_finite() && fps > 0.0) {
+        return Err(PyValueError::new_err(format!(
+            "invalid fps: must be > 0 (frames per second), got {fps}"
+        )));
+    }
+    let options = options(
+        particle_radius,
+        influence_radius,
+        cell_size,
+        decimate,
+        subdivide,
+        isolated_spheres,
+        iso_offset,
+        memory_budget,
+    )?;
+    let attributes = selection(attributes)?;
+    let reports = run_interruptible(py, |cancel| {
+        let plan = plan_frames(&input, &output, &FrameChoice::default())?;
+        let job = JobOptions {
+            input_format: None,
+            write: MeshWriteOptions {
+                normals,
+                ..MeshWriteOptions::default()
+            },
+            skip_existing,
+            archive_error_bound: error_bound.unwrap_or(ARCHIVE_ERROR * particle_radius as f64),
+            archive_attribute_error_bound: attribute_error_bound,
+            fps,
+            attributes,
+            cancel: cancel.clone(),
+            keep_going: false,
+        };
+        with_threads(threads, || {
+            run_frames(
+                &plan,
+                &options,
+                &job,
+                &mut |_, _| {},
+                &mut |_| {},
+                &mut |_| {},
+            )
+        })
+    })?;
+    let text =
+        serde_json::to_string(&reports).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    py.import_bound("json")?.call_method1("loads", (text,))
+}
+
+/// The CLI's default archive error bound, multiples of the particle radius.
+const ARCHIVE_ERROR: f64 = 0.01;
+
+/// A `.mseq` archive of meshes, one per frame number: `len(a)`, `a.frames`, `a[frame]`,
+/// `a.append(frame, mesh)`, `a.verify()`. The file is created by the first append.
+#[pyclass(module = "meniscus")]
+struct Archive {
+    path: PathBuf,
+    error_bound: Option<f64>,
+    attribute_error_bound: f64,
+}
+
+impl Archive {
+    fn reader(&self, py: Python<'_>) -> PyResult<Option<ArchiveReader>> {
+        if !self.path.exists() {
+            return Ok(None);
+        }
+        let path = &self.path;
+        run_interruptible(py, |_| ArchiveReader::open(path)).map(Some)
+    }
+}
+
+#[pymethods]
+impl Archive {
+    /// Opens (or names, for a new archive) the archive at `path`. `error_bound` (world
+    /// units) bounds the positions of appended frames (default 0.01 × the particle
+    /// radius of the mesh); `attribute_error_bound` their attributes.
+    #[new]
+    #[pyo3(signature = (path, *, error_bound = None,
+        attribute_error_bound = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND))]
+    fn new(path: PathBuf, error_bound: Option<f64>, attribute_error_bound: f64) -> Self {
+        Archive {
+            path,
+            error_bound,
+            attribute_error_bound,
+        }
+    }
+
+    fn __len__(&self, py: Python<'_>) -> PyResult<usize> {
+        Ok(self.reader(py)?.map_or(0, |r| r.frames().len()))
+    }
+
+    /// The frame numbers held, in file order.
+    #[getter]
+    fn frames(&self, py: Python<'_>) -> PyResult<Vec<i64>> {
+        Ok(self
+            .reader(py)?
+            .map_or_else(Vec::new, |r| r.frames().iter().map(|f| f.number).collect()))
+    }
+
+    fn __contains__(&self, py: Python<'_>, frame: i64) -> PyResult<bool> {
+        Ok(self.frames(py)?.contains(&frame))
+    }
+
+    /// The mesh of frame `frame` (decoded, with normals); KeyError when not held.
+    fn __getitem__(&self, py: Python<'_>, frame: i64) -> PyResult<Mesh> {
+        let reader = self.reader(py)?;
+        let Some(reader) = reader.filter(|r| r.frames().iter().any(|f| f.number == frame)) else {
+            return Err(PyKeyError::new_err(frame));
+        };
+        let surface = run_interruptible(py, |_| reader.read_surface(frame))?;
+        Ok(Mesh::new(surface, None, None))
+    }
+
+    /// Appends `mesh` as frame `frame` (creating the archive); returns the bytes
+    /// written. A frame number already held is refused (FileExistsError).
+    #[pyo3(signature = (frame, mesh, *, error_bound = None))]
+    fn append(
+        &self,
+        py: Python<'_>,
+        frame: i64,
+        mesh: &Mesh,
+        error_bound: Option<f64>,
+    ) -> PyResult<u64> {
+        let given = error_bound.or(self.error_bound);
+        let path = &self.path;
+        let surface = &mesh.surface;
+        let radius = mesh.particle_radius;
+        let attribute_error_bound = self.attribute_error_bound;
+        run_interruptible(py, |_| {
+            let held = if path.exists() {
+                let reader = ArchiveReader::open(path)?;
+                reader.check_new_frames(&[frame])?;
+                // One archive, one bound: by default, the one its frames have.
+                reader.frames().first().map(|f| f.step / 2.0)
+            } else {
+                None
+            };
+            let error_bound = given
+                .or(held)
+                .or(radius.map(|r| ARCHIVE_ERROR * r as f64))
+                .ok_or(Error::InvalidOption {
+                    option: "error_bound",
+                    message: "a mesh read from an archive has no particle radius; give the bound (world units)".into(),
+                })?;
+            let options = ArchiveOptions {
+                attribute_error_bound,
+                ..ArchiveOptions::new(error_bound)
+            };
+            let mut writer = if path.exists() {
+                ArchiveWriter::open_append(path, &options)?
+            } else {
+                ArchiveWriter::create(path, &options)?
+            };
+            let bytes = writer.append_frame(
+                frame,
+                &ArchiveFrame {
+                    fluid: &surface.fluid,
+                    subdivision_levels: 0,
+                    spheres: &surface.spheres,
+                },
+            )?;
+            writer.finish()?;
+            Ok(bytes)
+        })
+    }
+
+    /// Decodes every frame and checks it: a dict with `clean` (bool), `good` (frame
+    /// numbers), `damaged` ([frame, why]), `damage` (other damage), `trailing_bytes`,
+    /// `recovered_by_scan`.
+    fn verify<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let path = &self.path;
+        let report = run_interruptible(py, |_| Ok(ArchiveReader::open(path)?.verify()))?;
+        let d = PyDict::new_bound(py);
+        d.set_item("clean", report.is_clean())?;
+        d.set_item("good", report.good)?;
+        d.set_item("damaged", report.damaged)?;
+        d.set_item("damage", report.damage)?;
+        d.set_item("trailing_bytes", report.trailing_bytes)?;
+        d.set_item("recovered_by_scan", report.recovered_by_scan)?;
+        Ok(d)
+    }
+
+    fn __repr__(&self) -> String {
+        format!("<meniscus.Archive {}>", self.path.display())
+    }
+}
+
+/// Surface reconstruction for particle-based fluids (Akinci et al. 2013 pipeline), in
+/// process.
+#[pymodule]
+#[pyo3(name = "meniscus")]
+fn meniscus_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("FormatError", m.py().get_type_bound::<FormatError>())?;
+    m.add_class::<Mesh>()?;
+    m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
+    m.add_function(wrap_pyfunction!(read_particles, m)?)?;
+    m.add_function(wrap_pyfunction!(reconstruct_file, m)?)?;
+    m.add_class::<Archive>()?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,64 @@
+import numpy as np
+import pytest
+
+import meniscus
+from conftest import RADIUS
+
+
+@pytest.mark.parametrize("radius", [0.0, -1.0, float("nan")])
+def test_bad_radius_is_a_value_error_naming_it(frame25, radius):
+    with pytest.raises(ValueError, match="particle_radius"):
+        meniscus.reconstruct(frame25, radius)
+
+
+def test_bad_shapes_and_options(frame25):
+    with pytest.raises(ValueError, match="positions"):
+        meniscus.reconstruct(np.zeros((5, 2), dtype=np.float32), RADIUS)
+    with pytest.raises(ValueError, match="positions"):
+        meniscus.reconstruct([[0, 0, 0]], RADIUS)
+    with pytest.raises(ValueError, match="decimate"):
+        meniscus.reconstruct(frame25, RADIUS, decimate=1.5)
+    with pytest.raises(ValueError, match="threads"):
+        meniscus.reconstruct(frame25, RADIUS, threads=0)
+    with pytest.raises(ValueError, match="attributes"):
+        meniscus.reconstruct(frame25, RADIUS, attributes={"v": np.zeros(3)})
+
+
+def test_non_finite_position_is_a_value_error():
+    p = np.zeros((10, 3), dtype=np.float32)
+    p[3, 1] = np.nan
+    with pytest.raises(ValueError):
+        meniscus.reconstruct(p, RADIUS)
+
+
+def test_format_error_is_a_value_error():
+    assert issubclass(meniscus.FormatError, ValueError)
+
+
+def test_write_to_missing_directory_is_an_os_error(frame25, tmp_path):
+    mesh = meniscus.reconstruct(frame25, RADIUS)
+    with pytest.raises(OSError):
+        mesh.write(tmp_path / "no" / "such" / "dir" / "m.ply")
+    with pytest.raises(ValueError):
+        mesh.write(tmp_path / "m.unknown")
+
+
+def test_ctrl_c_interrupts_a_run(frame25):
+    import os
+    import signal
+    import threading
+    import time
+
+    big = np.concatenate([frame25 + np.float32(dx) for dx in (0.0, 1.0, 2.0, 3.0, 4.0, 5.0)])
+    timer = threading.Timer(0.1, lambda: os.kill(os.getpid(), signal.SIGINT))
+    start = time.perf_counter()
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        meniscus.reconstruct(big, RADIUS, subdivide=2)
+    timer.join()
+    elapsed = time.perf_counter() - start
+    full = time.perf_counter()
+    meniscus.reconstruct(big, RADIUS, subdivide=2)
+    full = time.perf_counter() - full
+    print(f"interrupted after {elapsed:.2f} s; a whole run takes {full:.2f} s")
+    assert elapsed < full

@@ -1,0 +1,76 @@
+import numpy as np
+import pytest
+
+import meniscus
+from conftest import RADIUS
+
+
+def ply_counts(path):
+    counts = {}
+    with open(path, "rb") as f:
+        for line in f:
+            if line.startswith(b"element"):
+                _, name, n = line.split()
+                counts[name.decode()] = int(n)
+            if line.strip() == b"end_header":
+                return counts
+
+
+def test_numpy_in_mesh_out_equals_cli(frame25, cli_ply, tmp_path):
+    mesh = meniscus.reconstruct(frame25, RADIUS)
+    counts = ply_counts(cli_ply)
+    assert mesh.vertices.shape == (counts["vertex"], 3)
+    assert mesh.triangles.shape == (counts["face"], 3)
+    assert mesh.vertices.dtype == np.float32
+    assert mesh.triangles.dtype == np.uint32
+    assert mesh.normals.shape == mesh.vertices.shape
+    assert mesh.triangles.max() < len(mesh.vertices)
+    out = tmp_path / "a.ply"
+    mesh.write(str(out))
+    assert out.read_bytes() == cli_ply.read_bytes()
+
+
+def test_float64_and_strided_give_the_same_mesh(frame25):
+    a = meniscus.reconstruct(frame25, RADIUS, decimate=None, subdivide=0)
+    b = meniscus.reconstruct(frame25.astype(np.float64), RADIUS, decimate=None, subdivide=0)
+    wide = np.zeros((len(frame25), 4), dtype=np.float32)
+    wide[:, :3] = frame25
+    c = meniscus.reconstruct(wide[:, :3], RADIUS, decimate=None, subdivide=0)
+    for m in (b, c):
+        assert np.array_equal(a.vertices, m.vertices)
+        assert np.array_equal(a.triangles, m.triangles)
+
+
+def test_stats_is_the_stage_table(frame25):
+    mesh = meniscus.reconstruct(frame25, RADIUS)
+    stats = mesh.stats
+    assert stats["particles"] == len(frame25)
+    stages = [s["stage"] for s in stats["stages"]]
+    assert stages and all(s["seconds"] >= 0 for s in stats["stages"])
+    assert stats["fluid_triangles"] + stats["sphere_triangles"] == len(mesh.triangles)
+
+
+def test_options_off_and_spheres(frame25):
+    raw = meniscus.reconstruct(frame25, RADIUS, decimate=None, subdivide=0, isolated_spheres=None)
+    assert raw.stats["isolated_particles"] == 0
+    assert raw.stats["decimation"] is None
+    assert len(raw.triangles) > 0
+
+
+def test_attributes_from_arrays(frame25):
+    n = len(frame25)
+    velocity = np.tile(np.array([1.0, -2.0, 0.5]), (n, 1))
+    density = np.full(n, 1000.0)
+    mesh = meniscus.reconstruct(frame25, RADIUS, attributes={"velocity": velocity, "density": density})
+    assert mesh.attributes["velocity"].shape == (len(mesh.vertices), 3)
+    assert mesh.attributes["density"].shape == (len(mesh.vertices),)
+    # A constant attribute comes out exactly (to f32 rounding).
+    np.testing.assert_allclose(mesh.attributes["velocity"], np.tile([1.0, -2.0, 0.5], (len(mesh.vertices), 1)), rtol=1e-5)
+    np.testing.assert_allclose(mesh.attributes["density"], 1000.0, rtol=1e-5)
+
+
+@pytest.mark.parametrize("ext", ["ply", "obj", "glb", "gltf", "vtk"])
+def test_write_formats(frame25, tmp_path, ext):
+    mesh = meniscus.reconstruct(frame25, RADIUS)
+    out = tmp_path / f"m.{ext}"
+    assert mesh.write(out) == out.stat().st_size > 0
