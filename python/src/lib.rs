@@ -8,11 +8,11 @@
 
 use glam::Vec3;
 use meniscus::archive::{ArchiveFrame, ArchiveOptions, ArchiveReader, ArchiveWriter};
+use meniscus::attributes::Attribute;
 use meniscus::attributes::AttributeSelection;
-use meniscus::attributes::{Attribute, AttributeLayout};
 use meniscus::decimation::DecimateOptions;
 use meniscus::io::mesh::{write_surface, MeshWriteOptions};
-use meniscus::io::particles::{ParticleChunk, ParticleSource};
+use meniscus::io::particles::ParticleSlices;
 use meniscus::job::{plan_frames, run_frames, JobOptions};
 use meniscus::mesh::{Surface, TriMesh};
 use meniscus::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
@@ -140,52 +140,6 @@ fn with_threads<T: Send>(
                 })?;
             pool.install(f)
         }
-    }
-}
-
-/// Positions borrowed from a numpy array (or owned when converted), with attributes as
-/// payload.
-struct ArraySource<'a> {
-    positions: &'a [Vec3],
-    attributes: Vec<Attribute>,
-}
-
-const CHUNK: usize = 1 << 16;
-
-impl ParticleSource for ArraySource<'_> {
-    fn particle_count(&self) -> usize {
-        self.positions.len()
-    }
-    fn attribute_layout(&self) -> Vec<AttributeLayout> {
-        self.attributes.iter().map(AttributeLayout::of).collect()
-    }
-    fn visit_chunks(
-        &self,
-        visit: &mut dyn FnMut(ParticleChunk<'_>) -> meniscus::Result<()>,
-    ) -> meniscus::Result<()> {
-        let mut rows = Vec::new();
-        for (n, chunk) in self.positions.chunks(CHUNK).enumerate() {
-            let first = n * CHUNK;
-            rows.clear();
-            if !self.attributes.is_empty() {
-                for i in first..first + chunk.len() {
-                    for a in &self.attributes {
-                        rows.extend_from_slice(a.item(i));
-                    }
-                }
-            }
-            visit(ParticleChunk {
-                first,
-                positions: chunk,
-                payload: &rows,
-            })?;
-        }
-        Ok(())
-    }
-    fn as_slices(&self) -> Option<(&[Vec3], &[f32])> {
-        self.attributes
-            .is_empty()
-            .then_some((self.positions, &[][..]))
     }
 }
 
@@ -526,9 +480,9 @@ fn reconstruct(
             columns.push(attribute_of(name, &v, slice.len())?);
         }
     }
-    let source = ArraySource {
+    let source = ParticleSlices {
         positions: slice,
-        attributes: columns,
+        attributes: &columns,
     };
     let (surface, stats) = run_interruptible(py, |cancel| {
         with_threads(threads, || {

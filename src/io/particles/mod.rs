@@ -17,7 +17,7 @@ mod source;
 pub(crate) mod vtk;
 mod xyz;
 
-pub use source::{MappedXyz, ParticleChunk, ParticleSource, SpooledParticles};
+pub use source::{MappedXyz, ParticleChunk, ParticleSlices, ParticleSource, SpooledParticles};
 
 pub use bgeo::stream_positions as stream_bgeo_positions;
 pub use ply::stream_positions as stream_ply_positions;

@@ -65,9 +65,17 @@ impl<T: AsRef<[Vec3]>> ParticleSource for T {
     }
 }
 
-/// Positions with every attribute of the [`Particles`] as payload (select first with
-/// [`crate::attributes::select_attributes`] to carry fewer).
-impl ParticleSource for Particles {
+/// Positions and attributes held by the caller (a [`Particles`], or arrays borrowed from
+/// elsewhere: the Python package's numpy arrays), every attribute as payload.
+#[derive(Clone, Copy, Debug)]
+pub struct ParticleSlices<'a> {
+    /// Positions, world units.
+    pub positions: &'a [Vec3],
+    /// Attributes, one item per position each.
+    pub attributes: &'a [Attribute],
+}
+
+impl ParticleSource for ParticleSlices<'_> {
     fn particle_count(&self) -> usize {
         self.positions.len()
     }
@@ -79,7 +87,7 @@ impl ParticleSource for Particles {
         for (n, chunk) in self.positions.chunks(CHUNK_PARTICLES).enumerate() {
             let first = n * CHUNK_PARTICLES;
             rows.clear();
-            interleave(&self.attributes, first..first + chunk.len(), &mut rows);
+            interleave(self.attributes, first..first + chunk.len(), &mut rows);
             visit(ParticleChunk {
                 first,
                 positions: chunk,
@@ -91,7 +99,36 @@ impl ParticleSource for Particles {
     fn as_slices(&self) -> Option<(&[Vec3], &[f32])> {
         self.attributes
             .is_empty()
+            .then_some((self.positions, &[][..]))
+    }
+}
+
+/// Positions with every attribute of the [`Particles`] as payload (select first with
+/// [`crate::attributes::select_attributes`] to carry fewer).
+impl ParticleSource for Particles {
+    fn particle_count(&self) -> usize {
+        self.positions.len()
+    }
+    fn attribute_layout(&self) -> Vec<AttributeLayout> {
+        self.slices().attribute_layout()
+    }
+    fn visit_chunks(&self, visit: &mut dyn FnMut(ParticleChunk<'_>) -> Result<()>) -> Result<()> {
+        self.slices().visit_chunks(visit)
+    }
+    fn as_slices(&self) -> Option<(&[Vec3], &[f32])> {
+        self.attributes
+            .is_empty()
             .then_some((self.positions.as_slice(), &[][..]))
+    }
+}
+
+impl Particles {
+    /// The positions and attributes as a [`ParticleSlices`].
+    pub fn slices(&self) -> ParticleSlices<'_> {
+        ParticleSlices {
+            positions: &self.positions,
+            attributes: &self.attributes,
+        }
     }
 }
 
