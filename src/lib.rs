@@ -37,6 +37,7 @@
 #![deny(missing_docs)]
 
 mod allocator;
+pub mod anisotropy;
 pub mod archive;
 pub mod attributes;
 pub mod cancel;

@@ -184,6 +184,22 @@ struct ReconstructArgs {
     /// bias on the shipped frames, at some flat-region smoothness).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     iso_offset: f32,
+    /// Particle kernel: `isotropic` (the paper's Solenthaler field) or `anisotropic` (Yu &
+    /// Turk 2013 kernels stretched along the local surface).
+    #[arg(long, value_enum, default_value_t = KernelArg::Isotropic)]
+    kernel: KernelArg,
+    /// Anisotropic kernels: radius h_a of an unstretched kernel, multiples of r.
+    #[arg(long, default_value_t = 3.5)]
+    kernel_radius: f32,
+    /// Anisotropic kernels: largest ratio of the longest to the shortest axis (k_r).
+    #[arg(long, default_value_t = 2.0)]
+    max_stretch: f32,
+    /// Anisotropic kernels: fewest neighbours within R for a stretched kernel (N_ε).
+    #[arg(long, default_value_t = 8)]
+    min_neighbours: u32,
+    /// Anisotropic kernels: centre smoothing λ in [0, 1] (0 = the particle positions).
+    #[arg(long, default_value_t = 0.0)]
+    centre_smoothing: f32,
     /// Tile edge in marching-cubes cells (rounded up to 8-cell blocks); default: one tile
     /// if the scene fits the memory budget, else the largest tile that does. The
     /// marching-cubes mesh does not depend on it.
@@ -522,6 +538,13 @@ fn parse_level(value: &str, option: &str) -> Result<Option<u32>, Failure> {
     }
 }
 
+/// `--kernel` values.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum KernelArg {
+    Isotropic,
+    Anisotropic,
+}
+
 fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, Failure> {
     let mut options = ReconstructOptions::new(args.particle_radius);
     options.field.influence_radius = args.influence_radius;
@@ -530,6 +553,14 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, Failure> {
     options.field.t_high = args.t_high;
     options.field.particle_coverage = args.particle_coverage;
     options.field.iso_offset = args.iso_offset;
+    options.field.kernel = match args.kernel {
+        KernelArg::Isotropic => meniscus::field::Kernel::Isotropic,
+        KernelArg::Anisotropic => meniscus::field::Kernel::Anisotropic,
+    };
+    options.field.anisotropy.kernel_radius = args.kernel_radius;
+    options.field.anisotropy.max_stretch = args.max_stretch;
+    options.field.anisotropy.min_neighbours = args.min_neighbours;
+    options.field.anisotropy.smoothing = args.centre_smoothing;
     options.isolated_sphere_level = parse_level(&args.isolated_spheres, "--isolated-spheres")?;
     options.tiles.tile_size_cells = args.tile_size;
     options.tiles.memory_budget_bytes = match &args.memory_budget {

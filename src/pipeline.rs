@@ -279,10 +279,12 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
     let untimed = clock.elapsed().as_secs_f64()
         - (t.spill_seconds
             + t.neighbour_seconds
+            + t.kernel_seconds
             + t.field_seconds
             + t.marching_seconds
             + t.stitch_seconds
             + t.decimation_seconds);
+    let kernels = t.kernel_seconds;
     let (neighbours, field, marching, stitching) = (
         t.spill_seconds + t.neighbour_seconds + untimed,
         t.field_seconds,
@@ -291,6 +293,9 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
     );
     stats.marching_cubes_triangles = stats.marching_cubes.triangles;
     stats.push_stage("neighbours", neighbours, 0);
+    if options.field.kernel == crate::field::Kernel::Anisotropic {
+        stats.push_stage("kernels", kernels, 0);
+    }
     stats.push_stage("field", field, 0);
     stats.push_stage(
         "marching cubes",

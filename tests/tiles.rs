@@ -3,7 +3,7 @@
 //! counts.
 
 use glam::Vec3;
-use meniscus::field::FieldOptions;
+use meniscus::field::{FieldOptions, Kernel};
 use meniscus::mesh::Surface;
 use meniscus::pipeline::{reconstruct, ReconstructOptions, ReconstructionStats};
 use meniscus::tiles::TileOptions;
@@ -107,6 +107,44 @@ fn tiled_runs_equal_the_untiled_run_on_every_frame() {
                 &format!("{rel}, tile {tile}"),
             );
         }
+    }
+}
+
+#[test]
+fn anisotropic_tiled_runs_equal_the_untiled_run_for_any_thread_count() {
+    // The kernels of a tile's particles come from its own ghost zone: the same neighbours
+    // in the same order as in the whole scene, so the same ellipsoids, the same field.
+    for (rel, r, tiles) in [
+        ("dambreak_small/ParticleData_Fluid_25.xyz", 0.012, [24, 64]),
+        ("dambreak_small/ParticleData_Fluid_45.xyz", 0.012, [32, 48]),
+        ("double_dambreak/ParticleData_Fluid_9.xyz", 0.025, [16, 40]),
+        ("analytic/sphere.xyz", 0.025, [16, 24]),
+        ("analytic/sheet.xyz", 0.025, [8, 16]),
+    ] {
+        let positions = xyz(rel);
+        let options = FieldOptions {
+            kernel: Kernel::Anisotropic,
+            ..FieldOptions::new(r)
+        };
+        let whole = run(&positions, &options, None, 2);
+        assert!(whole.surface.fluid.triangles.len() > 1000, "{rel}");
+        assert_same(
+            &whole,
+            &run(&positions, &options, None, 1),
+            &format!("{rel}, 1 thread"),
+        );
+        for tile in tiles {
+            let tiled = run(&positions, &options, Some(tile), 3);
+            assert!(
+                tiled.stats.tiles.tiles > 1,
+                "{rel}: {:?}",
+                tiled.stats.tiles
+            );
+            assert_same(&whole, &tiled, &format!("{rel}, anisotropic, tile {tile}"));
+        }
+        // And the kernels make a different surface from the isotropic one.
+        let isotropic = run(&positions, &FieldOptions::new(r), None, 2);
+        assert!(isotropic.surface.fluid.positions != whole.surface.fluid.positions);
     }
 }
 

@@ -25,12 +25,14 @@
 //! coordinates, never on the thread count or on how the domain is cut. Sums are accumulated in f32 on block-local
 //! coordinates (in cells), which keeps them exact enough far from the origin.
 
+pub use crate::anisotropy::AnisotropyOptions;
 use crate::error::{Error, Result};
 use crate::grid::{zeroed_blocks, BlockKey, BlockValues, SparseField, BLOCK_EDGE, BLOCK_VOLUME};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::borrow::Cow;
 
+pub mod anisotropic;
 mod candidates;
 mod concavity;
 mod coverage;
@@ -74,6 +76,24 @@ pub struct FieldOptions {
     /// paper's).
     #[serde(default)]
     pub iso_offset: f32,
+    /// Which kernel the field sums. Default [`Kernel::Isotropic`] (the paper's).
+    #[serde(default)]
+    pub kernel: Kernel,
+    /// Parameters of [`Kernel::Anisotropic`].
+    #[serde(default)]
+    pub anisotropy: AnisotropyOptions,
+}
+
+/// The kernel of the field.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Kernel {
+    /// The Solenthaler et al. 2007 field with spherical kernels of radius `R` (the paper's).
+    #[default]
+    Isotropic,
+    /// Yu and Turk 2013 anisotropic kernels ([`crate::anisotropy`]), see
+    /// [`anisotropic`].
+    Anisotropic,
 }
 
 impl FieldOptions {
@@ -87,6 +107,8 @@ impl FieldOptions {
             t_high: 3.5,
             particle_coverage: 0.9,
             iso_offset: 0.0,
+            kernel: Kernel::Isotropic,
+            anisotropy: AnisotropyOptions::default(),
         }
     }
 
@@ -161,6 +183,9 @@ impl FieldOptions {
                 ),
             });
         }
+        if self.kernel == Kernel::Anisotropic {
+            self.anisotropy.validate()?;
+        }
         if !(self.t_low.is_finite() && self.t_high.is_finite() && self.t_low < self.t_high) {
             return Err(Error::InvalidOption {
                 option: "t_low/t_high",
@@ -220,7 +245,17 @@ impl BlockRange {
 /// Blocks, per axis, between a block and the farthest block a particle of it can reach
 /// (`⌈R / (8h)⌉`).
 pub(crate) fn block_reach(options: &FieldOptions) -> i32 {
-    (options.influence_radius / options.cell_size / BLOCK_EDGE as f32).ceil() as i32
+    (kernel_reach(options) / options.cell_size / BLOCK_EDGE as f32).ceil() as i32
+}
+
+/// Farthest a particle's kernel reaches from the particle, multiples of `r`: `R`, or with
+/// anisotropic kernels the longer of `R` (the covariance neighbourhood) and the longest
+/// semi-axis plus the largest centre shift.
+pub(crate) fn kernel_reach(options: &FieldOptions) -> f32 {
+    match options.kernel {
+        Kernel::Isotropic => options.influence_radius,
+        Kernel::Anisotropic => options.influence_radius.max(options.anisotropy.reach()),
+    }
 }
 
 /// Edge of a half-block, in cells.
@@ -294,7 +329,13 @@ pub fn compute_field(
 ) -> Result<(SparseField, FieldStats)> {
     options.validate()?;
     check_positions(positions, options)?;
-    let (mut field, mut stats) = compute_blocks(positions, options, None);
+    let (mut field, mut stats) = match options.kernel {
+        Kernel::Isotropic => compute_blocks(positions, options, None),
+        Kernel::Anisotropic => {
+            let (kernels, _) = crate::anisotropy::compute_kernels(positions, options)?;
+            anisotropic::compute_blocks(&kernels, options, None)
+        }
+    };
     stats.uncovered_particles = apply_coverage(&mut field, positions, options, None);
     apply_iso_offset(&mut field, options);
     Ok((field, stats))

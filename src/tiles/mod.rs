@@ -59,11 +59,12 @@ pub(crate) mod plan;
 pub(crate) mod spill;
 pub(crate) mod store;
 
+use crate::anisotropy::kernels_sorted;
 use crate::cancel::CancelToken;
 use crate::error::Result;
 use crate::field::{
     apply_coverage, apply_iso_offset, block_of_half, compute_blocks, BlockRange, FieldOptions,
-    FieldStats, HALF_BLOCK_EDGE,
+    FieldStats, Kernel, HALF_BLOCK_EDGE,
 };
 use crate::grid::BlockKey;
 use crate::io::particles::ParticleSource;
@@ -122,6 +123,8 @@ pub struct TileStats {
     pub spill_seconds: f64,
     /// Seconds spent loading tile particles and finding isolated particles.
     pub neighbour_seconds: f64,
+    /// Seconds spent computing anisotropic kernels (0 with isotropic ones).
+    pub kernel_seconds: f64,
     /// Seconds spent computing field blocks (with coverage).
     pub field_seconds: f64,
     /// Seconds spent in marching cubes (per-block extraction).
@@ -236,10 +239,33 @@ pub(crate) fn run_tiles<S: ParticleSource>(
                 field_particles.push(p);
             }
         }
-        drop(local);
+        // Anisotropic kernels of the field particles, from all their neighbours (zone 2
+        // holds every particle within R of zone 1).
         stats.neighbour_seconds += clock.elapsed().as_secs_f64();
         let clock = Instant::now();
-        let (mut field, fs) = compute_blocks(&field_particles, field_options, Some(field_range));
+        let kernels = (field_options.kernel == Kernel::Anisotropic).then(|| {
+            let halves: Vec<BlockKey> = loaded.iter().map(|r| r.0).collect();
+            let wanted: Vec<bool> = (0..loaded.len())
+                .map(|k| in_zone1[k] && !lonely[k])
+                .collect();
+            let mut all = kernels_sorted(&local, &halves, field_options, &wanted);
+            let mut k = 0;
+            all.retain(|_| {
+                k += 1;
+                wanted[k - 1]
+            });
+            all
+        });
+        drop(local);
+        stats.kernel_seconds += clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
+        let (mut field, fs) = match &kernels {
+            None => compute_blocks(&field_particles, field_options, Some(field_range)),
+            Some(kernels) => {
+                crate::field::anisotropic::compute_blocks(kernels, field_options, Some(field_range))
+            }
+        };
+        drop(kernels);
         field_stats.uncovered_particles +=
             apply_coverage(&mut field, &field_particles, field_options, Some(own));
         apply_iso_offset(&mut field, field_options);

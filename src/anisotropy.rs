@@ -1,0 +1,594 @@
+//! Anisotropic particle kernels (Yu and Turk 2013, "Reconstructing Surfaces of
+//! Particle-Based Fluids Using Anisotropic Kernels", § 3–4).
+//!
+//! **Input:** particle centres (world units) and [`AnisotropyOptions`].
+//! **Output:** one [`ParticleKernel`] per particle: a smoothed centre and an ellipsoid
+//! (its quadratic form), stretched along the local surface and squeezed across it.
+//!
+//! For particle `i`, over its neighbours `j` within the influence radius `R` (itself
+//! included), with `w_ij = 1 − (|x_j − x_i| / R)³`:
+//! * the weighted mean `x̄_i = Σ w_ij x_j / Σ w_ij` and covariance
+//!   `C_i = Σ w_ij (x_j − x̄_i)(x_j − x̄_i)ᵀ / Σ w_ij`;
+//! * the smoothed centre `c_i = x_i + λ (x̄_i − x_i)` (Laplacian smoothing, the paper's
+//!   eq. 6), its shift capped at [`AnisotropyOptions::max_shift`];
+//! * the eigenvalues `σ1 ≥ σ2 ≥ σ3` of `C_i`, the two smaller ones raised to at least
+//!   `σ1 / k_r` (eq. 15), and the ellipsoid's semi-axes along the eigenvectors
+//!   `a_k = h_a σ_k / (σ1 σ2 σ3)^{1/3}`: the volume of a sphere of radius `h_a`, so every
+//!   particle's kernel has the same integral (the paper's `k_s` scales instead; a fixed
+//!   volume keeps the density of the bulk independent of the stretch);
+//! * fewer than `N_ε` neighbours: a sphere of radius `h_a` (the paper's `k_n I`).
+//!
+//! A flat surface particle gets a disc `h_a·(1.59, 1.59, 0.40)` (`k_r = 4`), a filament
+//! particle a needle `h_a·(2.52, 0.63, 0.63)`; a particle of the bulk, whose neighbourhood
+//! is a full ball, stays close to a sphere.
+//!
+//! **Evaluation order:** the sums of particle `i` run over its neighbours in the
+//! canonical order of the field ([`crate::field`]: home half-block in (z, y, x) order,
+//! then input index), in f64 relative to `x_i`; a tile sees the same neighbours in the
+//! same order as the whole scene, so the kernels do not depend on the tiling or the
+//! thread count.
+
+use crate::field::{home_half_block, FieldOptions, HALF_BLOCK_EDGE};
+use crate::grid::BlockKey;
+use glam::{DMat3, DVec3, Vec3};
+use rayon::prelude::*;
+
+/// Parameters of the anisotropic kernels; lengths in multiples of the particle radius
+/// `r`. The covariance neighbourhood is the field's influence radius `R`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AnisotropyOptions {
+    /// Radius `h_a` of the kernel of a particle with an isotropic neighbourhood, multiples
+    /// of `r`. Default 3.5.
+    pub kernel_radius: f32,
+    /// Largest ratio `k_r` of the longest to the shortest axis. Default 1.5 (the paper
+    /// uses 4; 1.5 measured better here, see `docs/quality.md`).
+    pub max_stretch: f32,
+    /// Fewest neighbours `N_ε` (within `R`, the particle itself not counted) for a
+    /// stretched kernel; fewer give a sphere of radius `h_a`. Default 8.
+    pub min_neighbours: u32,
+    /// Centre smoothing `λ` in `[0, 1]` (0: the particle positions). Default 0: smoothing
+    /// pulls the outer particles inwards (the fluid shrinks) and made faces rougher in
+    /// every measurement (`docs/quality.md`).
+    pub smoothing: f32,
+    /// Largest shift of a centre by smoothing, multiples of `r`. Default 1.
+    pub max_shift: f32,
+    /// Distance `ρ_s` of the surface from the weighted mean of the centres, multiples of
+    /// `r` (the field's `phi = |v − vbar| − ρ_s r`). Default 1.08: on flat faces `vbar`
+    /// lies a little below the outer centres (the second layer weighs in), which the
+    /// extra 0.08 r makes up (see `docs/quality.md`).
+    pub surface_distance: f32,
+}
+
+impl Default for AnisotropyOptions {
+    fn default() -> Self {
+        AnisotropyOptions {
+            kernel_radius: 3.5,
+            max_stretch: 1.5,
+            min_neighbours: 8,
+            smoothing: 0.0,
+            max_shift: 1.0,
+            surface_distance: 1.08,
+        }
+    }
+}
+
+impl AnisotropyOptions {
+    /// Longest semi-axis any kernel can have, multiples of `r`: `h_a k_r^{2/3}` (a needle).
+    pub fn longest_axis(&self) -> f32 {
+        self.kernel_radius * self.max_stretch.powf(2.0 / 3.0)
+    }
+
+    /// Farthest a kernel reaches from its particle, multiples of `r` (the longest axis,
+    /// plus the largest shift when centres are smoothed).
+    pub fn reach(&self) -> f32 {
+        self.longest_axis()
+            + if self.smoothing > 0.0 {
+                self.max_shift
+            } else {
+                0.0
+            }
+    }
+
+    /// Checks that every parameter can work.
+    pub fn validate(&self) -> crate::Result<()> {
+        let bad = |option: &'static str, message: String| {
+            Err(crate::Error::InvalidOption { option, message })
+        };
+        if !(self.kernel_radius.is_finite() && self.kernel_radius > 0.0) {
+            return bad(
+                "anisotropy.kernel_radius",
+                format!("must be > 0 (multiples of r), got {}", self.kernel_radius),
+            );
+        }
+        if !(self.max_stretch.is_finite() && self.max_stretch >= 1.0 && self.max_stretch <= 16.0) {
+            return bad(
+                "anisotropy.max_stretch",
+                format!("must be between 1 and 16, got {}", self.max_stretch),
+            );
+        }
+        if !(self.smoothing.is_finite() && (0.0..=1.0).contains(&self.smoothing)) {
+            return bad(
+                "anisotropy.smoothing",
+                format!("must be between 0 and 1, got {}", self.smoothing),
+            );
+        }
+        if !(self.surface_distance.is_finite()
+            && self.surface_distance > 0.0
+            && self.surface_distance <= 2.0)
+        {
+            return bad(
+                "anisotropy.surface_distance",
+                format!(
+                    "must be > 0 and at most 2 (multiples of r), got {}",
+                    self.surface_distance
+                ),
+            );
+        }
+        if !(self.max_shift.is_finite() && self.max_shift >= 0.0 && self.max_shift <= 4.0) {
+            return bad(
+                "anisotropy.max_shift",
+                format!(
+                    "must be between 0 and 4 (multiples of r), got {}",
+                    self.max_shift
+                ),
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The kernel of one particle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParticleKernel {
+    /// Smoothed centre, world units.
+    pub centre: Vec3,
+    /// Semi-axes, world units, longest first.
+    pub axes: [f32; 3],
+    /// Unit directions of the semi-axes (the eigenvectors of the covariance).
+    pub directions: [Vec3; 3],
+    /// Neighbours within `R`, the particle itself not counted.
+    pub neighbours: u32,
+}
+
+impl ParticleKernel {
+    /// The quadratic form `M` with `(v − c)ᵀ M (v − c) = 1` on the ellipsoid, for lengths
+    /// measured in units of `unit` (world units per unit), as `[xx, xy, xz, yy, yz, zz]`.
+    pub fn quadratic_form(&self, unit: f64) -> [f64; 6] {
+        let mut m = [0.0f64; 6];
+        for (a, d) in self.axes.iter().zip(&self.directions) {
+            let inv = (unit / *a as f64).powi(2);
+            let d = d.as_dvec3();
+            m[0] += inv * d.x * d.x;
+            m[1] += inv * d.x * d.y;
+            m[2] += inv * d.x * d.z;
+            m[3] += inv * d.y * d.y;
+            m[4] += inv * d.y * d.z;
+            m[5] += inv * d.z * d.z;
+        }
+        m
+    }
+
+    /// Half-extents of the ellipsoid's axis-aligned bounding box, in units of `unit`.
+    pub fn half_extents(&self, unit: f64) -> [f64; 3] {
+        let mut e = [0.0f64; 3];
+        for (a, d) in self.axes.iter().zip(&self.directions) {
+            let a2 = (*a as f64 / unit).powi(2);
+            let d = d.as_dvec3();
+            e[0] += a2 * d.x * d.x;
+            e[1] += a2 * d.y * d.y;
+            e[2] += a2 * d.z * d.z;
+        }
+        e.map(f64::sqrt)
+    }
+}
+
+/// What the kernel stage did.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct AnisotropyStats {
+    /// Kernels computed.
+    pub particles: usize,
+    /// Kernels left spherical (fewer than `N_ε` neighbours).
+    pub spherical: usize,
+    /// Mean ratio of the longest to the shortest axis.
+    pub mean_stretch: f64,
+}
+
+/// Computes the kernel of every particle of `positions` (world units, any order).
+pub fn compute_kernels(
+    positions: &[Vec3],
+    field: &FieldOptions,
+) -> crate::Result<(Vec<ParticleKernel>, AnisotropyStats)> {
+    field.validate()?;
+    crate::field::check_positions(positions, field)?;
+    let inv_h = 1.0 / field.cell_size_world();
+    let halves: Vec<BlockKey> = positions
+        .par_iter()
+        .map(|p| home_half_block(*p, inv_h))
+        .collect();
+    let order = crate::grid::sort_by_key_zyx(&halves);
+    let sorted: Vec<Vec3> = order.iter().map(|&i| positions[i as usize]).collect();
+    let sorted_halves: Vec<BlockKey> = order.iter().map(|&i| halves[i as usize]).collect();
+    let kernels = kernels_sorted(&sorted, &sorted_halves, field, &vec![true; sorted.len()]);
+    let mut out = vec![
+        ParticleKernel {
+            centre: Vec3::ZERO,
+            axes: [0.0; 3],
+            directions: [Vec3::X, Vec3::Y, Vec3::Z],
+            neighbours: 0,
+        };
+        positions.len()
+    ];
+    for (k, &i) in kernels.into_iter().zip(&order) {
+        out[i as usize] = k;
+    }
+    let stats = kernel_stats(&out, &field.anisotropy);
+    Ok((out, stats))
+}
+
+/// Figures of a set of kernels.
+pub(crate) fn kernel_stats(
+    kernels: &[ParticleKernel],
+    options: &AnisotropyOptions,
+) -> AnisotropyStats {
+    let spherical = kernels
+        .iter()
+        .filter(|k| k.neighbours < options.min_neighbours)
+        .count();
+    let stretch: f64 = kernels
+        .iter()
+        .map(|k| k.axes[0] as f64 / k.axes[2] as f64)
+        .sum();
+    AnisotropyStats {
+        particles: kernels.len(),
+        spherical,
+        mean_stretch: if kernels.is_empty() {
+            0.0
+        } else {
+            stretch / kernels.len() as f64
+        },
+    }
+}
+
+/// The kernels of the particles `positions` sorted by home half-block (`halves`, in
+/// (z, y, x) order, then input index) where `wanted` is true (a placeholder elsewhere).
+/// Every neighbour within `R` of a wanted particle must be among `positions`.
+pub(crate) fn kernels_sorted(
+    positions: &[Vec3],
+    halves: &[BlockKey],
+    field: &FieldOptions,
+    wanted: &[bool],
+) -> Vec<ParticleKernel> {
+    let options = &field.anisotropy;
+    debug_assert_eq!(positions.len(), halves.len());
+    let rows = crate::grid::row_ranges(halves.iter().copied());
+    let radius = field.influence_radius_world();
+    let radius2 = radius * radius;
+    // Half-block coordinates of a point, as `home_half_block` rounds them; the search
+    // box `p ± R` is widened by a hair against that rounding.
+    let inv_edge = 1.0 / (field.cell_size_world() * HALF_BLOCK_EDGE as f64);
+    let margin = radius * (1.0 + 1e-6);
+    let r = field.particle_radius as f64;
+    let sphere = |centre: Vec3, neighbours: u32| ParticleKernel {
+        centre,
+        axes: [(options.kernel_radius as f64 * r) as f32; 3],
+        directions: [Vec3::X, Vec3::Y, Vec3::Z],
+        neighbours,
+    };
+    positions
+        .par_iter()
+        .zip(wanted)
+        .map(|(&p, &wanted)| {
+            if !wanted {
+                return sphere(p, 0);
+            }
+            let x = p.as_dvec3();
+            let lo = (x - DVec3::splat(margin)) * inv_edge;
+            let hi = (x + DVec3::splat(margin)) * inv_edge;
+            let (lo, hi) = (
+                [lo.x, lo.y, lo.z].map(|c| c.floor() as i32),
+                [hi.x, hi.y, hi.z].map(|c| c.floor() as i32),
+            );
+            let (mut sw, mut swd) = (0.0f64, DVec3::ZERO);
+            let mut swdd = [0.0f64; 6];
+            let mut neighbours = 0u32;
+            for cz in lo[2]..=hi[2] {
+                for cy in lo[1]..=hi[1] {
+                    let Some(&(a, b)) = rows.get(&[cy, cz]) else {
+                        continue;
+                    };
+                    let row = &halves[a as usize..b as usize];
+                    let first = a as usize + row.partition_point(|k| k[0] < lo[0]);
+                    let last = a as usize + row.partition_point(|k| k[0] <= hi[0]);
+                    for q in &positions[first..last] {
+                        let d = q.as_dvec3() - x;
+                        let dist2 = d.length_squared();
+                        if dist2 >= radius2 {
+                            continue;
+                        }
+                        if dist2 > 0.0 {
+                            neighbours += 1;
+                        }
+                        let s = dist2.sqrt() / radius;
+                        let w = 1.0 - s * s * s;
+                        sw += w;
+                        swd += w * d;
+                        swdd[0] += w * d.x * d.x;
+                        swdd[1] += w * d.x * d.y;
+                        swdd[2] += w * d.x * d.z;
+                        swdd[3] += w * d.y * d.y;
+                        swdd[4] += w * d.y * d.z;
+                        swdd[5] += w * d.z * d.z;
+                    }
+                }
+            }
+            // `neighbours` counts coincident particles out, the particle itself too.
+            let mean = swd / sw;
+            let mut shift = mean * options.smoothing as f64;
+            let max_shift = options.max_shift as f64 * r;
+            if shift.length() > max_shift {
+                shift *= max_shift / shift.length();
+            }
+            let centre = (x + shift).as_vec3();
+            if neighbours < options.min_neighbours {
+                return sphere(centre, neighbours);
+            }
+            let cov = DMat3::from_cols(
+                DVec3::new(swdd[0], swdd[1], swdd[2]) / sw - mean * mean.x,
+                DVec3::new(swdd[1], swdd[3], swdd[4]) / sw - mean * mean.y,
+                DVec3::new(swdd[2], swdd[4], swdd[5]) / sw - mean * mean.z,
+            );
+            let (values, vectors) = symmetric_eigen(cov);
+            let s1 = values[0];
+            if !(s1 > 0.0 && s1.is_finite()) {
+                return sphere(centre, neighbours);
+            }
+            let floor = s1 / options.max_stretch as f64;
+            let s = [s1, values[1].max(floor), values[2].max(floor)];
+            let scale = options.kernel_radius as f64 * r / (s[0] * s[1] * s[2]).cbrt();
+            ParticleKernel {
+                centre,
+                axes: s.map(|v| (v * scale) as f32),
+                directions: vectors.map(|v| v.as_vec3()),
+                neighbours,
+            }
+        })
+        .collect()
+}
+
+/// Eigenvalues (descending) and unit eigenvectors of a symmetric 3×3 matrix, by cyclic
+/// Jacobi rotations (deterministic: a fixed sweep order, stopping when the off-diagonal
+/// part is negligible). The vectors form a right-handed orthonormal frame.
+pub(crate) fn symmetric_eigen(m: DMat3) -> ([f64; 3], [DVec3; 3]) {
+    let mut a = [
+        [m.x_axis.x, m.y_axis.x, m.z_axis.x],
+        [m.x_axis.y, m.y_axis.y, m.z_axis.y],
+        [m.x_axis.z, m.y_axis.z, m.z_axis.z],
+    ];
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0f64]];
+    let scale = a.iter().flatten().map(|x| x.abs()).fold(0.0, f64::max);
+    if scale > 0.0 && scale.is_finite() {
+        for _sweep in 0..32 {
+            let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
+            if off <= 1e-15 * scale {
+                break;
+            }
+            for (p, q) in [(0usize, 1usize), (0, 2), (1, 2)] {
+                if a[p][q].abs() <= 1e-300 {
+                    continue;
+                }
+                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let t = if theta == 0.0 { 1.0 } else { t };
+                let c = 1.0 / (t * t + 1.0).sqrt();
+                let s = t * c;
+                // A ← Jᵀ A J with the rotation J in the (p, q) plane.
+                for row in &mut a {
+                    let (akp, akq) = (row[p], row[q]);
+                    row[p] = c * akp - s * akq;
+                    row[q] = s * akp + c * akq;
+                }
+                let (row_p, row_q) = (a[p], a[q]);
+                for k in 0..3 {
+                    a[p][k] = c * row_p[k] - s * row_q[k];
+                    a[q][k] = s * row_p[k] + c * row_q[k];
+                }
+                for row in &mut v {
+                    let (vp, vq) = (row[p], row[q]);
+                    row[p] = c * vp - s * vq;
+                    row[q] = s * vp + c * vq;
+                }
+            }
+        }
+    }
+    let mut idx = [0usize, 1, 2];
+    idx.sort_by(|&i, &j| a[j][j].total_cmp(&a[i][i]));
+    let values = idx.map(|i| a[i][i]);
+    let mut vectors = idx.map(|i| DVec3::new(v[0][i], v[1][i], v[2][i]).normalize());
+    if vectors[0].cross(vectors[1]).dot(vectors[2]) < 0.0 {
+        vectors[2] = -vectors[2];
+    }
+    (values, vectors)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn anisotropic(r: f32) -> FieldOptions {
+        FieldOptions {
+            kernel: crate::field::Kernel::Anisotropic,
+            ..FieldOptions::new(r)
+        }
+    }
+
+    /// The weighted covariance of particle `i`, straight from its definition over every
+    /// pair (O(N²)): (neighbours, mean offset, covariance).
+    fn oracle(positions: &[Vec3], i: usize, radius: f64) -> (u32, DVec3, DMat3) {
+        let x = positions[i].as_dvec3();
+        let near: Vec<(f64, DVec3)> = positions
+            .iter()
+            .map(|q| q.as_dvec3() - x)
+            .filter(|d| d.length() < radius)
+            .map(|d| (1.0 - (d.length() / radius).powi(3), d))
+            .collect();
+        let sw: f64 = near.iter().map(|n| n.0).sum();
+        let mean = near.iter().map(|n| n.0 * n.1).sum::<DVec3>() / sw;
+        let mut cov = DMat3::ZERO;
+        for (w, d) in &near {
+            let e = *d - mean;
+            cov += DMat3::from_cols(e * e.x, e * e.y, e * e.z) * (*w / sw);
+        }
+        let count = near.iter().filter(|n| n.1.length() > 0.0).count() as u32;
+        (count, mean, cov)
+    }
+
+    #[test]
+    fn kernels_match_the_covariance_computed_pair_by_pair() {
+        // A jittered slab with a free top face, a few strays and a short filament.
+        let r = 0.01f32;
+        let mut rng = crate::test_rng::TestRng::new(9);
+        let mut positions = Vec::new();
+        for z in 0..9 {
+            for y in 0..5 {
+                for x in 0..9 {
+                    let j = Vec3::new(rng.unit_f32(), rng.unit_f32(), rng.unit_f32()) - 0.5;
+                    positions.push((Vec3::new(x as f32, y as f32, z as f32) * 2.0 + j * 0.4) * r);
+                }
+            }
+        }
+        for k in 0..6 {
+            positions.push(Vec3::new(0.3 + 0.02 * k as f32, 0.3, 0.05));
+        }
+        let mut options = anisotropic(r);
+        options.anisotropy.smoothing = 0.4;
+        let (kernels, stats) = compute_kernels(&positions, &options).unwrap();
+        assert_eq!(stats.particles, positions.len());
+        assert!(stats.spherical >= 6, "the filament has too few neighbours");
+        let radius = options.influence_radius_world();
+        let a = &options.anisotropy;
+        let (mut stretched, mut checked) = (0, 0);
+        for (i, k) in kernels.iter().enumerate() {
+            let (count, mean, cov) = oracle(&positions, i, radius);
+            assert_eq!(k.neighbours, count, "particle {i}");
+            let mut shift = mean * a.smoothing as f64;
+            let cap = a.max_shift as f64 * r as f64;
+            if shift.length() > cap {
+                shift *= cap / shift.length();
+            }
+            let centre = positions[i].as_dvec3() + shift;
+            assert!(
+                (k.centre.as_dvec3() - centre).length() < 1e-6,
+                "particle {i}"
+            );
+            let h_a = a.kernel_radius as f64 * r as f64;
+            if count < a.min_neighbours {
+                assert!(k.axes.iter().all(|&x| (x as f64 - h_a).abs() < 1e-6));
+                continue;
+            }
+            // Eigen-decomposition of the oracle's matrix by another route: the axes
+            // must satisfy C v = σ v with σ ∝ the axis before clamping, and the volume
+            // of the ellipsoid is that of the sphere of radius h_a.
+            let volume = k.axes.iter().map(|&x| x as f64).product::<f64>();
+            assert!((volume / h_a.powi(3) - 1.0).abs() < 1e-4, "particle {i}");
+            assert!(k.axes[0] as f64 / k.axes[2] as f64 <= a.max_stretch as f64 * (1.0 + 1e-5));
+            let s1 = (cov * k.directions[0].as_dvec3()).length();
+            let v0 = k.directions[0].as_dvec3();
+            assert!(
+                (cov * v0 - v0 * s1).length() <= 1e-4 * s1,
+                "particle {i}: the longest axis is not the top eigenvector"
+            );
+            // Unclamped axes are proportional to their eigenvalues.
+            let v2 = k.directions[2].as_dvec3();
+            let s3 = v2.dot(cov * v2);
+            if s3 > s1 / a.max_stretch as f64 {
+                let ratio = k.axes[0] as f64 / k.axes[2] as f64;
+                assert!((ratio - s1 / s3).abs() < 1e-3 * ratio, "particle {i}");
+            }
+            if k.axes[0] > 1.2 * k.axes[2] {
+                stretched += 1;
+            }
+            checked += 1;
+        }
+        // The top and bottom faces' particles are stretched along the slab.
+        assert!(checked > 300 && stretched > 100, "{checked} {stretched}");
+    }
+
+    #[test]
+    fn degenerate_neighbourhoods_give_finite_clamped_kernels() {
+        let r = 0.01f32;
+        let options = anisotropic(r);
+        let a = &options.anisotropy;
+        let h_a = a.kernel_radius * r;
+        let line: Vec<Vec3> = (0..30)
+            .map(|k| Vec3::new(k as f32 * 0.5 * r, 0.1, 0.2))
+            .collect();
+        let plane: Vec<Vec3> = (0..400)
+            .map(|k| Vec3::new((k % 20) as f32, 0.0, (k / 20) as f32) * 2.0 * r)
+            .collect();
+        let pair = vec![Vec3::ZERO, Vec3::new(r, 0.0, 0.0)];
+        let coincident = vec![Vec3::splat(0.5); 12];
+        for (name, cloud) in [
+            ("collinear", line),
+            ("coplanar", plane),
+            ("one neighbour", pair),
+            ("coincident", coincident),
+        ] {
+            let (kernels, _) = compute_kernels(&cloud, &options).unwrap();
+            for k in &kernels {
+                assert!(
+                    k.axes.iter().all(|x| x.is_finite() && *x > 0.0)
+                        && k.centre.is_finite()
+                        && k.directions.iter().all(|d| d.is_finite()),
+                    "{name}: {k:?}"
+                );
+                let ratio = k.axes[0] / k.axes[2];
+                assert!(ratio <= a.max_stretch * 1.0001, "{name}: {k:?}");
+                let volume: f32 = k.axes.iter().product();
+                assert!((volume / h_a.powi(3) - 1.0).abs() < 1e-3, "{name}: {k:?}");
+                let form = k.quadratic_form(1.0);
+                assert!(form.iter().all(|v| v.is_finite()), "{name}");
+            }
+            match name {
+                // A line: the long axis along it, the two others clamped to k_r.
+                "collinear" => {
+                    let k = &kernels[15];
+                    assert!(k.directions[0].x.abs() > 0.999, "{k:?}");
+                    assert!(
+                        (k.axes[0] / k.axes[1] - a.max_stretch).abs() < 1e-3,
+                        "{k:?}"
+                    );
+                }
+                // A plane: the short axis across it, clamped.
+                "coplanar" => {
+                    let k = &kernels[210];
+                    assert!(k.directions[2].y.abs() > 0.999, "{k:?}");
+                    assert!(
+                        (k.axes[0] / k.axes[2] - a.max_stretch).abs() < 1e-2,
+                        "{k:?}"
+                    );
+                }
+                // Too few neighbours (or none apart from coincident copies): spheres.
+                _ => assert!(kernels.iter().all(|k| k.axes == [h_a; 3]), "{name}"),
+            }
+        }
+    }
+
+    #[test]
+    fn eigen_decomposition_reconstructs_the_matrix() {
+        let mut rng = crate::test_rng::TestRng::new(3);
+        for _ in 0..200 {
+            let mut e = || rng.unit_f32() as f64 * 2.0 - 1.0;
+            let b = DMat3::from_cols_array(&[e(), e(), e(), e(), e(), e(), e(), e(), e()]);
+            let m = b * b.transpose();
+            let (values, vectors) = symmetric_eigen(m);
+            assert!(values[0] >= values[1] && values[1] >= values[2]);
+            let mut back = DMat3::ZERO;
+            for (l, v) in values.iter().zip(&vectors) {
+                back += DMat3::from_cols(*v * v.x, *v * v.y, *v * v.z) * *l;
+            }
+            for (x, y) in back.to_cols_array().iter().zip(m.to_cols_array()) {
+                assert!((x - y).abs() < 1e-12 * (1.0 + y.abs()), "{back} vs {m}");
+            }
+        }
+    }
+}
