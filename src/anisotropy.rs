@@ -250,23 +250,92 @@ pub(crate) fn kernel_stats(
 }
 
 /// The kernels of the particles `positions` sorted by home half-block (`halves`, in
-/// (z, y, x) order, then input index) where `wanted` is true (a placeholder elsewhere).
-/// Every neighbour within `R` of a wanted particle must be among `positions`.
+/// (z, y, x) order, then input index) where `wanted` is true, in their order. Every
+/// neighbour within `R` of a wanted particle must be among `positions`.
+///
+/// Per populated half-block, the particles of the half-blocks around it that can hold a
+/// neighbour are gathered once, in their (z, y, x, index) order, and each wanted particle
+/// of the half-block scans them: the neighbours of a particle are met in the canonical
+/// order whatever the tiling.
 pub(crate) fn kernels_sorted(
     positions: &[Vec3],
     halves: &[BlockKey],
     field: &FieldOptions,
     wanted: &[bool],
 ) -> Vec<ParticleKernel> {
-    let options = &field.anisotropy;
     debug_assert_eq!(positions.len(), halves.len());
-    let rows = crate::grid::row_ranges(halves.iter().copied());
+    // The populated half-blocks (runs of the sorted particles) and, per (y, z) row of
+    // half-blocks, the range of runs in it.
+    let runs = crate::grid::key_runs(halves.iter().copied());
+    let rows = crate::grid::row_ranges(runs.iter().map(|r| r.0));
+    // A neighbour within R of a particle of half-block c lies in c ± ⌈R / edge⌉ (a hair
+    // more against the rounding of the half-blocks).
+    let edge = field.cell_size_world() * HALF_BLOCK_EDGE as f64;
+    let reach = (field.influence_radius_world() / edge * (1.0 + 1e-6)).ceil() as i32;
+    runs.par_iter()
+        .map_init(Scratch::default, |scratch, &(c, start, end)| {
+            let Scratch {
+                candidates,
+                cells,
+                near,
+            } = scratch;
+            let (start, end) = (start as usize, end as usize);
+            if !wanted[start..end].iter().any(|&w| w) {
+                return Vec::new();
+            }
+            candidates.clear();
+            cells.clear();
+            for dz in -reach..=reach {
+                for dy in -reach..=reach {
+                    let Some(&(a, b)) = rows.get(&[c[1] + dy, c[2] + dz]) else {
+                        continue;
+                    };
+                    let row = &runs[a as usize..b as usize];
+                    let first = row.partition_point(|r| r.0[0] < c[0] - reach);
+                    let last = row.partition_point(|r| r.0[0] <= c[0] + reach);
+                    for &(key, a, b) in &row[first..last] {
+                        let base = candidates.len() as u32;
+                        candidates.extend_from_slice(&positions[a as usize..b as usize]);
+                        cells.push((key, base, base + (b - a)));
+                    }
+                }
+            }
+            (start..end)
+                .filter(|&i| wanted[i])
+                .map(|i| kernel_of(positions[i], candidates, cells, edge, near, field))
+                .collect::<Vec<_>>()
+        })
+        .flatten_iter()
+        .collect()
+}
+
+/// Lanes of the neighbour sums of [`kernel_of`].
+const LANES: usize = 8;
+
+/// Per-thread scratch of [`kernels_sorted`].
+#[derive(Default)]
+struct Scratch {
+    /// Particles of the half-blocks around the current one, in canonical order.
+    candidates: Vec<Vec3>,
+    /// The half-blocks of `candidates`: key and range.
+    cells: Vec<(BlockKey, u32, u32)>,
+    /// Offsets of the candidates near the current particle.
+    near: Vec<[f32; 3]>,
+}
+
+/// The kernel of the particle at `p` from `candidates` (its neighbours within `R`,
+/// itself and any others, in the canonical order), binned into the half-blocks `cells`
+/// of edge `edge` (world units); `near` is scratch.
+fn kernel_of(
+    p: Vec3,
+    candidates: &[Vec3],
+    cells: &[(BlockKey, u32, u32)],
+    edge: f64,
+    near: &mut Vec<[f32; 3]>,
+    field: &FieldOptions,
+) -> ParticleKernel {
+    let options = &field.anisotropy;
     let radius = field.influence_radius_world();
-    let radius2 = radius * radius;
-    // Half-block coordinates of a point, as `home_half_block` rounds them; the search
-    // box `p ± R` is widened by a hair against that rounding.
-    let inv_edge = 1.0 / (field.cell_size_world() * HALF_BLOCK_EDGE as f64);
-    let margin = radius * (1.0 + 1e-6);
     let r = field.particle_radius as f64;
     let sphere = |centre: Vec3, neighbours: u32| ParticleKernel {
         centre,
@@ -274,85 +343,92 @@ pub(crate) fn kernels_sorted(
         directions: [Vec3::X, Vec3::Y, Vec3::Z],
         neighbours,
     };
-    positions
-        .par_iter()
-        .zip(wanted)
-        .map(|(&p, &wanted)| {
-            if !wanted {
-                return sphere(p, 0);
-            }
-            let x = p.as_dvec3();
-            let lo = (x - DVec3::splat(margin)) * inv_edge;
-            let hi = (x + DVec3::splat(margin)) * inv_edge;
-            let (lo, hi) = (
-                [lo.x, lo.y, lo.z].map(|c| c.floor() as i32),
-                [hi.x, hi.y, hi.z].map(|c| c.floor() as i32),
-            );
-            let (mut sw, mut swd) = (0.0f64, DVec3::ZERO);
-            let mut swdd = [0.0f64; 6];
-            let mut neighbours = 0u32;
-            for cz in lo[2]..=hi[2] {
-                for cy in lo[1]..=hi[1] {
-                    let Some(&(a, b)) = rows.get(&[cy, cz]) else {
-                        continue;
-                    };
-                    let row = &halves[a as usize..b as usize];
-                    let first = a as usize + row.partition_point(|k| k[0] < lo[0]);
-                    let last = a as usize + row.partition_point(|k| k[0] <= hi[0]);
-                    for q in &positions[first..last] {
-                        let d = q.as_dvec3() - x;
-                        let dist2 = d.length_squared();
-                        if dist2 >= radius2 {
-                            continue;
-                        }
-                        if dist2 > 0.0 {
-                            neighbours += 1;
-                        }
-                        let s = dist2.sqrt() / radius;
-                        let w = 1.0 - s * s * s;
-                        sw += w;
-                        swd += w * d;
-                        swdd[0] += w * d.x * d.x;
-                        swdd[1] += w * d.x * d.y;
-                        swdd[2] += w * d.x * d.z;
-                        swdd[3] += w * d.y * d.y;
-                        swdd[4] += w * d.y * d.z;
-                        swdd[5] += w * d.z * d.z;
-                    }
-                }
-            }
-            // `neighbours` counts coincident particles out, the particle itself too.
-            let mean = swd / sw;
-            let mut shift = mean * options.smoothing as f64;
-            let max_shift = options.max_shift as f64 * r;
-            if shift.length() > max_shift {
-                shift *= max_shift / shift.length();
-            }
-            let centre = (x + shift).as_vec3();
-            if neighbours < options.min_neighbours {
-                return sphere(centre, neighbours);
-            }
-            let cov = DMat3::from_cols(
-                DVec3::new(swdd[0], swdd[1], swdd[2]) / sw - mean * mean.x,
-                DVec3::new(swdd[1], swdd[3], swdd[4]) / sw - mean * mean.y,
-                DVec3::new(swdd[2], swdd[4], swdd[5]) / sw - mean * mean.z,
-            );
-            let (values, vectors) = symmetric_eigen(cov);
-            let s1 = values[0];
-            if !(s1 > 0.0 && s1.is_finite()) {
-                return sphere(centre, neighbours);
-            }
-            let floor = s1 / options.max_stretch as f64;
-            let s = [s1, values[1].max(floor), values[2].max(floor)];
-            let scale = options.kernel_radius as f64 * r / (s[0] * s[1] * s[2]).cbrt();
-            ParticleKernel {
-                centre,
-                axes: s.map(|v| (v * scale) as f32),
-                directions: vectors.map(|v| v.as_vec3()),
-                neighbours,
-            }
-        })
-        .collect()
+    let x = p.as_dvec3();
+    // The neighbours' offsets, compacted without branches into lanes (padding far
+    // outside R, where the weight is 0), then summed lane by lane in f32 and the lanes
+    // added in order: a fixed order of operations, whatever the compiler vectorizes.
+    let radius32 = radius as f32;
+    let r2 = radius32 * radius32;
+    // Half-blocks beyond p ± R (a hair more, against their rounding) hold no neighbour.
+    let margin = DVec3::splat(radius * (1.0 + 1e-6));
+    let (lo, hi) = ((x - margin) / edge, (x + margin) / edge);
+    let (lo, hi) = (
+        [lo.x, lo.y, lo.z].map(|v| v.floor() as i32),
+        [hi.x, hi.y, hi.z].map(|v| v.floor() as i32),
+    );
+    let pad = [2.0 * radius32, 0.0, 0.0];
+    if near.len() < candidates.len() + LANES {
+        near.resize(candidates.len() + LANES, pad);
+    }
+    let (mut n, mut neighbours) = (0, 0u32);
+    for &(key, a, b) in cells {
+        if (0..3).any(|k| key[k] < lo[k] || key[k] > hi[k]) {
+            continue;
+        }
+        for q in &candidates[a as usize..b as usize] {
+            let d = *q - p;
+            let d2 = d.length_squared();
+            near[n] = d.to_array();
+            n += (d2 < r2) as usize;
+            neighbours += (d2 < r2 && d2 > 0.0) as u32;
+        }
+    }
+    let padded = n.div_ceil(LANES) * LANES;
+    near[n..padded].fill(pad);
+    let inv_radius = 1.0 / radius32;
+    let mut acc = [[0.0f32; LANES]; 10];
+    for chunk in near[..padded].chunks_exact(LANES) {
+        for (l, d) in chunk.iter().enumerate() {
+            let [dx, dy, dz] = *d;
+            let s = (dx * dx + dy * dy + dz * dz).sqrt() * inv_radius;
+            let w = (1.0 - s * s * s).max(0.0);
+            let (wx, wy, wz) = (w * dx, w * dy, w * dz);
+            acc[0][l] += w;
+            acc[1][l] += wx;
+            acc[2][l] += wy;
+            acc[3][l] += wz;
+            acc[4][l] += wx * dx;
+            acc[5][l] += wx * dy;
+            acc[6][l] += wx * dz;
+            acc[7][l] += wy * dy;
+            acc[8][l] += wy * dz;
+            acc[9][l] += wz * dz;
+        }
+    }
+    let total = acc.map(|lanes| lanes.iter().map(|&v| v as f64).sum::<f64>());
+    let sw = total[0];
+    let swd = DVec3::new(total[1], total[2], total[3]);
+    let swdd = [total[4], total[5], total[6], total[7], total[8], total[9]];
+    // `neighbours` counts coincident particles out, the particle itself too.
+    let mean = swd / sw;
+    let mut shift = mean * options.smoothing as f64;
+    let max_shift = options.max_shift as f64 * r;
+    if shift.length() > max_shift {
+        shift *= max_shift / shift.length();
+    }
+    let centre = (x + shift).as_vec3();
+    if neighbours < options.min_neighbours {
+        return sphere(centre, neighbours);
+    }
+    let cov = DMat3::from_cols(
+        DVec3::new(swdd[0], swdd[1], swdd[2]) / sw - mean * mean.x,
+        DVec3::new(swdd[1], swdd[3], swdd[4]) / sw - mean * mean.y,
+        DVec3::new(swdd[2], swdd[4], swdd[5]) / sw - mean * mean.z,
+    );
+    let (values, vectors) = symmetric_eigen(cov);
+    let s1 = values[0];
+    if !(s1 > 0.0 && s1.is_finite()) {
+        return sphere(centre, neighbours);
+    }
+    let floor = s1 / options.max_stretch as f64;
+    let s = [s1, values[1].max(floor), values[2].max(floor)];
+    let scale = options.kernel_radius as f64 * r / (s[0] * s[1] * s[2]).cbrt();
+    ParticleKernel {
+        centre,
+        axes: s.map(|v| (v * scale) as f32),
+        directions: vectors.map(|v| v.as_vec3()),
+        neighbours,
+    }
 }
 
 /// Eigenvalues (descending) and unit eigenvectors of a symmetric 3×3 matrix, by cyclic

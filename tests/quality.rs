@@ -125,15 +125,6 @@ fn anisotropic_kernels_fill_the_box_and_flatten_its_faces() {
     let iso = box_figures(&surface("analytic/box.xyz", Kernel::Isotropic));
     let mesh = surface("analytic/box.xyz", Kernel::Anisotropic);
     let aniso = box_figures(&mesh);
-    eprintln!(
-        "box: isotropic {:.4} {:.3} {:.4}; anisotropic {:.4} {:.3} {:.4}",
-        iso.volume_error,
-        iso.normal_error,
-        iso.waviness,
-        aniso.volume_error,
-        aniso.normal_error,
-        aniso.waviness
-    );
     // Measured (this test's measures): isotropic −5.9 % volume; anisotropic −1.5 %.
     assert!(
         iso.volume_error < -0.04,
@@ -159,19 +150,12 @@ fn anisotropic_kernels_round_the_sphere_better_than_spheres_do() {
     let iso = sphere_figures(&surface("analytic/sphere.xyz", Kernel::Isotropic));
     let mesh = surface("analytic/sphere.xyz", Kernel::Anisotropic);
     let aniso = sphere_figures(&mesh);
-    eprintln!(
-        "sphere: isotropic {:.4} {:.3} {:.4}; anisotropic {:.4} {:.3} {:.4}",
-        iso.volume_error,
-        iso.normal_error,
-        iso.waviness,
-        aniso.volume_error,
-        aniso.normal_error,
-        aniso.waviness
-    );
     // The particles fill a lattice staircase inside the sphere: its facets are what both
-    // kernels follow; the stretched kernels bridge more of them.
+    // kernels follow; the stretched kernels bridge more of them (measured 8.6° against
+    // 10.4°), which also adds volume: +4.2 % (the particles' own cubes are +0.8 % over the
+    // sphere, the isotropic surface −1.2 %).
     assert!(
-        aniso.normal_error < 0.9 * iso.normal_error && aniso.normal_error < 9.5,
+        aniso.normal_error < 0.9 * iso.normal_error && aniso.normal_error < 9.0,
         "normal error: anisotropic {:.2}°, isotropic {:.2}°",
         aniso.normal_error,
         iso.normal_error

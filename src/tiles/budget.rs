@@ -56,6 +56,10 @@ pub(crate) const POST_TILES_MAX_BYTES: u64 = 96 << 20;
 /// attribute stage, on top of `4·w` (records and rows read back, positions and indices,
 /// home half-blocks, the sort order, the sorted copy).
 pub(crate) const ATTRIBUTE_TILE_BYTES_PER_PARTICLE: u64 = 76;
+/// Bytes per particle that anisotropic kernels add to a tile or an untiled run: the
+/// kernel of every loaded particle (64), then for the field particles the kernels kept
+/// (64), the prepared copy (64) and the sort by centre (16).
+pub(crate) const ANISOTROPIC_BYTES_PER_PARTICLE: u64 = 208;
 /// Bytes per triangle of a finished mesh with normals (12 for indices, half a vertex of
 /// 24 for position and normal).
 pub(crate) const MESH_BYTES_PER_TRIANGLE: f64 = 24.0;
@@ -134,6 +138,7 @@ pub(super) fn choose_tile_blocks(
     reach: i32,
     output_bytes_per_triangle: f64,
     payload_width: usize,
+    kernel_bytes_per_particle: u64,
     decimated_in_tiles: bool,
     options: &super::TileOptions,
 ) -> Result<(Option<i32>, u64)> {
@@ -157,7 +162,8 @@ pub(super) fn choose_tile_blocks(
             } else {
                 20.0
             }) as u64;
-    let untiled = shape.untiled_bytes().max(output) + particles * kept;
+    let untiled = (shape.untiled_bytes() + particles * kernel_bytes_per_particle).max(output)
+        + particles * kept;
     // Zone 2 of a tile reaches 2·reach + 1 blocks below its own blocks and 2·reach + 2
     // above (see the module docs). Exact particle count of the fullest zone 2: every
     // populated block adds its count to each tile whose zone 2 holds it.
@@ -181,7 +187,8 @@ pub(super) fn choose_tile_blocks(
     let surface_factor = (shape.surface_blocks as f64 * PARTICLES_PER_SURFACE_BLOCK
         / particles.max(1) as f64)
         .max(1.0);
-    let tile_bytes_per_particle = (TILE_BYTES_PER_PARTICLE as f64 * surface_factor) as u64;
+    let tile_bytes_per_particle =
+        (TILE_BYTES_PER_PARTICLE as f64 * surface_factor) as u64 + kernel_bytes_per_particle;
     let tile_estimate = |t: i32| densest_zone(t) * tile_bytes_per_particle;
     // The whole tiled run: tiles over what they produced, or the surface after them with
     // the attribute stage's tile.
@@ -358,7 +365,7 @@ mod tests {
                 memory_budget_bytes: budget,
                 ..TileOptions::default()
             };
-            choose_tile_blocks(counts, 1, output, 0, true, &options)
+            choose_tile_blocks(counts, 1, output, 0, 0, true, &options)
         };
         let (body_tiles, body_bytes) = plan(&body, None).unwrap();
         let (spray_tiles, spray_bytes) = plan(&spray, None).unwrap();

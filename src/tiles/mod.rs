@@ -248,13 +248,7 @@ pub(crate) fn run_tiles<S: ParticleSource>(
             let wanted: Vec<bool> = (0..loaded.len())
                 .map(|k| in_zone1[k] && !lonely[k])
                 .collect();
-            let mut all = kernels_sorted(&local, &halves, field_options, &wanted);
-            let mut k = 0;
-            all.retain(|_| {
-                k += 1;
-                wanted[k - 1]
-            });
-            all
+            kernels_sorted(&local, &halves, field_options, &wanted)
         });
         drop(local);
         stats.kernel_seconds += clock.elapsed().as_secs_f64();

@@ -140,6 +140,10 @@ pub(crate) fn plan_tiles<S: ParticleSource + ?Sized>(
         reach,
         output_bytes_per_triangle,
         payload_width,
+        match field_options.kernel {
+            crate::field::Kernel::Isotropic => 0,
+            crate::field::Kernel::Anisotropic => super::budget::ANISOTROPIC_BYTES_PER_PARTICLE,
+        },
         decimated_in_tiles,
         tile_options,
     )?;
