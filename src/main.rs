@@ -22,8 +22,6 @@ use std::time::Instant;
 
 /// Error bound of `--decimate adaptive`, multiples of r.
 const ADAPTIVE_ERROR: f32 = 0.1;
-/// Default error bound of a `.mseq` output of `reconstruct`, multiples of r.
-const ARCHIVE_ERROR: f64 = 0.01;
 
 #[derive(Parser)]
 #[command(
@@ -604,7 +602,9 @@ fn reconstruct(
             .map_err(|e| Failure::option("--attributes", e))?,
         None => AttributeSelection::default(),
     };
-    let error_bound = args.error_bound.unwrap_or(ARCHIVE_ERROR * radius(args));
+    let error_bound = args
+        .error_bound
+        .unwrap_or(meniscus::archive::default_error_bound(args.particle_radius));
     let plan = plan_frames(
         &args.input,
         &args.output,
@@ -736,13 +736,6 @@ fn progress_line(report: &FrameReport) -> serde_json::Value {
     line
 }
 
-/// The particle radius as the user wrote it (0.025, not the f32's 0.02500000037…), so
-/// that the default error bound is the round number `archive info` then prints.
-fn radius(args: &ReconstructArgs) -> f64 {
-    let r = args.particle_radius;
-    r.to_string().parse().unwrap_or(r as f64)
-}
-
 /// Options the user gave that the chosen output makes pointless, each with the reason;
 /// the run proceeds without them.
 fn ineffective_options(
@@ -798,12 +791,13 @@ fn ineffective_options(
         }
         // An error bound of world units given as multiples of r (as it once was).
         if let Some(bound) = args.error_bound {
-            let r = radius(args);
+            let r = args.particle_radius as f64;
             if bound > 0.1 * r {
                 warnings.push(format!(
-                    "--error-bound is in world units: {bound} is {:.3} × the particle radius (default {} = {ARCHIVE_ERROR} r)",
+                    "--error-bound is in world units: {bound} is {:.3} × the particle radius (default {} = {} r)",
                     bound / r,
-                    ARCHIVE_ERROR * r
+                    meniscus::archive::default_error_bound(args.particle_radius),
+                    meniscus::archive::DEFAULT_ERROR_BOUND_RADII
                 ));
             }
         }

@@ -599,7 +599,8 @@ fn reconstruct_file<'py>(
                 ..MeshWriteOptions::default()
             },
             skip_existing,
-            archive_error_bound: error_bound.unwrap_or(ARCHIVE_ERROR * particle_radius as f64),
+            archive_error_bound: error_bound
+                .unwrap_or(meniscus::archive::default_error_bound(particle_radius)),
             archive_attribute_error_bound: attribute_error_bound,
             fps,
             attributes,
@@ -621,9 +622,6 @@ fn reconstruct_file<'py>(
         serde_json::to_string(&reports).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     py.import_bound("json")?.call_method1("loads", (text,))
 }
-
-/// The CLI's default archive error bound, multiples of the particle radius.
-const ARCHIVE_ERROR: f64 = 0.01;
 
 /// A `.mseq` archive of meshes, one per frame number: `len(a)`, `a.frames`, `a[frame]`,
 /// `a.append(frame, mesh)`, `a.verify()`. The file is created by the first append.
@@ -712,7 +710,7 @@ impl Archive {
             };
             let error_bound = given
                 .or(held)
-                .or(radius.map(|r| ARCHIVE_ERROR * r as f64))
+                .or(radius.map(meniscus::archive::default_error_bound))
                 .ok_or(Error::InvalidOption {
                     option: "error_bound",
                     message: "a mesh read from an archive has no particle radius; give the bound (world units)".into(),

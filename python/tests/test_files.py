@@ -62,6 +62,17 @@ def test_reconstruct_file_equals_cli(tmp_path, cli_ply):
         meniscus.reconstruct_file(str(DATA / "ParticleData_Fluid_25.xyz"), str(out), -1.0)
 
 
+def test_reconstruct_file_archive_equals_cli(tmp_path):
+    # The default error bound is 0.01 r with r as written (0.012, not the f32's
+    # 0.0120000001...): the same bound as the CLI's, so the archives are the same bytes
+    # and the ones of several writers merge.
+    pattern = str(DATA / "ParticleData_Fluid_{}.xyz")
+    run_cli("reconstruct", pattern, "--particle-radius", RADIUS, "-o", tmp_path / "cli.mseq", "--quiet")
+    reports = meniscus.reconstruct_file(pattern, str(tmp_path / "py.mseq"), RADIUS)
+    assert [r["status"] for r in reports] == ["done"] * len(reports) and len(reports) > 1
+    assert (tmp_path / "py.mseq").read_bytes() == (tmp_path / "cli.mseq").read_bytes()
+
+
 def area(mesh):
     a, b, c = (mesh.vertices[mesh.triangles[:, k]].astype(np.float64) for k in range(3))
     return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()
