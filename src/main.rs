@@ -6,7 +6,6 @@ use clap::{ArgMatches, Args, CommandFactory, FromArgMatches, Parser, Subcommand}
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use meniscus::archive::{ArchiveOptions, ArchiveReader, ArchiveWriter};
 use meniscus::attributes::AttributeSelection;
-use meniscus::decimation::DecimateOptions;
 use meniscus::io::mesh::read_mesh;
 use meniscus::io::mesh::MeshWriteOptions;
 use meniscus::io::particles::ParticleFormat;
@@ -15,13 +14,11 @@ use meniscus::job::{
     JobOptions, OutputKind,
 };
 use meniscus::pipeline::ReconstructOptions;
+use meniscus::settings::{Decimation, ReconstructSettings};
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
-
-/// Error bound of `--decimate adaptive`, multiples of r.
-const ADAPTIVE_ERROR: f32 = 0.1;
 
 #[derive(Parser)]
 #[command(
@@ -521,63 +518,32 @@ fn parse_level(value: &str, option: &str) -> Result<Option<u32>, Failure> {
 }
 
 fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, Failure> {
-    let mut options = ReconstructOptions::new(args.particle_radius);
-    options.field.influence_radius = args.influence_radius;
-    options.field.cell_size = args.cell_size;
-    options.field.t_low = args.t_low;
-    options.field.t_high = args.t_high;
-    options.field.particle_coverage = args.particle_coverage;
-    options.field.iso_offset = args.iso_offset;
-    options.isolated_sphere_level = parse_level(&args.isolated_spheres, "--isolated-spheres")?;
-    options.tiles.tile_size_cells = args.tile_size;
-    options.tiles.memory_budget_bytes = match &args.memory_budget {
-        Some(text) => Some(
-            meniscus::tiles::parse_memory_size(text)
-                .map_err(|e| Failure::option("--memory-budget", e))?,
-        ),
-        None => meniscus::tiles::default_memory_budget(),
+    let settings = ReconstructSettings {
+        particle_radius: args.particle_radius,
+        influence_radius: args.influence_radius,
+        cell_size: args.cell_size,
+        t_low: args.t_low,
+        t_high: args.t_high,
+        particle_coverage: args.particle_coverage,
+        iso_offset: args.iso_offset,
+        isolated_spheres: parse_level(&args.isolated_spheres, "--isolated-spheres")?,
+        decimate: args
+            .decimate
+            .parse()
+            .map_err(|e| Failure::option("--decimate", e))?,
+        decimate_error: args.decimate_error,
+        subdivide: args.subdivide,
+        tile_size: args.tile_size,
+        memory_budget: match &args.memory_budget {
+            Some(text) => Some(
+                meniscus::tiles::parse_memory_size(text)
+                    .map_err(|e| Failure::option("--memory-budget", e))?,
+            ),
+            None => None,
+        },
+        temp_dir: args.temp_dir.clone(),
     };
-    options.tiles.temp_dir = args.temp_dir.clone();
-    options.subdivide.levels = args.subdivide;
-    let r = args.particle_radius;
-    let error = args.decimate_error.map(|e| e * r);
-    if let Some(e) = args.decimate_error {
-        if !(e.is_finite() && e > 0.0) {
-            return Err(Failure::option(
-                "--decimate-error",
-                format!("must be > 0 (multiples of r), got {e}"),
-            ));
-        }
-    }
-    options.decimate = match args.decimate.as_str() {
-        "off" | "none" | "0" => None,
-        "adaptive" => Some(DecimateOptions {
-            target_reduction: None,
-            max_error: Some(error.unwrap_or(ADAPTIVE_ERROR * r)),
-            ..Default::default()
-        }),
-        fraction => {
-            let f: f32 = fraction
-                .parse()
-                .ok()
-                .filter(|f: &f32| (0.0..1.0).contains(f))
-                .ok_or_else(|| {
-                    Failure::option(
-                        "--decimate",
-                        format!(
-                            "takes a fraction in [0, 1), `adaptive` or `off`, got {fraction:?}"
-                        ),
-                    )
-                })?;
-            Some(DecimateOptions {
-                target_reduction: Some(f),
-                max_error: error,
-                ..Default::default()
-            })
-        }
-    };
-    options.field.validate()?;
-    Ok(options)
+    Ok(settings.options()?)
 }
 
 fn reconstruct(
@@ -659,7 +625,7 @@ fn reconstruct(
         &mut |report: &FrameReport| {
             bar.inc(1);
             if args.json_progress {
-                println!("{}", progress_line(report));
+                println!("{}", report.progress_line());
             }
             if args.keep_going {
                 if let Some(error) = &report.error {
@@ -717,23 +683,6 @@ fn reconstruct(
         )));
     }
     Ok(())
-}
-
-/// One line of `--json-progress`: what a farm manager needs of a finished frame.
-fn progress_line(report: &FrameReport) -> serde_json::Value {
-    let mut line = serde_json::json!({
-        "frame": report.frame,
-        "input": report.input,
-        "output": report.output,
-        "status": report.status,
-        "triangles": (report.status == FrameStatus::Done).then(|| report.triangles()),
-        "seconds": report.seconds,
-        "peak_rss_bytes": peak_rss_bytes(),
-    });
-    if let Some(error) = &report.error {
-        line["error"] = error.as_str().into();
-    }
-    line
 }
 
 /// Options the user gave that the chosen output makes pointless, each with the reason;
@@ -824,7 +773,7 @@ fn ineffective_options(
             "--keep-going has no effect: a single file has no other frames to go on with".into(),
         );
     }
-    if given("decimate_error") && matches!(args.decimate.as_str(), "off" | "none" | "0") {
+    if given("decimate_error") && args.decimate.parse() == Ok(Decimation::Off) {
         warnings.push(format!(
             "--decimate-error has no effect: decimation is off (--decimate {})",
             args.decimate
