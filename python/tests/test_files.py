@@ -112,3 +112,30 @@ def test_archive_append_read_verify(frame25, tmp_path):
     other = meniscus.Archive(tmp_path / "other.mseq", error_bound=1e-4)
     other.append(1, archive[25])
     assert other.frames == [1] and other.verify()["clean"]
+
+
+def test_archive_append_of_a_control_mesh_is_the_cli_archive(tmp_path):
+    # The CLI's .mseq stores each frame's control mesh (before Loop subdivision) and the
+    # number of steps the reader runs: reconstructed with subdivide=0 and appended with
+    # subdivide=1, a frame is the CLI's, byte for byte, one append at a time.
+    run_cli("reconstruct", str(DATA / "ParticleData_Fluid_{}.xyz"), "--particle-radius", RADIUS,
+            "--frames", "1,9,25", "-o", tmp_path / "cli.mseq", "--quiet")
+    archive = meniscus.Archive(tmp_path / "py.mseq")
+    for number in (1, 9, 25):
+        positions, _ = meniscus.read_particles(DATA / f"ParticleData_Fluid_{number}.xyz")
+        control = meniscus.reconstruct(positions, RADIUS, subdivide=0)
+        archive.append(number, control, subdivide=1)
+    assert (tmp_path / "py.mseq").read_bytes() == (tmp_path / "cli.mseq").read_bytes()
+    # Read back, a frame is the subdivided surface (4x the control mesh's triangles).
+    assert archive[25].triangle_count - control.stats["sphere_triangles"] == 4 * control.stats["fluid_triangles"]
+    # A mesh subdivided already is not subdivided again.
+    with pytest.raises(ValueError, match="subdivided already"):
+        archive.append(31, meniscus.reconstruct(positions, RADIUS), subdivide=1)
+    # Stored as given (the default), a subdivided mesh keeps all its triangles: the same
+    # surface when read back, in a larger file.
+    whole = meniscus.Archive(tmp_path / "whole.mseq")
+    whole.append(25, meniscus.reconstruct(positions, RADIUS))
+    single = meniscus.Archive(tmp_path / "control.mseq")
+    single.append(25, control, subdivide=1)
+    assert whole[25].triangle_count == single[25].triangle_count
+    assert (tmp_path / "whole.mseq").stat().st_size > 2 * (tmp_path / "control.mseq").stat().st_size
