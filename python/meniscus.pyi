@@ -11,7 +11,9 @@ or written, ``FormatError`` (a ``ValueError``) for malformed or unsupported file
 """
 
 import os
-from typing import Any, Mapping, Sequence, Union
+from typing import Any, Callable, Literal, Mapping, Sequence, TypedDict, Union
+
+from typing_extensions import Unpack
 
 import numpy as np
 import numpy.typing as npt
@@ -19,6 +21,59 @@ import numpy.typing as npt
 __version__: str
 
 _Path = Union[str, os.PathLike[str]]
+
+class ReconstructOptions(TypedDict, total=False):
+    """The reconstruction settings, taken as keywords by ``reconstruct`` and
+    ``reconstruct_file`` (``**options``); named as the CLI's flags, with the same defaults.
+
+    Any other keyword is a TypeError naming it; ``None`` for a setting is its default,
+    except for ``decimate`` and ``isolated_spheres``, which it turns off.
+    """
+
+    influence_radius: float
+    """Kernel support R, multiples of r. Default 4."""
+    cell_size: float
+    """Marching-cubes cell size h, multiples of r. Default 1."""
+    t_low: float
+    """Lower eigenvalue threshold of the concavity factor. Default 0.4."""
+    t_high: float
+    """Upper eigenvalue threshold of the concavity factor. Default 3.5."""
+    particle_coverage: float
+    """Coverage radius, multiples of r: particles the surface would leave outside are
+    enclosed in a ball of this radius (0: off). Default 0.9."""
+    iso_offset: float
+    """Iso-level offset, multiples of r (moves the surface outwards). Default 0."""
+    kernel: Literal["isotropic", "anisotropic"]
+    """Particle kernel: ``"isotropic"`` (the paper's Solenthaler field) or
+    ``"anisotropic"`` (Yu & Turk 2013 kernels stretched along the local surface).
+    Default ``"isotropic"``."""
+    kernel_radius: float
+    """Anisotropic kernels: radius of an unstretched kernel, multiples of r. Default 3.5."""
+    max_stretch: float
+    """Anisotropic kernels: largest ratio of the longest to the shortest axis. Default 1.5."""
+    min_neighbours: int
+    """Anisotropic kernels: fewest neighbours within R for a stretched kernel. Default 8."""
+    centre_smoothing: float
+    """Anisotropic kernels: centre smoothing in [0, 1] (0: the particle positions).
+    Default 0."""
+    isolated_spheres: int | None
+    """Icosphere level of the spheres standing for isolated particles; None keeps them in
+    the field. Default 2."""
+    decimate: float | str | None
+    """Quadric decimation: the fraction of triangles removed, in [0, 1); ``"adaptive"``
+    (stop on an error bound only: 0.1 r unless ``decimate_error``); None or ``"off"``.
+    Default 0.8."""
+    decimate_error: float | None
+    """Error bound of decimation, multiples of r; with a fraction, whichever is reached
+    first stops it. Default None."""
+    subdivide: int
+    """Loop subdivision steps after decimation (0: off). Default 1."""
+    tile_size: int | None
+    """Tile edge in marching-cubes cells; default: from the memory budget."""
+    memory_budget: int | str | None
+    """Bytes, or a size such as ``"2GiB"``; default: half the available memory."""
+    temp_dir: _Path | None
+    """Directory of a tiled run's spill file; default: the system's temporary directory."""
 
 class FormatError(ValueError):
     """A particle, mesh or archive file whose content is malformed or whose format is not supported."""
@@ -61,14 +116,8 @@ def reconstruct(
     particle_radius: float,
     *,
     attributes: Mapping[str, npt.ArrayLike] | None = None,
-    influence_radius: float = 4.0,
-    cell_size: float = 1.0,
-    decimate: float | None = 0.8,
-    subdivide: int = 1,
-    isolated_spheres: int | None = 2,
-    iso_offset: float = 0.0,
     threads: int | None = None,
-    memory_budget: int | str | None = None,
+    **options: Unpack[ReconstructOptions],
 ) -> Mesh:
     """Reconstructs the surface of the particles at ``positions``.
 
@@ -78,15 +127,10 @@ def reconstruct(
         particle_radius: ``r``, world units (> 0).
         attributes: name -> (N,) or (N, k) array of per-particle values (e.g. velocity),
             carried to the surface vertices (``Mesh.attributes``).
-        influence_radius: kernel support, multiples of r.
-        cell_size: lattice cell size, multiples of r.
-        decimate: fraction of triangles removed by quadric decimation, in [0, 1); None: off.
-        subdivide: Loop subdivision steps after decimation (0: off).
-        isolated_spheres: icosphere level of the spheres standing for isolated particles;
-            None keeps them in the field.
-        iso_offset: iso-level offset, as the CLI's ``--iso-offset``.
         threads: worker threads (default: all cores). The output does not depend on it.
-        memory_budget: bytes, or a size such as ``"2GiB"``; default: the available memory.
+        **options: the reconstruction settings (``ReconstructOptions``): influence_radius,
+            cell_size, t_low, t_high, particle_coverage, iso_offset, isolated_spheres,
+            decimate, decimate_error, subdivide, tile_size, memory_budget, temp_dir.
     """
 
 def read_particles(path: _Path) -> tuple[npt.NDArray[np.float32], dict[str, npt.NDArray[np.float32]]]:
@@ -99,29 +143,64 @@ def reconstruct_file(
     particle_radius: float,
     *,
     attributes: str | Sequence[str] | None = None,
-    influence_radius: float = 4.0,
-    cell_size: float = 1.0,
-    decimate: float | None = 0.8,
-    subdivide: int = 1,
-    isolated_spheres: int | None = 2,
-    iso_offset: float = 0.0,
     threads: int | None = None,
-    memory_budget: int | str | None = None,
-    normals: bool = True,
+    frames: str | Sequence[int] | None = None,
+    shard: str | tuple[int, int] | None = None,
+    start: int | None = None,
+    end: int | None = None,
+    keep_going: bool = False,
+    progress: Callable[[dict[str, Any]], Any] | None = None,
     skip_existing: bool = False,
+    normals: bool = True,
     error_bound: float | None = None,
     attribute_error_bound: float = 1e-3,
     fps: float = 24.0,
+    input_format: str | None = None,
+    **options: Unpack[ReconstructOptions],
 ) -> list[dict[str, Any]]:
     """Reconstructs a particle file, or a ``{}`` frame sequence, into ``output`` as
-    ``meniscus reconstruct INPUT -o OUTPUT`` does: a mesh file, a ``{}`` pattern of them, one
-    ``.mseq`` archive or one ``.glb``/``.gltf`` for a sequence.
+    ``meniscus reconstruct INPUT -o OUTPUT`` does (the same library function): a mesh
+    file, a ``{}`` pattern of them, one ``.mseq`` archive or one ``.glb``/``.gltf`` for a
+    sequence. An archive is the CLI's, byte for byte (the control mesh of each frame is
+    stored, subdivided when read).
 
-    ``attributes``: None (the velocity when the input has one), ``"none"``, ``"all"``,
-    ``"a,b"`` or a list of names. ``error_bound`` (world units, default 0.01 r) and
-    ``attribute_error_bound`` apply to ``.mseq`` outputs. Returns one report per frame, as
-    the CLI's ``--stats`` JSON.
+    Args:
+        attributes: None (the velocity when the input has one), ``"none"``, ``"all"``,
+            ``"a,b"`` or a list of names.
+        threads: worker threads (default: all cores).
+        frames: the frames of the pattern to take, as ``--frames``: ``"1-100"``,
+            ``"1-100:2"`` (every second), ``"1,5,7-20"``, or a list of numbers. Every
+            selected frame needs a file.
+        shard: ``(i, n)`` or ``"i/n"``, as ``--shard``: every n-th frame of the selection
+            from the i-th (0-based), round-robin.
+        start, end: an inclusive range of frames (instead of ``frames``).
+        keep_going: a frame that fails is reported (status ``"failed"``, ``error``) and the
+            others are done; the call then returns normally. Default: the first failure
+            raises (a ``.mseq`` output keeps the frames done before it).
+        progress: called with each finished frame's ``--json-progress`` object: ``frame``,
+            ``input``, ``output``, ``status`` (done/skipped/failed), ``triangles``,
+            ``seconds``, ``peak_rss_bytes`` and, when failed, ``error``. An exception it
+            raises stops the run and is raised.
+        skip_existing: skip frames whose output exists (or that the ``.mseq`` holds).
+        normals: write vertex normals.
+        error_bound: ``.mseq`` position bound, world units; default 0.01 r (r as written,
+            the CLI's).
+        attribute_error_bound: ``.mseq`` attribute bound, in the attribute's units.
+        fps: playback rate of a sequence written into one glTF.
+        input_format: ``"xyz"``, ``"vtk"``, ``"ply"`` or ``"bgeo"``, instead of the extension.
+        **options: the reconstruction settings (``ReconstructOptions``).
+
+    Returns:
+        One report per frame, as the CLI's ``--stats`` JSON.
     """
+
+def merge_archives(inputs: Sequence[_Path], output: _Path) -> dict[str, int]:
+    """Joins ``.mseq`` archives (one per worker or task) into ``output`` without
+    re-encoding, as ``meniscus archive merge``: frames in increasing order, records copied
+    byte for byte, so the result equals the archive one writer makes of the same frames.
+    A frame in two inputs, different error bounds or a damaged input is refused
+    (``FormatError``) and ``output`` is not created. Returns ``inputs``, ``frames``,
+    ``bytes``."""
 
 class Archive:
     """A ``.mseq`` archive: one mesh per frame number. The file is created by the first append."""
@@ -137,9 +216,16 @@ class Archive:
         """Frame numbers held, in file order."""
     def __getitem__(self, frame: int) -> Mesh:
         """The decoded mesh of ``frame`` (with normals); KeyError when not held."""
-    def append(self, frame: int, mesh: Mesh, *, error_bound: float | None = None) -> int:
+    def append(self, frame: int, mesh: Mesh, *, error_bound: float | None = None, subdivide: int = 0) -> int:
         """Appends ``mesh`` as ``frame``; returns the bytes written. A frame number already
-        held raises FileExistsError."""
+        held raises FileExistsError.
+
+        ``subdivide``: Loop steps the reader runs on ``mesh``, which is then stored as a
+        control mesh (a quarter of the triangles per step). The CLI archives frames so:
+        ``archive.append(n, reconstruct(p, r, subdivide=0), subdivide=1)`` writes the
+        frame ``meniscus reconstruct ... -o run.mseq`` writes, byte for byte. A mesh
+        reconstructed with subdivision is refused with ``subdivide`` > 0; by default it
+        is stored as it is (all its triangles)."""
     def verify(self) -> dict[str, Any]:
         """Decodes and checks every frame: ``clean``, ``good``, ``damaged``, ``damage``,
         ``trailing_bytes``, ``recovered_by_scan``."""

@@ -141,6 +141,26 @@ impl FrameReport {
     pub fn triangles(&self) -> usize {
         self.reconstruction.fluid_triangles + self.reconstruction.sphere_triangles
     }
+
+    /// What a farm manager needs of a finished frame, as one JSON object (the CLI's
+    /// `--json-progress` line): `frame`, `input`, `output`, `status`, `triangles` (fluid
+    /// plus spheres, `null` unless done), `seconds`, `peak_rss_bytes` (the process's peak
+    /// so far) and, for a failed frame, `error`.
+    pub fn progress_line(&self) -> serde_json::Value {
+        let mut line = serde_json::json!({
+            "frame": self.frame,
+            "input": self.input,
+            "output": self.output,
+            "status": self.status,
+            "triangles": (self.status == FrameStatus::Done).then(|| self.triangles()),
+            "seconds": self.seconds,
+            "peak_rss_bytes": peak_rss_bytes(),
+        });
+        if let Some(error) = &self.error {
+            line["error"] = error.as_str().into();
+        }
+        line
+    }
 }
 
 /// Reads `input`, reconstructs it and sends it to `sink`: the file `output`, an archive

@@ -21,6 +21,7 @@
 //! * [`attributes`]: particle attributes (velocity, ...) carried to the surface vertices.
 //! * [`pipeline`]: the whole reconstruction of one frame, stage by stage, with timings.
 //! * [`job`], [`sequence`]: files and `{}` frame sequences, as the CLI runs them.
+//! * [`settings`]: the options as the CLI and the Python package take them.
 //! * [`archive`]: the `.mseq` container for whole mesh sequences.
 //!
 //! ```no_run
@@ -53,6 +54,7 @@ pub mod mesh;
 pub(crate) mod neighbors;
 pub mod pipeline;
 pub mod sequence;
+pub mod settings;
 pub mod subdivision;
 #[cfg(test)]
 mod test_rng;

@@ -6,7 +6,6 @@ use clap::{ArgMatches, Args, CommandFactory, FromArgMatches, Parser, Subcommand}
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use meniscus::archive::{ArchiveOptions, ArchiveReader, ArchiveWriter};
 use meniscus::attributes::AttributeSelection;
-use meniscus::decimation::DecimateOptions;
 use meniscus::io::mesh::read_mesh;
 use meniscus::io::mesh::MeshWriteOptions;
 use meniscus::io::particles::ParticleFormat;
@@ -15,15 +14,11 @@ use meniscus::job::{
     JobOptions, OutputKind,
 };
 use meniscus::pipeline::ReconstructOptions;
+use meniscus::settings::{Decimation, ReconstructSettings};
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
-
-/// Error bound of `--decimate adaptive`, multiples of r.
-const ADAPTIVE_ERROR: f32 = 0.1;
-/// Default error bound of a `.mseq` output of `reconstruct`, multiples of r.
-const ARCHIVE_ERROR: f64 = 0.01;
 
 #[derive(Parser)]
 #[command(
@@ -546,71 +541,40 @@ enum KernelArg {
 }
 
 fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, Failure> {
-    let mut options = ReconstructOptions::new(args.particle_radius);
-    options.field.influence_radius = args.influence_radius;
-    options.field.cell_size = args.cell_size;
-    options.field.t_low = args.t_low;
-    options.field.t_high = args.t_high;
-    options.field.particle_coverage = args.particle_coverage;
-    options.field.iso_offset = args.iso_offset;
-    options.field.kernel = match args.kernel {
-        KernelArg::Isotropic => meniscus::field::Kernel::Isotropic,
-        KernelArg::Anisotropic => meniscus::field::Kernel::Anisotropic,
+    let settings = ReconstructSettings {
+        particle_radius: args.particle_radius,
+        influence_radius: args.influence_radius,
+        cell_size: args.cell_size,
+        t_low: args.t_low,
+        t_high: args.t_high,
+        particle_coverage: args.particle_coverage,
+        iso_offset: args.iso_offset,
+        kernel: match args.kernel {
+            KernelArg::Isotropic => meniscus::field::Kernel::Isotropic,
+            KernelArg::Anisotropic => meniscus::field::Kernel::Anisotropic,
+        },
+        kernel_radius: args.kernel_radius,
+        max_stretch: args.max_stretch,
+        min_neighbours: args.min_neighbours,
+        centre_smoothing: args.centre_smoothing,
+        isolated_spheres: parse_level(&args.isolated_spheres, "--isolated-spheres")?,
+        decimate: args
+            .decimate
+            .parse()
+            .map_err(|e| Failure::option("--decimate", e))?,
+        decimate_error: args.decimate_error,
+        subdivide: args.subdivide,
+        tile_size: args.tile_size,
+        memory_budget: match &args.memory_budget {
+            Some(text) => Some(
+                meniscus::tiles::parse_memory_size(text)
+                    .map_err(|e| Failure::option("--memory-budget", e))?,
+            ),
+            None => None,
+        },
+        temp_dir: args.temp_dir.clone(),
     };
-    options.field.anisotropy.kernel_radius = args.kernel_radius;
-    options.field.anisotropy.max_stretch = args.max_stretch;
-    options.field.anisotropy.min_neighbours = args.min_neighbours;
-    options.field.anisotropy.smoothing = args.centre_smoothing;
-    options.isolated_sphere_level = parse_level(&args.isolated_spheres, "--isolated-spheres")?;
-    options.tiles.tile_size_cells = args.tile_size;
-    options.tiles.memory_budget_bytes = match &args.memory_budget {
-        Some(text) => Some(
-            meniscus::tiles::parse_memory_size(text)
-                .map_err(|e| Failure::option("--memory-budget", e))?,
-        ),
-        None => meniscus::tiles::default_memory_budget(),
-    };
-    options.tiles.temp_dir = args.temp_dir.clone();
-    options.subdivide.levels = args.subdivide;
-    let r = args.particle_radius;
-    let error = args.decimate_error.map(|e| e * r);
-    if let Some(e) = args.decimate_error {
-        if !(e.is_finite() && e > 0.0) {
-            return Err(Failure::option(
-                "--decimate-error",
-                format!("must be > 0 (multiples of r), got {e}"),
-            ));
-        }
-    }
-    options.decimate = match args.decimate.as_str() {
-        "off" | "none" | "0" => None,
-        "adaptive" => Some(DecimateOptions {
-            target_reduction: None,
-            max_error: Some(error.unwrap_or(ADAPTIVE_ERROR * r)),
-            ..Default::default()
-        }),
-        fraction => {
-            let f: f32 = fraction
-                .parse()
-                .ok()
-                .filter(|f: &f32| (0.0..1.0).contains(f))
-                .ok_or_else(|| {
-                    Failure::option(
-                        "--decimate",
-                        format!(
-                            "takes a fraction in [0, 1), `adaptive` or `off`, got {fraction:?}"
-                        ),
-                    )
-                })?;
-            Some(DecimateOptions {
-                target_reduction: Some(f),
-                max_error: error,
-                ..Default::default()
-            })
-        }
-    };
-    options.field.validate()?;
-    Ok(options)
+    Ok(settings.options()?)
 }
 
 fn reconstruct(
@@ -635,7 +599,9 @@ fn reconstruct(
             .map_err(|e| Failure::option("--attributes", e))?,
         None => AttributeSelection::default(),
     };
-    let error_bound = args.error_bound.unwrap_or(ARCHIVE_ERROR * radius(args));
+    let error_bound = args
+        .error_bound
+        .unwrap_or(meniscus::archive::default_error_bound(args.particle_radius));
     let plan = plan_frames(
         &args.input,
         &args.output,
@@ -690,7 +656,7 @@ fn reconstruct(
         &mut |report: &FrameReport| {
             bar.inc(1);
             if args.json_progress {
-                println!("{}", progress_line(report));
+                println!("{}", report.progress_line());
             }
             if args.keep_going {
                 if let Some(error) = &report.error {
@@ -750,30 +716,6 @@ fn reconstruct(
     Ok(())
 }
 
-/// One line of `--json-progress`: what a farm manager needs of a finished frame.
-fn progress_line(report: &FrameReport) -> serde_json::Value {
-    let mut line = serde_json::json!({
-        "frame": report.frame,
-        "input": report.input,
-        "output": report.output,
-        "status": report.status,
-        "triangles": (report.status == FrameStatus::Done).then(|| report.triangles()),
-        "seconds": report.seconds,
-        "peak_rss_bytes": peak_rss_bytes(),
-    });
-    if let Some(error) = &report.error {
-        line["error"] = error.as_str().into();
-    }
-    line
-}
-
-/// The particle radius as the user wrote it (0.025, not the f32's 0.02500000037…), so
-/// that the default error bound is the round number `archive info` then prints.
-fn radius(args: &ReconstructArgs) -> f64 {
-    let r = args.particle_radius;
-    r.to_string().parse().unwrap_or(r as f64)
-}
-
 /// Options the user gave that the chosen output makes pointless, each with the reason;
 /// the run proceeds without them.
 fn ineffective_options(
@@ -829,12 +771,13 @@ fn ineffective_options(
         }
         // An error bound of world units given as multiples of r (as it once was).
         if let Some(bound) = args.error_bound {
-            let r = radius(args);
+            let r = args.particle_radius as f64;
             if bound > 0.1 * r {
                 warnings.push(format!(
-                    "--error-bound is in world units: {bound} is {:.3} × the particle radius (default {} = {ARCHIVE_ERROR} r)",
+                    "--error-bound is in world units: {bound} is {:.3} × the particle radius (default {} = {} r)",
                     bound / r,
-                    ARCHIVE_ERROR * r
+                    meniscus::archive::default_error_bound(args.particle_radius),
+                    meniscus::archive::DEFAULT_ERROR_BOUND_RADII
                 ));
             }
         }
@@ -861,7 +804,7 @@ fn ineffective_options(
             "--keep-going has no effect: a single file has no other frames to go on with".into(),
         );
     }
-    if given("decimate_error") && matches!(args.decimate.as_str(), "off" | "none" | "0") {
+    if given("decimate_error") && args.decimate.parse() == Ok(Decimation::Off) {
         warnings.push(format!(
             "--decimate-error has no effect: decimation is off (--decimate {})",
             args.decimate

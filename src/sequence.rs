@@ -330,7 +330,7 @@ pub fn choose(pattern: &str, choice: &FrameChoice) -> Result<Vec<Frame>> {
             if choice.start.is_some() || choice.end.is_some() {
                 return Err(Error::InvalidOption {
                     option: "frames",
-                    message: "takes the place of --start/--end; give one or the other".into(),
+                    message: "takes the place of start/end; give one or the other".into(),
                 });
             }
             let scanned = match frames(pattern, None, None) {

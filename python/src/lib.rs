@@ -7,16 +7,18 @@
 #![allow(clippy::useless_conversion)]
 
 use glam::Vec3;
-use meniscus::archive::{ArchiveFrame, ArchiveOptions, ArchiveReader, ArchiveWriter};
 use meniscus::attributes::Attribute;
 use meniscus::attributes::AttributeSelection;
-use meniscus::decimation::DecimateOptions;
 use meniscus::io::mesh::{write_surface, MeshWriteOptions};
+use meniscus::io::particles::ParticleFormat;
 use meniscus::io::particles::ParticleSlices;
-use meniscus::job::{plan_frames, run_frames, JobOptions};
+use meniscus::job::{plan_frames, run_frames, FrameReport, JobOptions};
 use meniscus::mesh::{Surface, TriMesh};
 use meniscus::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
-use meniscus::sequence::FrameChoice;
+use options::Keywords;
+
+mod archive;
+mod options;
 use meniscus::{CancelToken, Error};
 use numpy::ndarray::Array2;
 use numpy::{
@@ -24,12 +26,12 @@ use numpy::{
 };
 use pyo3::create_exception;
 use pyo3::exceptions::{
-    PyFileExistsError, PyKeyError, PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError,
+    PyFileExistsError, PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError,
 };
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
-use std::sync::mpsc;
+use std::sync::{mpsc, Mutex};
 use std::time::Duration;
 
 create_exception!(
@@ -44,7 +46,7 @@ create_exception!(
 const SIGNAL_POLL: Duration = Duration::from_millis(100);
 
 /// The Python exception for a library error.
-fn to_py(e: Error) -> PyErr {
+pub(crate) fn to_py(e: Error) -> PyErr {
     let message = e.to_string();
     match e {
         Error::InvalidOption { .. }
@@ -71,7 +73,7 @@ fn to_py(e: Error) -> PyErr {
 /// raises (Ctrl-C: KeyboardInterrupt) cancels the token; the worker stops at its next
 /// check, and the handler's exception is raised once it has (its temporary files
 /// removed).
-fn run_interruptible<T: Send>(
+pub(crate) fn run_interruptible<T: Send>(
     py: Python<'_>,
     work: impl FnOnce(&CancelToken) -> meniscus::Result<T> + Send,
 ) -> PyResult<T> {
@@ -253,71 +255,43 @@ fn attribute_of(name: String, array: &Bound<'_, PyAny>, count: usize) -> PyResul
 
 use pyo3::types::IntoPyDict;
 
-/// The options of the command line, in its units.
-#[allow(clippy::too_many_arguments)]
-fn options(
+/// The library's options of a function's `**options` (see [`options::settings`]).
+fn reconstruct_options(
+    py: Python<'_>,
+    function: &'static str,
     particle_radius: f32,
-    influence_radius: f32,
-    cell_size: f32,
-    decimate: Option<f32>,
-    subdivide: u32,
-    isolated_spheres: Option<u32>,
-    iso_offset: f32,
-    memory_budget: Option<&Bound<'_, PyAny>>,
+    given: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<ReconstructOptions> {
-    let mut o = ReconstructOptions::new(particle_radius);
-    o.field.influence_radius = influence_radius;
-    o.field.cell_size = cell_size;
-    o.field.iso_offset = iso_offset;
-    o.isolated_sphere_level = isolated_spheres;
-    o.subdivide.levels = subdivide;
-    o.decimate = match decimate {
-        None => None,
-        Some(f) if (0.0..1.0).contains(&f) => Some(DecimateOptions {
-            target_reduction: Some(f),
-            ..Default::default()
-        }),
-        Some(f) => {
-            return Err(PyValueError::new_err(format!(
-                "invalid decimate: takes a fraction in [0, 1) or None, got {f}"
-            )))
-        }
-    };
-    o.tiles.memory_budget_bytes = match memory_budget {
-        None => meniscus::tiles::default_memory_budget(),
-        Some(b) if b.is_none() => meniscus::tiles::default_memory_budget(),
-        Some(b) => Some(if let Ok(bytes) = b.extract::<u64>() {
-            bytes
-        } else {
-            let text: String = b.extract().map_err(|_| {
-                PyValueError::new_err(
-                    "invalid memory_budget: bytes (int) or a size such as \"2GiB\"",
-                )
-            })?;
-            meniscus::tiles::parse_memory_size(&text)
-                .map_err(|e| PyValueError::new_err(format!("invalid memory_budget: {e}")))?
-        }),
-    };
-    o.field.validate().map_err(to_py)?;
-    Ok(o)
+    let keywords = Keywords::new(py, function, given)?;
+    let settings = options::settings(particle_radius, &keywords)?;
+    keywords.finish()?;
+    settings.options().map_err(to_py)
 }
 
 /// A reconstructed surface: the fluid and the isolated-particle spheres, merged into
 /// `vertices` / `triangles` as the CLI's PLY/OBJ/VTK output holds them.
 #[pyclass(module = "meniscus", frozen)]
-struct Mesh {
+pub struct Mesh {
     surface: Surface,
     merged: TriMesh,
     stats: Option<ReconstructionStats>,
     /// The particle radius it was reconstructed with (unknown for an archive's frame).
     particle_radius: Option<f32>,
+    /// The Loop steps it was reconstructed with (unknown for an archive's frame).
+    subdivided: Option<u32>,
 }
 
 impl Mesh {
+    /// A mesh read from an archive: no figures, radius or subdivision known.
+    fn decoded(surface: Surface) -> Self {
+        Mesh::new(surface, None, None, None)
+    }
+
     fn new(
         surface: Surface,
         stats: Option<ReconstructionStats>,
         particle_radius: Option<f32>,
+        subdivided: Option<u32>,
     ) -> Self {
         let merged = surface.merged();
         Mesh {
@@ -325,6 +299,7 @@ impl Mesh {
             merged,
             stats,
             particle_radius,
+            subdivided,
         }
     }
 }
@@ -438,37 +413,19 @@ impl Mesh {
 
 /// Reconstructs the surface of particles at `positions` ((N, 3) float32 or float64;
 /// a C-contiguous float32 array is not copied) of radius `particle_radius` (world
-/// units). See the module documentation for the options.
+/// units). `**options` are the reconstruction settings ([`options::SETTINGS`]).
 #[pyfunction]
-#[pyo3(signature = (positions, particle_radius, *, attributes = None, influence_radius = 4.0,
-    cell_size = 1.0, decimate = Some(0.8), subdivide = 1, isolated_spheres = Some(2),
-    iso_offset = 0.0, threads = None, memory_budget = None))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (positions, particle_radius, *, attributes = None, threads = None, **options))]
 fn reconstruct(
     py: Python<'_>,
     positions: &Bound<'_, PyAny>,
     particle_radius: f32,
     attributes: Option<&Bound<'_, PyDict>>,
-    influence_radius: f32,
-    cell_size: f32,
-    decimate: Option<f32>,
-    subdivide: u32,
-    isolated_spheres: Option<u32>,
-    iso_offset: f32,
     threads: Option<usize>,
-    memory_budget: Option<&Bound<'_, PyAny>>,
+    options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Mesh> {
     check_threads(threads)?;
-    let options = options(
-        particle_radius,
-        influence_radius,
-        cell_size,
-        decimate,
-        subdivide,
-        isolated_spheres,
-        iso_offset,
-        memory_budget,
-    )?;
+    let options = reconstruct_options(py, "reconstruct", particle_radius, options)?;
     let positions = positions_of(positions)?;
     let slice = positions.as_slice();
     let mut columns = Vec::new();
@@ -489,7 +446,12 @@ fn reconstruct(
             reconstruct_source(source, &options, &|_| {}, cancel)
         })
     })?;
-    Ok(Mesh::new(surface, Some(stats), Some(particle_radius)))
+    Ok(Mesh::new(
+        surface,
+        Some(stats),
+        Some(particle_radius),
+        Some(options.subdivide.levels),
+    ))
 }
 
 fn check_threads(threads: Option<usize>) -> PyResult<()> {
@@ -544,14 +506,18 @@ fn selection(attributes: Option<&Bound<'_, PyAny>>) -> PyResult<AttributeSelecti
 
 /// Reconstructs a particle file (or a `{}` frame sequence) into `output` as the CLI's
 /// `meniscus reconstruct INPUT -o OUTPUT` does (a mesh file, a `{}` pattern of them, a
-/// `.mseq` archive or one `.glb` for a sequence). Returns one report per frame (dicts as
-/// the CLI's `--stats` JSON).
+/// `.mseq` archive or one `.glb` for a sequence), through the same library function
+/// ([`run_frames`]). `frames`, `shard`, `start`/`end`, `keep_going` are the CLI's
+/// `--frames`, `--shard`, `--start`/`--end`, `--keep-going`; `progress` is called with
+/// each finished frame's `--json-progress` object (a dict). Returns one report per frame
+/// (dicts as the CLI's `--stats` JSON); with `keep_going`, a failed frame is one with
+/// status "failed" and an error, and the call returns normally.
 #[pyfunction]
-#[pyo3(signature = (input, output, particle_radius, *, attributes = None,
-    influence_radius = 4.0, cell_size = 1.0, decimate = Some(0.8), subdivide = 1,
-    isolated_spheres = Some(2), iso_offset = 0.0, threads = None, memory_budget = None,
-    normals = true, skip_existing = false, error_bound = None,
-    attribute_error_bound = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND, fps = 24.0))]
+#[pyo3(signature = (input, output, particle_radius, *, attributes = None, threads = None,
+    frames = None, shard = None, start = None, end = None, keep_going = false,
+    progress = None, skip_existing = false, normals = true, error_bound = None,
+    attribute_error_bound = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND, fps = 24.0,
+    input_format = None, **options))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct_file<'py>(
     py: Python<'py>,
@@ -559,19 +525,20 @@ fn reconstruct_file<'py>(
     output: String,
     particle_radius: f32,
     attributes: Option<&Bound<'_, PyAny>>,
-    influence_radius: f32,
-    cell_size: f32,
-    decimate: Option<f32>,
-    subdivide: u32,
-    isolated_spheres: Option<u32>,
-    iso_offset: f32,
     threads: Option<usize>,
-    memory_budget: Option<&Bound<'_, PyAny>>,
-    normals: bool,
+    frames: Option<&Bound<'_, PyAny>>,
+    shard: Option<&Bound<'_, PyAny>>,
+    start: Option<i64>,
+    end: Option<i64>,
+    keep_going: bool,
+    progress: Option<Bound<'_, PyAny>>,
     skip_existing: bool,
+    normals: bool,
     error_bound: Option<f64>,
     attribute_error_bound: f64,
     fps: f32,
+    input_format: Option<String>,
+    options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
     check_threads(threads)?;
     if !(fps.is_finite() && fps > 0.0) {
@@ -579,32 +546,46 @@ fn reconstruct_file<'py>(
             "invalid fps: must be > 0 (frames per second), got {fps}"
         )));
     }
-    let options = options(
-        particle_radius,
-        influence_radius,
-        cell_size,
-        decimate,
-        subdivide,
-        isolated_spheres,
-        iso_offset,
-        memory_budget,
-    )?;
+    let options = reconstruct_options(py, "reconstruct_file", particle_radius, options)?;
     let attributes = selection(attributes)?;
-    let reports = run_interruptible(py, |cancel| {
-        let plan = plan_frames(&input, &output, &FrameChoice::default())?;
+    let choice = options::frame_choice(start, end, frames, shard)?;
+    let input_format = input_format
+        .map(|f| f.parse::<ParticleFormat>())
+        .transpose()
+        .map_err(|e| PyValueError::new_err(format!("invalid input_format: {e}")))?;
+    let progress = progress.filter(|p| !p.is_none()).map(Bound::unbind);
+    // An exception of the progress callback: it stops the run and is raised.
+    let raised: Mutex<Option<PyErr>> = Mutex::new(None);
+    let run = run_interruptible(py, |cancel| {
+        let plan = plan_frames(&input, &output, &choice)?;
         let job = JobOptions {
-            input_format: None,
+            input_format,
             write: MeshWriteOptions {
                 normals,
                 ..MeshWriteOptions::default()
             },
             skip_existing,
-            archive_error_bound: error_bound.unwrap_or(ARCHIVE_ERROR * particle_radius as f64),
+            archive_error_bound: error_bound
+                .unwrap_or(meniscus::archive::default_error_bound(particle_radius)),
             archive_attribute_error_bound: attribute_error_bound,
             fps,
             attributes,
             cancel: cancel.clone(),
-            keep_going: false,
+            keep_going,
+        };
+        let mut on_done = |report: &FrameReport| {
+            let Some(callback) = &progress else { return };
+            Python::with_gil(|py| {
+                let line = report.progress_line().to_string();
+                let called = py
+                    .import_bound("json")
+                    .and_then(|json| json.call_method1("loads", (line,)))
+                    .and_then(|dict| callback.call1(py, (dict,)));
+                if let Err(e) = called {
+                    raised.lock().expect("not poisoned").get_or_insert(e);
+                    cancel.cancel();
+                }
+            });
         };
         with_threads(threads, || {
             run_frames(
@@ -613,151 +594,15 @@ fn reconstruct_file<'py>(
                 &job,
                 &mut |_, _| {},
                 &mut |_| {},
-                &mut |_| {},
+                &mut on_done,
             )
         })
-    })?;
-    let text =
-        serde_json::to_string(&reports).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    });
+    if let Some(e) = raised.into_inner().expect("not poisoned") {
+        return Err(e);
+    }
+    let text = serde_json::to_string(&run?).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     py.import_bound("json")?.call_method1("loads", (text,))
-}
-
-/// The CLI's default archive error bound, multiples of the particle radius.
-const ARCHIVE_ERROR: f64 = 0.01;
-
-/// A `.mseq` archive of meshes, one per frame number: `len(a)`, `a.frames`, `a[frame]`,
-/// `a.append(frame, mesh)`, `a.verify()`. The file is created by the first append.
-#[pyclass(module = "meniscus")]
-struct Archive {
-    path: PathBuf,
-    error_bound: Option<f64>,
-    attribute_error_bound: f64,
-}
-
-impl Archive {
-    fn reader(&self, py: Python<'_>) -> PyResult<Option<ArchiveReader>> {
-        if !self.path.exists() {
-            return Ok(None);
-        }
-        let path = &self.path;
-        run_interruptible(py, |_| ArchiveReader::open(path)).map(Some)
-    }
-}
-
-#[pymethods]
-impl Archive {
-    /// Opens (or names, for a new archive) the archive at `path`. `error_bound` (world
-    /// units) bounds the positions of appended frames (default 0.01 × the particle
-    /// radius of the mesh); `attribute_error_bound` their attributes.
-    #[new]
-    #[pyo3(signature = (path, *, error_bound = None,
-        attribute_error_bound = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND))]
-    fn new(path: PathBuf, error_bound: Option<f64>, attribute_error_bound: f64) -> Self {
-        Archive {
-            path,
-            error_bound,
-            attribute_error_bound,
-        }
-    }
-
-    fn __len__(&self, py: Python<'_>) -> PyResult<usize> {
-        Ok(self.reader(py)?.map_or(0, |r| r.frames().len()))
-    }
-
-    /// The frame numbers held, in file order.
-    #[getter]
-    fn frames(&self, py: Python<'_>) -> PyResult<Vec<i64>> {
-        Ok(self
-            .reader(py)?
-            .map_or_else(Vec::new, |r| r.frames().iter().map(|f| f.number).collect()))
-    }
-
-    fn __contains__(&self, py: Python<'_>, frame: i64) -> PyResult<bool> {
-        Ok(self.frames(py)?.contains(&frame))
-    }
-
-    /// The mesh of frame `frame` (decoded, with normals); KeyError when not held.
-    fn __getitem__(&self, py: Python<'_>, frame: i64) -> PyResult<Mesh> {
-        let reader = self.reader(py)?;
-        let Some(reader) = reader.filter(|r| r.frames().iter().any(|f| f.number == frame)) else {
-            return Err(PyKeyError::new_err(frame));
-        };
-        let surface = run_interruptible(py, |_| reader.read_surface(frame))?;
-        Ok(Mesh::new(surface, None, None))
-    }
-
-    /// Appends `mesh` as frame `frame` (creating the archive); returns the bytes
-    /// written. A frame number already held is refused (FileExistsError).
-    #[pyo3(signature = (frame, mesh, *, error_bound = None))]
-    fn append(
-        &self,
-        py: Python<'_>,
-        frame: i64,
-        mesh: &Mesh,
-        error_bound: Option<f64>,
-    ) -> PyResult<u64> {
-        let given = error_bound.or(self.error_bound);
-        let path = &self.path;
-        let surface = &mesh.surface;
-        let radius = mesh.particle_radius;
-        let attribute_error_bound = self.attribute_error_bound;
-        run_interruptible(py, |_| {
-            let held = if path.exists() {
-                let reader = ArchiveReader::open(path)?;
-                reader.check_new_frames(&[frame])?;
-                // One archive, one bound: by default, the one its frames have.
-                reader.frames().first().map(|f| f.step / 2.0)
-            } else {
-                None
-            };
-            let error_bound = given
-                .or(held)
-                .or(radius.map(|r| ARCHIVE_ERROR * r as f64))
-                .ok_or(Error::InvalidOption {
-                    option: "error_bound",
-                    message: "a mesh read from an archive has no particle radius; give the bound (world units)".into(),
-                })?;
-            let options = ArchiveOptions {
-                attribute_error_bound,
-                ..ArchiveOptions::new(error_bound)
-            };
-            let mut writer = if path.exists() {
-                ArchiveWriter::open_append(path, &options)?
-            } else {
-                ArchiveWriter::create(path, &options)?
-            };
-            let bytes = writer.append_frame(
-                frame,
-                &ArchiveFrame {
-                    fluid: &surface.fluid,
-                    subdivision_levels: 0,
-                    spheres: &surface.spheres,
-                },
-            )?;
-            writer.finish()?;
-            Ok(bytes)
-        })
-    }
-
-    /// Decodes every frame and checks it: a dict with `clean` (bool), `good` (frame
-    /// numbers), `damaged` ([frame, why]), `damage` (other damage), `trailing_bytes`,
-    /// `recovered_by_scan`.
-    fn verify<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let path = &self.path;
-        let report = run_interruptible(py, |_| Ok(ArchiveReader::open(path)?.verify()))?;
-        let d = PyDict::new_bound(py);
-        d.set_item("clean", report.is_clean())?;
-        d.set_item("good", report.good)?;
-        d.set_item("damaged", report.damaged)?;
-        d.set_item("damage", report.damage)?;
-        d.set_item("trailing_bytes", report.trailing_bytes)?;
-        d.set_item("recovered_by_scan", report.recovered_by_scan)?;
-        Ok(d)
-    }
-
-    fn __repr__(&self) -> String {
-        format!("<meniscus.Archive {}>", self.path.display())
-    }
 }
 
 /// Surface reconstruction for particle-based fluids (Akinci et al. 2013 pipeline), in
@@ -770,7 +615,8 @@ fn meniscus_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(read_particles, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct_file, m)?)?;
-    m.add_class::<Archive>()?;
+    m.add_class::<archive::Archive>()?;
+    m.add_function(wrap_pyfunction!(archive::merge_archives, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -12,11 +12,17 @@ DATA = ROOT / "datasets" / "dambreak_small"
 RADIUS = 0.012
 
 
-def run_cli(*args):
-    """Runs the meniscus CLI of this checkout (built by cargo, honouring CARGO_TARGET_DIR)."""
+def cli_command(*args):
+    """The command line running the meniscus CLI of this checkout (built by cargo,
+    honouring CARGO_TARGET_DIR) with ``args``."""
     binary = os.environ.get("MENISCUS_BIN")
     command = [binary] if binary else ["cargo", "run", "--release", "--quiet", "--bin", "meniscus", "--"]
-    subprocess.run(command + [str(a) for a in args], cwd=ROOT, check=True)
+    return command + [str(a) for a in args]
+
+
+def run_cli(*args):
+    """Runs the meniscus CLI with ``args``; it must succeed."""
+    subprocess.run(cli_command(*args), cwd=ROOT, check=True)
 
 
 @pytest.fixture(scope="session")

@@ -62,6 +62,17 @@ def test_reconstruct_file_equals_cli(tmp_path, cli_ply):
         meniscus.reconstruct_file(str(DATA / "ParticleData_Fluid_25.xyz"), str(out), -1.0)
 
 
+def test_reconstruct_file_archive_equals_cli(tmp_path):
+    # The default error bound is 0.01 r with r as written (0.012, not the f32's
+    # 0.0120000001...): the same bound as the CLI's, so the archives are the same bytes
+    # and the ones of several writers merge.
+    pattern = str(DATA / "ParticleData_Fluid_{}.xyz")
+    run_cli("reconstruct", pattern, "--particle-radius", RADIUS, "-o", tmp_path / "cli.mseq", "--quiet")
+    reports = meniscus.reconstruct_file(pattern, str(tmp_path / "py.mseq"), RADIUS)
+    assert [r["status"] for r in reports] == ["done"] * len(reports) and len(reports) > 1
+    assert (tmp_path / "py.mseq").read_bytes() == (tmp_path / "cli.mseq").read_bytes()
+
+
 def area(mesh):
     a, b, c = (mesh.vertices[mesh.triangles[:, k]].astype(np.float64) for k in range(3))
     return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()
@@ -101,3 +112,30 @@ def test_archive_append_read_verify(frame25, tmp_path):
     other = meniscus.Archive(tmp_path / "other.mseq", error_bound=1e-4)
     other.append(1, archive[25])
     assert other.frames == [1] and other.verify()["clean"]
+
+
+def test_archive_append_of_a_control_mesh_is_the_cli_archive(tmp_path):
+    # The CLI's .mseq stores each frame's control mesh (before Loop subdivision) and the
+    # number of steps the reader runs: reconstructed with subdivide=0 and appended with
+    # subdivide=1, a frame is the CLI's, byte for byte, one append at a time.
+    run_cli("reconstruct", str(DATA / "ParticleData_Fluid_{}.xyz"), "--particle-radius", RADIUS,
+            "--frames", "1,9,25", "-o", tmp_path / "cli.mseq", "--quiet")
+    archive = meniscus.Archive(tmp_path / "py.mseq")
+    for number in (1, 9, 25):
+        positions, _ = meniscus.read_particles(DATA / f"ParticleData_Fluid_{number}.xyz")
+        control = meniscus.reconstruct(positions, RADIUS, subdivide=0)
+        archive.append(number, control, subdivide=1)
+    assert (tmp_path / "py.mseq").read_bytes() == (tmp_path / "cli.mseq").read_bytes()
+    # Read back, a frame is the subdivided surface (4x the control mesh's triangles).
+    assert archive[25].triangle_count - control.stats["sphere_triangles"] == 4 * control.stats["fluid_triangles"]
+    # A mesh subdivided already is not subdivided again.
+    with pytest.raises(ValueError, match="subdivided already"):
+        archive.append(31, meniscus.reconstruct(positions, RADIUS), subdivide=1)
+    # Stored as given (the default), a subdivided mesh keeps all its triangles: the same
+    # surface when read back, in a larger file.
+    whole = meniscus.Archive(tmp_path / "whole.mseq")
+    whole.append(25, meniscus.reconstruct(positions, RADIUS))
+    single = meniscus.Archive(tmp_path / "control.mseq")
+    single.append(25, control, subdivide=1)
+    assert whole[25].triangle_count == single[25].triangle_count
+    assert (tmp_path / "whole.mseq").stat().st_size > 2 * (tmp_path / "control.mseq").stat().st_size

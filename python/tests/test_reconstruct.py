@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 import meniscus
-from conftest import RADIUS
+from conftest import DATA, RADIUS, run_cli
 
 
 def ply_counts(path):
@@ -74,3 +74,45 @@ def test_write_formats(frame25, tmp_path, ext):
     mesh = meniscus.reconstruct(frame25, RADIUS)
     out = tmp_path / f"m.{ext}"
     assert mesh.write(out) == out.stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    "options, flags",
+    [
+        ({"t_low": 0.3, "t_high": 3.0}, ["--t-low", "0.3", "--t-high", "3.0"]),
+        ({"decimate": "adaptive"}, ["--decimate", "adaptive"]),
+        ({"decimate": 0.5, "decimate_error": 0.05}, ["--decimate", "0.5", "--decimate-error", "0.05"]),
+        ({"particle_coverage": 0.0, "iso_offset": 0.1}, ["--particle-coverage", "0", "--iso-offset", "0.1"]),
+        ({"kernel": "anisotropic", "max_stretch": 2.0}, ["--kernel", "anisotropic", "--max-stretch", "2"]),
+        ({"decimate": None, "subdivide": 2, "isolated_spheres": None}, ["--decimate", "off", "--subdivide", "2", "--isolated-spheres", "off"]),
+        ({"tile_size": 16, "memory_budget": "1GiB", "temp_dir": "TMP"}, ["--tile-size", "16", "--memory-budget", "1GiB", "--temp-dir", "TMP"]),
+    ],
+)
+def test_options_are_the_cli_flags(frame25, cli_ply, tmp_path, options, flags):
+    spill = tmp_path / "spill"
+    spill.mkdir()
+    options = {k: (str(spill) if v == "TMP" else v) for k, v in options.items()}
+    flags = [str(spill) if f == "TMP" else f for f in flags]
+    cli = tmp_path / "cli.ply"
+    run_cli("reconstruct", DATA / "ParticleData_Fluid_25.xyz", "--particle-radius", RADIUS, "-o", cli, "--quiet", *flags)
+    # The flags change the surface (so a keyword that was ignored would show) ...
+    assert cli.read_bytes() != cli_ply.read_bytes()
+    # ... and the keywords change it the same way.
+    meniscus.reconstruct(frame25, RADIUS, **options).write(tmp_path / "py.ply")
+    assert (tmp_path / "py.ply").read_bytes() == cli.read_bytes()
+    assert list(spill.iterdir()) == []
+
+
+def test_unknown_and_mistyped_options_are_refused(frame25):
+    with pytest.raises(TypeError, match="unexpected keyword argument 'decimation'"):
+        meniscus.reconstruct(frame25, RADIUS, decimation=0.5)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'fps'"):
+        meniscus.reconstruct(frame25, RADIUS, fps=24)
+    with pytest.raises(TypeError, match="invalid cell_size"):
+        meniscus.reconstruct(frame25, RADIUS, cell_size="fine")
+    with pytest.raises(ValueError, match="invalid decimate: .*adaptive"):
+        meniscus.reconstruct(frame25, RADIUS, decimate="most")
+    with pytest.raises(ValueError, match="invalid decimate_error"):
+        meniscus.reconstruct(frame25, RADIUS, decimate_error=-1.0)
+    with pytest.raises(ValueError, match="invalid t_low/t_high"):
+        meniscus.reconstruct(frame25, RADIUS, t_low=3.0, t_high=1.0)

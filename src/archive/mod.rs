@@ -102,6 +102,24 @@ pub struct ArchiveOptions {
 /// of magnitude about 1 (or smaller) less finely than it may need.
 pub const DEFAULT_ATTRIBUTE_ERROR_BOUND: f64 = 1e-3;
 
+/// The default [`ArchiveOptions::error_bound`] of an archive of surfaces reconstructed
+/// from particles, multiples of the particle radius `r` ([`default_error_bound`]).
+pub const DEFAULT_ERROR_BOUND_RADII: f64 = 0.01;
+
+/// The default [`ArchiveOptions::error_bound`] for particles of radius `particle_radius`
+/// (world units): 0.01 r, with `r` taken as it is written (`0.012`, not the `f32`'s
+/// 0.0120000001…). Every writer given the same radius (the CLI, the Python package, each
+/// task of a farm) then uses the same bound, which archives must share to be merged, and
+/// `archive info` prints the round number.
+pub fn default_error_bound(particle_radius: f32) -> f64 {
+    // An f32's Display is the shortest decimal that reads back as the same f32.
+    let r: f64 = particle_radius
+        .to_string()
+        .parse()
+        .unwrap_or(particle_radius as f64);
+    DEFAULT_ERROR_BOUND_RADII * r
+}
+
 impl ArchiveOptions {
     /// Options with an error bound in world units, the default attribute error bound and
     /// the default zstd level.

@@ -194,3 +194,17 @@ fn a_record_cut_by_a_failed_write_is_cut_from_the_archive() {
     drop(w);
     assert!(!fresh.exists());
 }
+
+#[test]
+fn the_default_error_bound_takes_the_radius_as_written() {
+    for (radius, written) in [
+        (0.012f32, 0.012f64),
+        (0.025, 0.025),
+        (0.1, 0.1),
+        (1e-7, 1e-7),
+    ] {
+        assert_eq!(default_error_bound(radius), 0.01 * written, "r = {radius}");
+    }
+    // The f32 widened as it is would give another bound, which would not merge.
+    assert_ne!(0.01 * (0.012f32 as f64), default_error_bound(0.012));
+}

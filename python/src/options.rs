@@ -1,0 +1,219 @@
+//! Keyword options. The reconstruction settings, which `reconstruct` and
+//! `reconstruct_file` both take as `**options`, are read here and only here into the
+//! library's [`ReconstructSettings`] (the CLI's flags go through the same struct); the
+//! frame choice of `reconstruct_file` into [`FrameChoice`].
+
+use meniscus::field::Kernel;
+use meniscus::sequence::{FrameChoice, FrameSelection, Shard};
+use meniscus::settings::{Decimation, ReconstructSettings};
+use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+
+/// The reconstruction settings taken as keywords, in the order of the stubs.
+pub const SETTINGS: &[&str] = &[
+    "influence_radius",
+    "cell_size",
+    "t_low",
+    "t_high",
+    "particle_coverage",
+    "iso_offset",
+    "kernel",
+    "kernel_radius",
+    "max_stretch",
+    "min_neighbours",
+    "centre_smoothing",
+    "isolated_spheres",
+    "decimate",
+    "decimate_error",
+    "subdivide",
+    "tile_size",
+    "memory_budget",
+    "temp_dir",
+];
+
+/// A function's `**options`, taken one by one; what is left at the end is an unexpected
+/// keyword (TypeError, as Python's own functions say it).
+pub struct Keywords<'py> {
+    function: &'static str,
+    left: Bound<'py, PyDict>,
+}
+
+impl<'py> Keywords<'py> {
+    pub fn new(
+        py: Python<'py>,
+        function: &'static str,
+        given: Option<&Bound<'py, PyDict>>,
+    ) -> PyResult<Self> {
+        let left = match given {
+            Some(d) => d.copy()?,
+            None => PyDict::new_bound(py),
+        };
+        Ok(Keywords { function, left })
+    }
+
+    /// The object given for `name` (Python's `None` included), or `None` when absent.
+    fn take(&self, name: &str) -> PyResult<Option<Bound<'py, PyAny>>> {
+        let value = self.left.get_item(name)?;
+        if value.is_some() {
+            self.left.del_item(name)?;
+        }
+        Ok(value)
+    }
+
+    /// The value given for `name`; `None` when absent or given as `None` (the default).
+    fn value<T: FromPyObject<'py>>(&self, name: &str) -> PyResult<Option<T>> {
+        match self.take(name)? {
+            Some(v) if !v.is_none() => extract(&v, name).map(Some),
+            _ => Ok(None),
+        }
+    }
+
+    /// Refuses the keywords nobody took.
+    pub fn finish(self) -> PyResult<()> {
+        match self.left.keys().iter().next() {
+            None => Ok(()),
+            Some(name) => Err(PyTypeError::new_err(format!(
+                "{}() got an unexpected keyword argument {}; the reconstruction options are {}",
+                self.function,
+                name.repr()?,
+                SETTINGS.join(", ")
+            ))),
+        }
+    }
+}
+
+fn extract<'py, T: FromPyObject<'py>>(value: &Bound<'py, PyAny>, name: &str) -> PyResult<T> {
+    value
+        .extract()
+        .map_err(|e| PyTypeError::new_err(format!("invalid {name}: {e}")))
+}
+
+/// The reconstruction settings of `keywords` (the others are left for the caller).
+pub fn settings(particle_radius: f32, keywords: &Keywords<'_>) -> PyResult<ReconstructSettings> {
+    let mut s = ReconstructSettings::new(particle_radius);
+    for (name, field) in [
+        ("influence_radius", &mut s.influence_radius),
+        ("cell_size", &mut s.cell_size),
+        ("t_low", &mut s.t_low),
+        ("t_high", &mut s.t_high),
+        ("particle_coverage", &mut s.particle_coverage),
+        ("iso_offset", &mut s.iso_offset),
+        ("kernel_radius", &mut s.kernel_radius),
+        ("max_stretch", &mut s.max_stretch),
+        ("centre_smoothing", &mut s.centre_smoothing),
+    ] {
+        if let Some(v) = keywords.value(name)? {
+            *field = v;
+        }
+    }
+    if let Some(v) = keywords.value("min_neighbours")? {
+        s.min_neighbours = v;
+    }
+    if let Some(kernel) = keywords.value::<String>("kernel")? {
+        s.kernel = match kernel.as_str() {
+            "isotropic" => Kernel::Isotropic,
+            "anisotropic" => Kernel::Anisotropic,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "invalid kernel: \"isotropic\" or \"anisotropic\", got {other:?}"
+                )))
+            }
+        };
+    }
+    // None turns these two off (absent: the default).
+    if let Some(v) = keywords.take("isolated_spheres")? {
+        s.isolated_spheres = match v.is_none() {
+            true => None,
+            false => Some(extract(&v, "isolated_spheres")?),
+        };
+    }
+    if let Some(v) = keywords.take("decimate")? {
+        s.decimate = if v.is_none() {
+            Decimation::Off
+        } else if let Ok(text) = v.extract::<String>() {
+            text.parse()
+                .map_err(|e| PyValueError::new_err(format!("invalid decimate: {e}")))?
+        } else {
+            Decimation::Fraction(extract(&v, "decimate")?)
+        };
+    }
+    s.decimate_error = keywords.value("decimate_error")?;
+    if let Some(v) = keywords.value("subdivide")? {
+        s.subdivide = v;
+    }
+    s.tile_size = keywords.value("tile_size")?;
+    s.memory_budget = match keywords.take("memory_budget")? {
+        Some(b) if !b.is_none() => Some(if let Ok(bytes) = b.extract::<u64>() {
+            bytes
+        } else {
+            let text: String = b.extract().map_err(|_| {
+                PyValueError::new_err(
+                    "invalid memory_budget: bytes (int) or a size such as \"2GiB\"",
+                )
+            })?;
+            meniscus::tiles::parse_memory_size(&text)
+                .map_err(|e| PyValueError::new_err(format!("invalid memory_budget: {e}")))?
+        }),
+        _ => None,
+    };
+    s.temp_dir = keywords.value::<PathBuf>("temp_dir")?;
+    Ok(s)
+}
+
+/// The frames `reconstruct_file` takes, as the CLI's `--start/--end`, `--frames` and
+/// `--shard` (the library parses the text of the last two).
+pub fn frame_choice(
+    start: Option<i64>,
+    end: Option<i64>,
+    frames: Option<&Bound<'_, PyAny>>,
+    shard: Option<&Bound<'_, PyAny>>,
+) -> PyResult<FrameChoice> {
+    let frames = match frames.filter(|f| !f.is_none()) {
+        None => None,
+        Some(f) => {
+            let text = if let Ok(text) = f.extract::<String>() {
+                text
+            } else if let Ok(numbers) = f.extract::<Vec<i64>>() {
+                numbers
+                    .iter()
+                    .map(|n| n.to_string())
+                    .collect::<Vec<_>>()
+                    .join(",")
+            } else {
+                return Err(PyTypeError::new_err(
+                    "invalid frames: a selection such as \"1-100:2,7\" or a list of frame numbers",
+                ));
+            };
+            Some(
+                text.parse::<FrameSelection>()
+                    .map_err(|e| PyValueError::new_err(format!("invalid frames: {e}")))?,
+            )
+        }
+    };
+    let shard = match shard.filter(|s| !s.is_none()) {
+        None => None,
+        Some(s) => {
+            let text = if let Ok(text) = s.extract::<String>() {
+                text
+            } else if let Ok((index, count)) = s.extract::<(i64, i64)>() {
+                format!("{index}/{count}")
+            } else {
+                return Err(PyTypeError::new_err(
+                    "invalid shard: (index, count) or \"index/count\", such as (0, 4)",
+                ));
+            };
+            Some(
+                text.parse::<Shard>()
+                    .map_err(|e| PyValueError::new_err(format!("invalid shard: {e}")))?,
+            )
+        }
+    };
+    Ok(FrameChoice {
+        start,
+        end,
+        frames,
+        shard,
+    })
+}

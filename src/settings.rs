@@ -1,0 +1,237 @@
+//! The reconstruction options as users state them: the flags of `meniscus reconstruct`
+//! and the keywords of the Python package, with the same names, defaults and units
+//! (lengths in multiples of the particle radius `r`, decimation as a fraction, `adaptive`
+//! or off). [`ReconstructSettings::options`] turns them into the pipeline's
+//! [`ReconstructOptions`]; every front end goes through it, so none can drift from the
+//! others.
+
+use crate::decimation::DecimateOptions;
+use crate::error::{Error, Result};
+use crate::field::{AnisotropyOptions, Kernel};
+use crate::pipeline::ReconstructOptions;
+use std::path::PathBuf;
+
+/// Error bound of [`Decimation::Adaptive`] when no `decimate_error` is given, multiples
+/// of `r`.
+pub const ADAPTIVE_ERROR_RADII: f32 = 0.1;
+
+/// How much quadric decimation removes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Decimation {
+    /// No decimation.
+    Off,
+    /// Remove this fraction of the triangles, in `[0, 1)` (0.8 is the paper's).
+    Fraction(f32),
+    /// Stop on the error bound only (`decimate_error`, default
+    /// [`ADAPTIVE_ERROR_RADII`]): flat regions simplify, curved ones keep their
+    /// triangles.
+    Adaptive,
+}
+
+impl std::str::FromStr for Decimation {
+    type Err = String;
+
+    /// `0.8` (a fraction in `[0, 1)`), `adaptive`, or `off` (also `none` and `0`).
+    fn from_str(text: &str) -> std::result::Result<Self, String> {
+        match text {
+            "off" | "none" | "0" => Ok(Decimation::Off),
+            "adaptive" => Ok(Decimation::Adaptive),
+            fraction => fraction
+                .parse()
+                .ok()
+                .filter(|f: &f32| (0.0..1.0).contains(f))
+                .map(Decimation::Fraction)
+                .ok_or_else(|| {
+                    format!("takes a fraction in [0, 1), `adaptive` or `off`, got {fraction:?}")
+                }),
+        }
+    }
+}
+
+/// The options of one reconstruction in the units users give them. [`Self::new`] holds
+/// the defaults of the CLI and the Python package.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReconstructSettings {
+    /// Particle radius `r`, world units (half the rest spacing).
+    pub particle_radius: f32,
+    /// Influence radius `R`, multiples of `r`. Default 4.
+    pub influence_radius: f32,
+    /// Marching-cubes cell size `h`, multiples of `r`. Default 1.
+    pub cell_size: f32,
+    /// Lower eigenvalue threshold of the concavity factor. Default 0.4.
+    pub t_low: f32,
+    /// Upper eigenvalue threshold of the concavity factor. Default 3.5.
+    pub t_high: f32,
+    /// Coverage radius, multiples of `r` (0: off). Default 0.9.
+    pub particle_coverage: f32,
+    /// Iso-surface offset, multiples of `r`. Default 0.
+    pub iso_offset: f32,
+    /// Particle kernel. Default [`Kernel::Isotropic`].
+    pub kernel: Kernel,
+    /// Anisotropic kernels: radius `h_a` of an unstretched kernel, multiples of `r`.
+    /// Default 3.5.
+    pub kernel_radius: f32,
+    /// Anisotropic kernels: largest ratio of the longest to the shortest axis. Default 1.5.
+    pub max_stretch: f32,
+    /// Anisotropic kernels: fewest neighbours within `R` for a stretched kernel. Default 8.
+    pub min_neighbours: u32,
+    /// Anisotropic kernels: centre smoothing `λ` in `[0, 1]`. Default 0.
+    pub centre_smoothing: f32,
+    /// Icosphere level of the spheres of isolated particles, or `None` to leave them in
+    /// the field. Default `Some(2)`.
+    pub isolated_spheres: Option<u32>,
+    /// Decimation. Default a fraction of 0.8.
+    pub decimate: Decimation,
+    /// Error bound of decimation, multiples of `r`; with a fraction, whichever is reached
+    /// first stops it. Default none.
+    pub decimate_error: Option<f32>,
+    /// Loop subdivision steps after decimation. Default 1.
+    pub subdivide: u32,
+    /// Tile edge, marching-cubes cells. Default: from the memory budget.
+    pub tile_size: Option<u32>,
+    /// Memory the run may use, bytes. Default `None`: half the available memory
+    /// ([`crate::tiles::default_memory_budget`]).
+    pub memory_budget: Option<u64>,
+    /// Directory of a tiled run's spill file. Default: the system's temporary directory.
+    pub temp_dir: Option<PathBuf>,
+}
+
+impl ReconstructSettings {
+    /// The defaults, for particles of radius `particle_radius` (world units).
+    pub fn new(particle_radius: f32) -> Self {
+        let defaults = AnisotropyOptions::default();
+        ReconstructSettings {
+            particle_radius,
+            influence_radius: 4.0,
+            cell_size: 1.0,
+            t_low: 0.4,
+            t_high: 3.5,
+            particle_coverage: 0.9,
+            iso_offset: 0.0,
+            kernel: Kernel::Isotropic,
+            kernel_radius: defaults.kernel_radius,
+            max_stretch: defaults.max_stretch,
+            min_neighbours: defaults.min_neighbours,
+            centre_smoothing: defaults.smoothing,
+            isolated_spheres: Some(2),
+            decimate: Decimation::Fraction(0.8),
+            decimate_error: None,
+            subdivide: 1,
+            tile_size: None,
+            memory_budget: None,
+            temp_dir: None,
+        }
+    }
+
+    /// The pipeline's options, checked: [`Error::InvalidOption`] names the setting
+    /// (`decimate_error`, `influence_radius/cell_size`, ...).
+    pub fn options(&self) -> Result<ReconstructOptions> {
+        let r = self.particle_radius;
+        let mut options = ReconstructOptions::new(r);
+        let field = &mut options.field;
+        field.influence_radius = self.influence_radius;
+        field.cell_size = self.cell_size;
+        field.t_low = self.t_low;
+        field.t_high = self.t_high;
+        field.particle_coverage = self.particle_coverage;
+        field.iso_offset = self.iso_offset;
+        field.kernel = self.kernel;
+        field.anisotropy.kernel_radius = self.kernel_radius;
+        field.anisotropy.max_stretch = self.max_stretch;
+        field.anisotropy.min_neighbours = self.min_neighbours;
+        field.anisotropy.smoothing = self.centre_smoothing;
+        options.isolated_sphere_level = self.isolated_spheres;
+        options.tiles.tile_size_cells = self.tile_size;
+        options.tiles.memory_budget_bytes = self
+            .memory_budget
+            .or_else(crate::tiles::default_memory_budget);
+        options.tiles.temp_dir = self.temp_dir.clone();
+        options.subdivide.levels = self.subdivide;
+        if let Some(e) = self.decimate_error {
+            if !(e.is_finite() && e > 0.0) {
+                return Err(Error::InvalidOption {
+                    option: "decimate_error",
+                    message: format!("must be > 0 (multiples of r), got {e}"),
+                });
+            }
+        }
+        let max_error = self.decimate_error.map(|e| e * r);
+        options.decimate = match self.decimate {
+            Decimation::Off => None,
+            Decimation::Adaptive => Some(DecimateOptions {
+                target_reduction: None,
+                max_error: Some(max_error.unwrap_or(ADAPTIVE_ERROR_RADII * r)),
+                ..Default::default()
+            }),
+            Decimation::Fraction(f) => {
+                if !(0.0..1.0).contains(&f) {
+                    return Err(Error::InvalidOption {
+                        option: "decimate",
+                        message: format!("takes a fraction in [0, 1), got {f}"),
+                    });
+                }
+                Some(DecimateOptions {
+                    target_reduction: Some(f),
+                    max_error,
+                    ..Default::default()
+                })
+            }
+        };
+        options.field.validate()?;
+        Ok(options)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_defaults_are_the_pipelines() {
+        let mut expected = ReconstructOptions::new(0.012);
+        expected.tiles.memory_budget_bytes = crate::tiles::default_memory_budget();
+        assert_eq!(ReconstructSettings::new(0.012).options().unwrap(), expected);
+    }
+
+    #[test]
+    fn decimation_is_a_fraction_adaptive_or_off() {
+        assert_eq!("0.5".parse(), Ok(Decimation::Fraction(0.5)));
+        assert_eq!("adaptive".parse(), Ok(Decimation::Adaptive));
+        for off in ["off", "none", "0"] {
+            assert_eq!(off.parse(), Ok(Decimation::Off));
+        }
+        for bad in ["1", "-0.1", "most", ""] {
+            let e = bad.parse::<Decimation>().unwrap_err();
+            assert!(
+                e.contains("fraction") && e.contains(&format!("{bad:?}")),
+                "{e}"
+            );
+        }
+        let mut s = ReconstructSettings::new(0.5);
+        s.decimate = Decimation::Adaptive;
+        let d = s.options().unwrap().decimate.unwrap();
+        assert_eq!((d.target_reduction, d.max_error), (None, Some(0.05)));
+        s.decimate_error = Some(0.2);
+        assert_eq!(s.options().unwrap().decimate.unwrap().max_error, Some(0.1));
+        s.decimate = Decimation::Fraction(0.7);
+        let d = s.options().unwrap().decimate.unwrap();
+        assert_eq!((d.target_reduction, d.max_error), (Some(0.7), Some(0.1)));
+        s.decimate = Decimation::Off;
+        assert_eq!(s.options().unwrap().decimate, None);
+    }
+
+    #[test]
+    fn bad_settings_are_named() {
+        let name = |s: ReconstructSettings| match s.options() {
+            Err(Error::InvalidOption { option, .. }) => option,
+            other => panic!("{other:?}"),
+        };
+        let mut s = ReconstructSettings::new(0.01);
+        s.decimate_error = Some(0.0);
+        assert_eq!(name(s), "decimate_error");
+        let mut s = ReconstructSettings::new(0.01);
+        s.decimate = Decimation::Fraction(1.0);
+        assert_eq!(name(s), "decimate");
+        assert_eq!(name(ReconstructSettings::new(-1.0)), "particle_radius");
+    }
+}
