@@ -6,6 +6,7 @@ use clap::{ArgMatches, Args, CommandFactory, FromArgMatches, Parser, Subcommand}
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use meniscus::archive::{ArchiveOptions, ArchiveReader, ArchiveWriter};
 use meniscus::attributes::AttributeSelection;
+use meniscus::field::AnisotropyOptions;
 use meniscus::io::mesh::read_mesh;
 use meniscus::io::mesh::MeshWriteOptions;
 use meniscus::io::particles::ParticleFormat;
@@ -184,16 +185,16 @@ struct ReconstructArgs {
     #[arg(long, value_enum, default_value_t = KernelArg::Isotropic)]
     kernel: KernelArg,
     /// Anisotropic kernels: radius h_a of an unstretched kernel, multiples of r.
-    #[arg(long, default_value_t = 3.5)]
+    #[arg(long, default_value_t = AnisotropyOptions::default().kernel_radius)]
     kernel_radius: f32,
     /// Anisotropic kernels: largest ratio of the longest to the shortest axis (k_r).
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = AnisotropyOptions::default().max_stretch)]
     max_stretch: f32,
     /// Anisotropic kernels: fewest neighbours within R for a stretched kernel (N_ε).
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = AnisotropyOptions::default().min_neighbours)]
     min_neighbours: u32,
     /// Anisotropic kernels: centre smoothing λ in [0, 1] (0 = the particle positions).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = AnisotropyOptions::default().smoothing)]
     centre_smoothing: f32,
     /// Tile edge in marching-cubes cells (rounded up to 8-cell blocks); default: one tile
     /// if the scene fits the memory budget, else the largest tile that does. The

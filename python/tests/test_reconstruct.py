@@ -83,6 +83,7 @@ def test_write_formats(frame25, tmp_path, ext):
         ({"decimate": "adaptive"}, ["--decimate", "adaptive"]),
         ({"decimate": 0.5, "decimate_error": 0.05}, ["--decimate", "0.5", "--decimate-error", "0.05"]),
         ({"particle_coverage": 0.0, "iso_offset": 0.1}, ["--particle-coverage", "0", "--iso-offset", "0.1"]),
+        ({"kernel": "anisotropic"}, ["--kernel", "anisotropic"]),
         ({"kernel": "anisotropic", "max_stretch": 2.0}, ["--kernel", "anisotropic", "--max-stretch", "2"]),
         ({"decimate": None, "subdivide": 2, "isolated_spheres": None}, ["--decimate", "off", "--subdivide", "2", "--isolated-spheres", "off"]),
         ({"tile_size": 16, "memory_budget": "1GiB", "temp_dir": "TMP"}, ["--tile-size", "16", "--memory-budget", "1GiB", "--temp-dir", "TMP"]),
