@@ -50,7 +50,7 @@ class ReconstructOptions(TypedDict, total=False):
     kernel_radius: float
     """Anisotropic kernels: radius of an unstretched kernel, multiples of r. Default 3.5."""
     max_stretch: float
-    """Anisotropic kernels: largest ratio of the longest to the shortest axis. Default 1.5."""
+    """Anisotropic kernels: largest ratio of the longest to the shortest axis. Default 1.75."""
     min_neighbours: int
     """Anisotropic kernels: fewest neighbours within R for a stretched kernel. Default 8."""
     centre_smoothing: float

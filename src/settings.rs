@@ -71,7 +71,7 @@ pub struct ReconstructSettings {
     /// Anisotropic kernels: radius `h_a` of an unstretched kernel, multiples of `r`.
     /// Default 3.5.
     pub kernel_radius: f32,
-    /// Anisotropic kernels: largest ratio of the longest to the shortest axis. Default 1.5.
+    /// Anisotropic kernels: largest ratio of the longest to the shortest axis. Default 1.75.
     pub max_stretch: f32,
     /// Anisotropic kernels: fewest neighbours within `R` for a stretched kernel. Default 8.
     pub min_neighbours: u32,
