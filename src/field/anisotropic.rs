@@ -303,3 +303,41 @@ fn accumulate_row(sums: &mut [[f32; ROW]; SUMS], x: &[f32; 3], b: f32, c: f32, m
         s3[i] = w.mul_add(rz, s3[i]);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::field::Kernel;
+
+    #[test]
+    fn the_vector_kernel_gives_the_portable_kernel_values_bit_for_bit() {
+        let r = 0.01f32;
+        let mut rng = crate::test_rng::TestRng::new(5);
+        let mut jitter = || (rng.unit_f32() - 0.5) * r;
+        let mut positions = Vec::new();
+        for z in 0..10 {
+            for y in 0..8 {
+                for x in 0..12 {
+                    let p = glam::Vec3::new(x as f32, y as f32, z as f32) * 2.0 * r;
+                    positions.push(p + glam::Vec3::new(jitter(), jitter(), jitter()));
+                }
+            }
+        }
+        let options = FieldOptions {
+            kernel: Kernel::Anisotropic,
+            ..FieldOptions::new(r)
+        };
+        let (kernels, stats) = crate::anisotropy::compute_kernels(&positions, &options).unwrap();
+        assert!(stats.mean_stretch > 1.05, "{stats:?}");
+        let (portable, _) = compute_blocks_with(&kernels, &options, None, false);
+        let (vector, _) = compute_blocks_with(&kernels, &options, None, true);
+        assert!(portable.blocks().count() > 10);
+        assert_eq!(portable.blocks().count(), vector.blocks().count());
+        for (key, values) in portable.blocks() {
+            let other = vector.block(key).expect("same blocks");
+            for (x, y) in values.iter().zip(other.iter()) {
+                assert_eq!(x.to_bits(), y.to_bits(), "block {key:?}");
+            }
+        }
+    }
+}
