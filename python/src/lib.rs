@@ -18,6 +18,7 @@ use meniscus::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionS
 use options::Keywords;
 
 mod archive;
+mod malloc;
 mod options;
 use meniscus::{CancelToken, Error};
 use numpy::ndarray::Array2;
@@ -446,11 +447,13 @@ fn reconstruct(
         positions: slice,
         attributes: &columns,
     };
-    let (surface, stats) = run_interruptible(py, |cancel| {
+    let result = run_interruptible(py, |cancel| {
         with_threads(threads, || {
             reconstruct_source(source, &options, &|_| {}, cancel)
         })
-    })?;
+    });
+    py.allow_threads(malloc::release_free_memory);
+    let (surface, stats) = result?;
     Ok(Mesh::new(
         surface,
         Some(stats),
@@ -615,6 +618,7 @@ fn reconstruct_file<'py>(
 #[pymodule]
 #[pyo3(name = "meniscus")]
 fn meniscus_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    malloc::tune();
     m.add("FormatError", m.py().get_type_bound::<FormatError>())?;
     m.add_class::<Mesh>()?;
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
