@@ -12,7 +12,8 @@
 # with the velocity of frame 25's VTK (a binary PLY, carried to the surface as the CLI
 # does by default) and run with the default budget and 1GiB, and as a violent splash
 # (`tile_scene ... splash`: 1.4 times the surface per particle, 27k isolated particles)
-# under 512MiB, 1GiB and 2GiB, like the plain scene. Each run writes a fresh
+# under 512MiB, 1GiB and 2GiB, like the plain scene, and with anisotropic kernels
+# (`--kernel anisotropic`) with the default budget and 512MiB. Each run writes a fresh
 # output after a `sync`. Needs python3 for the summary.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -24,12 +25,13 @@ FRAME_VELOCITY=datasets/dambreak_small/ParticleData_Fluid_25.vtk
 WORK=$(mktemp -d "${TMPDIR:-/tmp}/meniscus-scale.XXXXXX")
 trap 'rm -rf "$WORK"' EXIT
 
-run() { # copies budget [velocity|splash]
-    local copies=$1 budget=$2 scene="$WORK/scene_$1.xyz" frame=$FRAME splash=()
+run() { # copies budget [velocity|splash|anisotropic]
+    local copies=$1 budget=$2 scene="$WORK/scene_$1.xyz" frame=$FRAME splash=() kernel=()
     if [ "${3:-}" = velocity ]; then scene="$WORK/scene_$1_velocity.ply" frame=$FRAME_VELOCITY; fi
     if [ "${3:-}" = splash ]; then scene="$WORK/scene_$1_splash.xyz" splash=(splash); fi
+    if [ "${3:-}" = anisotropic ]; then kernel=(--kernel anisotropic); fi
     [ -f "$scene" ] || target/release/examples/tile_scene "$frame" "$copies" "$scene" "${splash[@]}" >/dev/null
-    local args=(reconstruct "$scene" -r 0.012 -o "$WORK/out.ply" --stats "$WORK/stats.json" -q)
+    local args=(reconstruct "$scene" -r 0.012 -o "$WORK/out.ply" --stats "$WORK/stats.json" -q "${kernel[@]}")
     [ "$budget" != default ] && args+=(--memory-budget "$budget")
     # Every run writes a fresh file with the previous runs' output flushed: replacing a
     # 300 MB output that is still in the page cache, or writing while the last one is
@@ -63,6 +65,8 @@ for copies in ${SCALE_COPIES:-24 96 384 768}; do
             run "$copies" default velocity
             run "$copies" 1GiB velocity
             for budget in 512MiB 1GiB 2GiB; do run "$copies" "$budget" splash; done
+            run "$copies" default anisotropic
+            run "$copies" 512MiB anisotropic
             ;;
         384 | 768) run "$copies" 2GiB ;;
     esac

@@ -49,7 +49,7 @@ pub struct AnisotropyOptions {
     /// Centre smoothing `λ` in `[0, 1]` (0: the particle positions). Default 0: smoothing
     /// pulls the outer particles inwards (the fluid shrinks) and made faces rougher in
     /// every measurement (`docs/quality.md`).
-    pub smoothing: f32,
+    pub centre_smoothing: f32,
     /// Largest shift of a centre by smoothing, multiples of `r`. Default 1.
     pub max_shift: f32,
     /// Distance `ρ_s` of the surface from the weighted mean of the centres, multiples of
@@ -65,7 +65,7 @@ impl Default for AnisotropyOptions {
             kernel_radius: 3.5,
             max_stretch: 1.75,
             min_neighbours: 8,
-            smoothing: 0.0,
+            centre_smoothing: 0.0,
             max_shift: 1.0,
             surface_distance: 1.08,
         }
@@ -82,7 +82,7 @@ impl AnisotropyOptions {
     /// plus the largest shift when centres are smoothed).
     pub fn reach(&self) -> f32 {
         self.longest_axis()
-            + if self.smoothing > 0.0 {
+            + if self.centre_smoothing > 0.0 {
                 self.max_shift
             } else {
                 0.0
@@ -96,20 +96,20 @@ impl AnisotropyOptions {
         };
         if !(self.kernel_radius.is_finite() && self.kernel_radius > 0.0) {
             return bad(
-                "anisotropy.kernel_radius",
+                "kernel_radius",
                 format!("must be > 0 (multiples of r), got {}", self.kernel_radius),
             );
         }
         if !(self.max_stretch.is_finite() && self.max_stretch >= 1.0 && self.max_stretch <= 16.0) {
             return bad(
-                "anisotropy.max_stretch",
+                "max_stretch",
                 format!("must be between 1 and 16, got {}", self.max_stretch),
             );
         }
-        if !(self.smoothing.is_finite() && (0.0..=1.0).contains(&self.smoothing)) {
+        if !(self.centre_smoothing.is_finite() && (0.0..=1.0).contains(&self.centre_smoothing)) {
             return bad(
-                "anisotropy.smoothing",
-                format!("must be between 0 and 1, got {}", self.smoothing),
+                "centre_smoothing",
+                format!("must be between 0 and 1, got {}", self.centre_smoothing),
             );
         }
         if !(self.surface_distance.is_finite()
@@ -117,7 +117,7 @@ impl AnisotropyOptions {
             && self.surface_distance <= 2.0)
         {
             return bad(
-                "anisotropy.surface_distance",
+                "surface_distance",
                 format!(
                     "must be > 0 and at most 2 (multiples of r), got {}",
                     self.surface_distance
@@ -126,7 +126,7 @@ impl AnisotropyOptions {
         }
         if !(self.max_shift.is_finite() && self.max_shift >= 0.0 && self.max_shift <= 4.0) {
             return bad(
-                "anisotropy.max_shift",
+                "max_shift",
                 format!(
                     "must be between 0 and 4 (multiples of r), got {}",
                     self.max_shift
@@ -401,7 +401,7 @@ fn kernel_of(
     let swdd = [total[4], total[5], total[6], total[7], total[8], total[9]];
     // `neighbours` counts coincident particles out, the particle itself too.
     let mean = swd / sw;
-    let mut shift = mean * options.smoothing as f64;
+    let mut shift = mean * options.centre_smoothing as f64;
     let max_shift = options.max_shift as f64 * r;
     if shift.length() > max_shift {
         shift *= max_shift / shift.length();
@@ -536,7 +536,7 @@ mod tests {
             positions.push(Vec3::new(0.3 + 0.02 * k as f32, 0.3, 0.05));
         }
         let mut options = anisotropic(r);
-        options.anisotropy.smoothing = 0.4;
+        options.anisotropy.centre_smoothing = 0.4;
         let (kernels, stats) = compute_kernels(&positions, &options).unwrap();
         assert_eq!(stats.particles, positions.len());
         assert!(stats.spherical >= 6, "the filament has too few neighbours");
@@ -546,7 +546,7 @@ mod tests {
         for (i, k) in kernels.iter().enumerate() {
             let (count, mean, cov) = oracle(&positions, i, radius);
             assert_eq!(k.neighbours, count, "particle {i}");
-            let mut shift = mean * a.smoothing as f64;
+            let mut shift = mean * a.centre_smoothing as f64;
             let cap = a.max_shift as f64 * r as f64;
             if shift.length() > cap {
                 shift *= cap / shift.length();

@@ -194,7 +194,7 @@ struct ReconstructArgs {
     #[arg(long, default_value_t = AnisotropyOptions::default().min_neighbours)]
     min_neighbours: u32,
     /// Anisotropic kernels: centre smoothing λ in [0, 1] (0 = the particle positions).
-    #[arg(long, default_value_t = AnisotropyOptions::default().smoothing)]
+    #[arg(long, default_value_t = AnisotropyOptions::default().centre_smoothing)]
     centre_smoothing: f32,
     /// Tile edge in marching-cubes cells (rounded up to 8-cell blocks); default: one tile
     /// if the scene fits the memory budget, else the largest tile that does. The

@@ -112,7 +112,7 @@ impl ReconstructSettings {
             kernel_radius: defaults.kernel_radius,
             max_stretch: defaults.max_stretch,
             min_neighbours: defaults.min_neighbours,
-            centre_smoothing: defaults.smoothing,
+            centre_smoothing: defaults.centre_smoothing,
             isolated_spheres: Some(2),
             decimate: Decimation::Fraction(0.8),
             decimate_error: None,
@@ -139,7 +139,7 @@ impl ReconstructSettings {
         field.anisotropy.kernel_radius = self.kernel_radius;
         field.anisotropy.max_stretch = self.max_stretch;
         field.anisotropy.min_neighbours = self.min_neighbours;
-        field.anisotropy.smoothing = self.centre_smoothing;
+        field.anisotropy.centre_smoothing = self.centre_smoothing;
         options.isolated_sphere_level = self.isolated_spheres;
         options.tiles.tile_size_cells = self.tile_size;
         options.tiles.memory_budget_bytes = self

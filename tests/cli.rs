@@ -542,6 +542,37 @@ fn new_user_errors_name_the_real_cause() {
             vec!["--memory-budget", "unknown size unit \"parsecs\""],
             vec!["--tile-size"],
         ),
+        // Anisotropic kernels: a stretch below 1, and kernels reaching too many cells.
+        (
+            vec![
+                "reconstruct",
+                sphere,
+                "--kernel",
+                "anisotropic",
+                "--max-stretch",
+                "0.5",
+                "-o",
+                &out,
+            ],
+            2,
+            vec!["--max-stretch", "between 1 and 16, got 0.5"],
+            vec!["--kernel-radius", "anisotropy."],
+        ),
+        (
+            vec![
+                "reconstruct",
+                sphere,
+                "--kernel",
+                "anisotropic",
+                "--kernel-radius",
+                "60",
+                "-o",
+                &out,
+            ],
+            2,
+            vec!["--kernel-radius/--cell-size", "more than 64 cells"],
+            vec!["--influence-radius", "anisotropy."],
+        ),
         (
             vec!["reconstruct", sphere, "--threads", "0", "-o", &out],
             2,

@@ -185,6 +185,18 @@ impl FieldOptions {
         }
         if self.kernel == Kernel::Anisotropic {
             self.anisotropy.validate()?;
+            if self.anisotropy.reach() / self.cell_size > 64.0 {
+                return Err(Error::InvalidOption {
+                    option: "kernel_radius/cell_size",
+                    message: format!(
+                        "anisotropic kernels of radius {} r stretched up to {} reach {:.1} r, more than 64 cells of {} r: a smaller kernel radius or stretch, or larger cells",
+                        self.anisotropy.kernel_radius,
+                        self.anisotropy.max_stretch,
+                        self.anisotropy.reach(),
+                        self.cell_size
+                    ),
+                });
+            }
         }
         if !(self.t_low.is_finite() && self.t_high.is_finite() && self.t_low < self.t_high) {
             return Err(Error::InvalidOption {
