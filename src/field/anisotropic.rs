@@ -26,7 +26,7 @@ use super::{
     home_half_block, kernel_reach, BlockRange, FieldOptions, FieldStats, HALF_BLOCK_EDGE, ROW, ROWS,
 };
 use crate::anisotropy::ParticleKernel;
-use crate::grid::{zeroed_blocks, BlockKey, BlockValues, SparseField, BLOCK_EDGE};
+use crate::grid::{BlockKey, BlockValues, SparseField, BLOCK_EDGE};
 use rayon::prelude::*;
 
 /// A kernel ready for the lattice: centre, quadratic form and bounding box in cells.
@@ -99,36 +99,13 @@ fn compute_blocks_with(
         surface: options.anisotropy.surface_distance as f64 * options.particle_radius as f64,
         simd,
     };
-    let mut values: Vec<BlockValues> = zeroed_blocks(candidates.len());
-    let in_band: Vec<Option<usize>> = candidates
-        .par_iter()
-        .zip(values.par_iter_mut())
-        .map_init(Scratch::default, |scratch, (&key, out)| {
-            evaluator.evaluate(key, scratch, out)
-        })
-        .collect();
-    let mut stats = FieldStats {
-        particles: kernels.len(),
-        ..FieldStats::default()
-    };
-    let mut kept = 0;
-    let mut keys = Vec::with_capacity(candidates.len());
-    for (slot, (key, n)) in candidates.iter().zip(&in_band).enumerate() {
-        if let Some(n) = n {
-            stats.vertices_in_band += n;
-            if slot != kept {
-                values.copy_within(slot..=slot, kept);
-            }
-            keys.push(*key);
-            kept += 1;
-        }
-    }
-    values.truncate(kept);
-    values.shrink_to_fit();
-    stats.blocks = kept;
-    let field = SparseField::from_parts(h, options.outside_value(), &keys, values);
-    stats.block_bytes = field.memory_bytes();
-    (field, stats)
+    super::evaluate_candidates(
+        &candidates,
+        kernels.len(),
+        options,
+        Scratch::default,
+        |scratch, key, out| evaluator.evaluate(key, scratch, out),
+    )
 }
 
 /// Per-thread scratch of one block.

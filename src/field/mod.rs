@@ -422,18 +422,34 @@ fn compute_blocks_with(
         options,
         simd,
     };
-    // Evaluate every candidate into one contiguous array, then compact away the
-    // candidates no particle reaches.
+    evaluate_candidates(
+        &candidates,
+        positions.len(),
+        options,
+        RowLists::new,
+        |lists, key, out| kernel.evaluate(key, lists, out),
+    )
+}
+
+/// Evaluates every candidate block into one contiguous array with `evaluate` (per-thread
+/// scratch from `scratch`; `None` when no particle reaches the block), then compacts
+/// away the candidates no particle reaches: the field and its figures. Shared by the
+/// isotropic and the anisotropic kernel.
+pub(super) fn evaluate_candidates<T: Send>(
+    candidates: &[BlockKey],
+    particles: usize,
+    options: &FieldOptions,
+    scratch: impl Fn() -> T + Sync + Send,
+    evaluate: impl Fn(&mut T, BlockKey, &mut BlockValues) -> Option<usize> + Sync + Send,
+) -> (SparseField, FieldStats) {
     let mut values: Vec<BlockValues> = zeroed_blocks(candidates.len());
     let in_band: Vec<Option<usize>> = candidates
         .par_iter()
         .zip(values.par_iter_mut())
-        .map_init(RowLists::new, |lists, (&key, out)| {
-            kernel.evaluate(key, lists, out)
-        })
+        .map_init(scratch, |t, (&key, out)| evaluate(t, key, out))
         .collect();
     let mut stats = FieldStats {
-        particles: positions.len(),
+        particles,
         ..FieldStats::default()
     };
     let mut kept = 0;
@@ -452,7 +468,12 @@ fn compute_blocks_with(
     values.truncate(kept);
     values.shrink_to_fit();
     stats.blocks = kept;
-    let field = SparseField::from_parts(h, options.outside_value(), &keys, values);
+    let field = SparseField::from_parts(
+        options.cell_size_world(),
+        options.outside_value(),
+        &keys,
+        values,
+    );
     stats.block_bytes = field.memory_bytes();
     (field, stats)
 }
