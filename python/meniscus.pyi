@@ -68,6 +68,16 @@ class ReconstructOptions(TypedDict, total=False):
     first stops it. Default None."""
     subdivide: int
     """Loop subdivision steps after decimation (0: off). Default 1."""
+    defer_subdivision: bool
+    """Leave the ``subdivide`` Loop steps to whoever reads the mesh: it comes back as the
+    control mesh, its particles kept inside the surface it becomes once subdivided
+    (for ``Archive.append(n, mesh, subdivide=...)``, as the CLI's ``.mseq`` does).
+    Default False."""
+    keep_inside: float | None
+    """Least depth of every non-isolated particle centre under the final surface,
+    multiples of r, in [0, 1]: where decimation or subdivision left one shallower or
+    outside, the surface over it is pushed out; None leaves the surface as they made it.
+    Default 0.25."""
     tile_size: int | None
     """Tile edge in marching-cubes cells; default: from the memory budget."""
     memory_budget: int | str | None
@@ -130,7 +140,8 @@ def reconstruct(
         threads: worker threads (default: all cores). The output does not depend on it.
         **options: the reconstruction settings (``ReconstructOptions``): influence_radius,
             cell_size, t_low, t_high, particle_coverage, iso_offset, isolated_spheres,
-            decimate, decimate_error, subdivide, tile_size, memory_budget, temp_dir.
+            decimate, decimate_error, subdivide, defer_subdivision, keep_inside, tile_size,
+            memory_budget, temp_dir.
     """
 
 def read_particles(path: _Path) -> tuple[npt.NDArray[np.float32], dict[str, npt.NDArray[np.float32]]]:
@@ -222,7 +233,7 @@ class Archive:
 
         ``subdivide``: Loop steps the reader runs on ``mesh``, which is then stored as a
         control mesh (a quarter of the triangles per step). The CLI archives frames so:
-        ``archive.append(n, reconstruct(p, r, subdivide=0), subdivide=1)`` writes the
+        ``archive.append(n, reconstruct(p, r, defer_subdivision=True), subdivide=1)`` writes the
         frame ``meniscus reconstruct ... -o run.mseq`` writes, byte for byte. A mesh
         reconstructed with subdivision is refused with ``subdivide`` > 0; by default it
         is stored as it is (all its triangles)."""

@@ -233,6 +233,7 @@ pub fn reconstruct_file(
     let options = if deferred_levels > 0 {
         let mut o = options.clone();
         o.subdivide.levels = 0;
+        o.deferred_subdivision = deferred_levels;
         deferred_options = o;
         &deferred_options
     } else {

@@ -17,7 +17,8 @@
 //! * [`mesh`]: the indexed triangle mesh, normals and topology validation.
 //! * [`neighbors`]: the cell hash behind isolation checks.
 //! * [`tiles`]: field and marching cubes tile by tile, stitched bit-identically.
-//! * [`decimation`], [`subdivision`], [`isolated`]: the post-processing stages.
+//! * [`decimation`], [`containment`], [`subdivision`], [`isolated`]: the post-processing
+//!   stages.
 //! * [`attributes`]: particle attributes (velocity, ...) carried to the surface vertices.
 //! * [`pipeline`]: the whole reconstruction of one frame, stage by stage, with timings.
 //! * [`job`], [`sequence`]: files and `{}` frame sequences, as the CLI runs them.
@@ -42,6 +43,7 @@ pub mod anisotropy;
 pub mod archive;
 pub mod attributes;
 pub mod cancel;
+pub mod containment;
 pub mod decimation;
 pub mod error;
 pub mod field;

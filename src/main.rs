@@ -171,6 +171,11 @@ struct ReconstructArgs {
     /// Loop subdivision steps after decimation (0 = off).
     #[arg(long, default_value_t = 1)]
     subdivide: u32,
+    /// Least depth of every non-isolated particle centre under the final surface,
+    /// multiples of r (0 to 1): where decimation or subdivision left one shallower or
+    /// outside, the surface over it is pushed out; `off` leaves the surface as they made it.
+    #[arg(long, default_value = "0.25")]
+    keep_inside: String,
     /// Coverage radius c, multiples of r: particles the paper's surface would leave
     /// outside are enclosed in a ball of c·r (0 = off, the pure Solenthaler field).
     #[arg(allow_negative_numbers = true, long, default_value_t = 0.9)]
@@ -565,6 +570,17 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, Failure> {
             .map_err(|e| Failure::option("--decimate", e))?,
         decimate_error: args.decimate_error,
         subdivide: args.subdivide,
+        // A `.mseq` output defers it by itself (see `job`).
+        defer_subdivision: false,
+        keep_inside: match args.keep_inside.as_str() {
+            "off" => None,
+            v => Some(v.parse().map_err(|_| {
+                Failure::option(
+                    "--keep-inside",
+                    format!("takes a depth (multiples of r) or `off`, got {v:?}"),
+                )
+            })?),
+        },
         tile_size: args.tile_size,
         memory_budget: match &args.memory_budget {
             Some(text) => Some(

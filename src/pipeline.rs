@@ -8,15 +8,18 @@
 //!    stitches the pieces exactly, or decimates each as it comes
 //!    ([`crate::decimation::TileDecimation`]);
 //! 4. quadric decimation ([`crate::decimation`]), unless the tiles did it;
-//! 5. Loop subdivision ([`crate::subdivision`]);
-//! 6. icospheres of radius `r` at the isolated particles ([`crate::isolated`]);
-//! 7. area-weighted vertex normals;
-//! 8. the particles' payload carried to the final vertices ([`crate::attributes`]).
+//! 5. containment: every non-isolated particle centre pushed under the surface that
+//!    subdivision will make ([`crate::containment`]);
+//! 6. Loop subdivision ([`crate::subdivision`]): the surface containment measured;
+//! 7. icospheres of radius `r` at the isolated particles ([`crate::isolated`]);
+//! 8. area-weighted vertex normals;
+//! 9. the particles' payload carried to the final vertices ([`crate::attributes`]).
 //!
 //! Every stage is timed; [`ReconstructionStats`] is the paper's Table 1 for one frame.
 
 use crate::attributes::transfer;
 use crate::cancel::CancelToken;
+use crate::containment::{contain_centres, ContainmentOptions, ContainmentStats};
 use crate::decimation::TileDecimation;
 use crate::decimation::{decimate, DecimateOptions, DecimateStats};
 use crate::error::Result;
@@ -47,6 +50,14 @@ pub struct ReconstructOptions {
     pub decimate: Option<DecimateOptions>,
     /// Loop subdivision steps after decimation. Default 1 (0 skips it).
     pub subdivide: SubdivideOptions,
+    /// Loop subdivision steps left to whoever decodes the surface (a `.mseq` archive
+    /// stores the control mesh and subdivides on decoding): not run here, but the
+    /// containment stage measures the surface as it will be decoded. Default 0.
+    pub deferred_subdivision: u32,
+    /// Keeping every non-isolated particle centre under the surface after decimation and
+    /// subdivision, or `None` to leave the surface as they made it. Default: at least
+    /// 0.25 r deep.
+    pub containment: Option<ContainmentOptions>,
 }
 
 impl ReconstructOptions {
@@ -67,6 +78,8 @@ impl ReconstructOptions {
             tiles: TileOptions::default(),
             decimate: Some(DecimateOptions::default()),
             subdivide: SubdivideOptions::default(),
+            deferred_subdivision: 0,
+            containment: Some(ContainmentOptions::default()),
         }
     }
 }
@@ -99,6 +112,8 @@ pub struct ReconstructionStats {
     pub tiles: TileStats,
     /// Decimation figures, when it ran.
     pub decimation: Option<DecimateStats>,
+    /// Containment figures, when it ran.
+    pub containment: Option<ContainmentStats>,
     /// Triangles straight out of marching cubes.
     pub marching_cubes_triangles: usize,
     /// Per-stage wall times in pipeline order.
@@ -270,8 +285,9 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
             (mesh, run, None)
         }
     };
-    // The particles are needed again only to carry their payload to the surface.
-    let store = (!layout.is_empty()).then_some(store);
+    // The particles are needed again to keep their centres under the surface and to
+    // carry their payload to it.
+    let store = (!layout.is_empty() || options.containment.is_some()).then_some(store);
     let isolated_centers = tiles_run.isolated;
     stats.isolated_particles = isolated_centers.len();
     stats.field = tiles_run.field;
@@ -324,20 +340,42 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
     }
 
     cancel.check()?;
-    // 5. Subdivision.
-    progress("subdivision");
-    if options.subdivide.levels > 0 {
+    // 5. Containment, on the surface as subdivision will make it; 6. subdivision.
+    let levels = options.subdivide.levels;
+    let mut subdivided = None;
+    if let (Some(containment), Some(store)) = (&options.containment, &store) {
+        progress("containment");
         let clock = Instant::now();
-        subdivide(&mut fluid, &options.subdivide);
-        stats.push_stage(
-            "subdivision",
-            clock.elapsed().as_secs_f64(),
-            fluid.triangle_count(),
-        );
+        let (surface, contained) = contain_centres(
+            &mut fluid,
+            levels + options.deferred_subdivision,
+            store,
+            &isolated_centers,
+            r,
+            containment,
+            cancel,
+        )?;
+        let seconds = clock.elapsed().as_secs_f64() - contained.subdivision_seconds;
+        stats.push_stage("containment", seconds, fluid.triangle_count());
+        if levels > 0 && options.deferred_subdivision == 0 {
+            subdivided = Some((surface, contained.subdivision_seconds));
+        }
+        stats.containment = Some(contained);
+    }
+    cancel.check()?;
+    progress("subdivision");
+    if levels > 0 {
+        let (surface, seconds) = subdivided.unwrap_or_else(|| {
+            let clock = Instant::now();
+            subdivide(&mut fluid, &options.subdivide);
+            (std::mem::take(&mut fluid), clock.elapsed().as_secs_f64())
+        });
+        fluid = surface;
+        stats.push_stage("subdivision", seconds, fluid.triangle_count());
     }
 
     cancel.check()?;
-    // 6. Spheres.
+    // 7. Spheres.
     let clock = Instant::now();
     let mut spheres = match options.isolated_sphere_level {
         Some(level) if !isolated_centers.is_empty() => SphereInstances {
@@ -354,7 +392,7 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
         fluid.triangle_count(),
     );
 
-    // 7. Normals.
+    // 8. Normals.
     let clock = Instant::now();
     fluid.compute_normals();
     stats.fluid_triangles = fluid.triangle_count();
@@ -364,7 +402,7 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
         fluid.triangle_count(),
     );
 
-    // 8. Attributes at the final vertices and the sphere centres.
+    // 9. Attributes at the final vertices and the sphere centres.
     if let Some(store) = store {
         cancel.check()?;
         progress("attributes");

@@ -5,6 +5,7 @@
 //! [`ReconstructOptions`]; every front end goes through it, so none can drift from the
 //! others.
 
+use crate::containment::ContainmentOptions;
 use crate::decimation::DecimateOptions;
 use crate::error::{Error, Result};
 use crate::field::{AnisotropyOptions, Kernel};
@@ -87,6 +88,14 @@ pub struct ReconstructSettings {
     pub decimate_error: Option<f32>,
     /// Loop subdivision steps after decimation. Default 1.
     pub subdivide: u32,
+    /// Leave the Loop subdivision to whoever reads the surface (a `.mseq` archive's
+    /// decoder, which runs `subdivide` steps): the surface comes back as the control mesh,
+    /// and containment judges it as it will be subdivided. Default false.
+    pub defer_subdivision: bool,
+    /// Least depth of every non-isolated particle centre under the final surface,
+    /// multiples of `r`, or `None` to leave the surface as decimation and subdivision made
+    /// it. Default `Some(0.25)`.
+    pub keep_inside: Option<f32>,
     /// Tile edge, marching-cubes cells. Default: from the memory budget.
     pub tile_size: Option<u32>,
     /// Memory the run may use, bytes. Default `None`: half the available memory
@@ -117,6 +126,8 @@ impl ReconstructSettings {
             decimate: Decimation::Fraction(0.8),
             decimate_error: None,
             subdivide: 1,
+            defer_subdivision: false,
+            keep_inside: Some(ContainmentOptions::default().min_depth),
             tile_size: None,
             memory_budget: None,
             temp_dir: None,
@@ -147,6 +158,23 @@ impl ReconstructSettings {
             .or_else(crate::tiles::default_memory_budget);
         options.tiles.temp_dir = self.temp_dir.clone();
         options.subdivide.levels = self.subdivide;
+        if self.defer_subdivision {
+            options.deferred_subdivision = self.subdivide;
+            options.subdivide.levels = 0;
+        }
+        options.containment = match self.keep_inside {
+            None => None,
+            Some(d) if d.is_finite() && (0.0..=1.0).contains(&d) => Some(ContainmentOptions {
+                min_depth: d,
+                ..Default::default()
+            }),
+            Some(d) => {
+                return Err(Error::InvalidOption {
+                    option: "keep_inside",
+                    message: format!("takes a depth in [0, 1] (multiples of r), got {d}"),
+                })
+            }
+        };
         if let Some(e) = self.decimate_error {
             if !(e.is_finite() && e > 0.0) {
                 return Err(Error::InvalidOption {

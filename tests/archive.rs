@@ -23,8 +23,10 @@ fn particles(rel: &str) -> Vec<glam::Vec3> {
 /// The six shipped frames reconstructed the way `reconstruct … -o run.mseq` archives
 /// them: the pipeline without its Loop step (the control mesh) and the spheres.
 fn frames() -> Vec<(i64, Surface)> {
+    // Control meshes as the CLI archives them: subdivision left to the decoder.
     let mut options = ReconstructOptions::new(R);
     options.subdivide.levels = 0;
+    options.deferred_subdivision = 1;
     [1i64, 9, 17, 25, 31, 45]
         .iter()
         .map(|k| {

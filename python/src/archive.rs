@@ -72,8 +72,8 @@ impl Archive {
     /// Appends `mesh` as frame `frame` (creating the archive); returns the bytes
     /// written. A frame number already held is refused (FileExistsError). `subdivide`:
     /// Loop steps the archive's reader applies to `mesh`, which is then the control mesh
-    /// (the CLI stores a `.mseq` frame so: reconstructed with `subdivide=0`, appended
-    /// with `subdivide=1`, it is the CLI's frame, byte for byte).
+    /// (the CLI stores a `.mseq` frame so: reconstructed with `defer_subdivision=True`,
+    /// appended with `subdivide=1`, it is the CLI's frame, byte for byte).
     #[pyo3(signature = (frame, mesh, *, error_bound = None, subdivide = 0))]
     fn append(
         &self,
@@ -86,7 +86,7 @@ impl Archive {
         if subdivide > 0 {
             if let Some(levels) = mesh.subdivided.filter(|&l| l > 0) {
                 return Err(PyValueError::new_err(format!(
-                    "invalid subdivide: the mesh is subdivided already (reconstructed with subdivide={levels}); reconstruct it with subdivide=0 to append its control mesh"
+                    "invalid subdivide: the mesh is subdivided already (reconstructed with subdivide={levels}); reconstruct it with defer_subdivision=True to append its control mesh"
                 )));
             }
         }

@@ -28,6 +28,8 @@ pub const SETTINGS: &[&str] = &[
     "decimate",
     "decimate_error",
     "subdivide",
+    "defer_subdivision",
+    "keep_inside",
     "tile_size",
     "memory_budget",
     "temp_dir",
@@ -127,6 +129,15 @@ pub fn settings(particle_radius: f32, keywords: &Keywords<'_>) -> PyResult<Recon
         s.isolated_spheres = match v.is_none() {
             true => None,
             false => Some(extract(&v, "isolated_spheres")?),
+        };
+    }
+    if let Some(v) = keywords.value("defer_subdivision")? {
+        s.defer_subdivision = v;
+    }
+    if let Some(v) = keywords.take("keep_inside")? {
+        s.keep_inside = match v.is_none() {
+            true => None,
+            false => Some(extract(&v, "keep_inside")?),
         };
     }
     if let Some(v) = keywords.take("decimate")? {

@@ -116,14 +116,15 @@ def test_archive_append_read_verify(frame25, tmp_path):
 
 def test_archive_append_of_a_control_mesh_is_the_cli_archive(tmp_path):
     # The CLI's .mseq stores each frame's control mesh (before Loop subdivision) and the
-    # number of steps the reader runs: reconstructed with subdivide=0 and appended with
+    # number of steps the reader runs: reconstructed with defer_subdivision=True (the
+    # control mesh, its particles kept inside the surface it becomes) and appended with
     # subdivide=1, a frame is the CLI's, byte for byte, one append at a time.
     run_cli("reconstruct", str(DATA / "ParticleData_Fluid_{}.xyz"), "--particle-radius", RADIUS,
             "--frames", "1,9,25", "-o", tmp_path / "cli.mseq", "--quiet")
     archive = meniscus.Archive(tmp_path / "py.mseq")
     for number in (1, 9, 25):
         positions, _ = meniscus.read_particles(DATA / f"ParticleData_Fluid_{number}.xyz")
-        control = meniscus.reconstruct(positions, RADIUS, subdivide=0)
+        control = meniscus.reconstruct(positions, RADIUS, defer_subdivision=True)
         archive.append(number, control, subdivide=1)
     assert (tmp_path / "py.mseq").read_bytes() == (tmp_path / "cli.mseq").read_bytes()
     # Read back, a frame is the subdivided surface (4x the control mesh's triangles).

@@ -86,6 +86,8 @@ def test_write_formats(frame25, tmp_path, ext):
         ({"kernel": "anisotropic"}, ["--kernel", "anisotropic"]),
         ({"kernel": "anisotropic", "max_stretch": 2.0}, ["--kernel", "anisotropic", "--max-stretch", "2"]),
         ({"decimate": None, "subdivide": 2, "isolated_spheres": None}, ["--decimate", "off", "--subdivide", "2", "--isolated-spheres", "off"]),
+        ({"keep_inside": None}, ["--keep-inside", "off"]),
+        ({"keep_inside": 0.5}, ["--keep-inside", "0.5"]),
         ({"tile_size": 16, "memory_budget": "1GiB", "temp_dir": "TMP"}, ["--tile-size", "16", "--memory-budget", "1GiB", "--temp-dir", "TMP"]),
     ],
 )
