@@ -13,7 +13,9 @@
 # does by default) and run with the default budget and 1GiB, and as a violent splash
 # (`tile_scene ... splash`: 1.4 times the surface per particle, 27k isolated particles)
 # under 512MiB, 1GiB and 2GiB, like the plain scene, and with anisotropic kernels
-# (`--kernel anisotropic`) with the default budget and 512MiB. Each run writes a fresh
+# (`--kernel anisotropic`) with the default budget and 512MiB. At 16M and 32M also with
+# `--keep-inside off` (containment needs ≈ 160 B per decimated triangle: 32M under 2GiB
+# fits only without it) and 32M with containment under 3GiB. Each run writes a fresh
 # output after a `sync`. Needs python3 for the summary.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -25,11 +27,12 @@ FRAME_VELOCITY=datasets/dambreak_small/ParticleData_Fluid_25.vtk
 WORK=$(mktemp -d "${TMPDIR:-/tmp}/meniscus-scale.XXXXXX")
 trap 'rm -rf "$WORK"' EXIT
 
-run() { # copies budget [velocity|splash|anisotropic]
+run() { # copies budget [velocity|splash|anisotropic|no-containment]
     local copies=$1 budget=$2 scene="$WORK/scene_$1.xyz" frame=$FRAME splash=() kernel=()
     if [ "${3:-}" = velocity ]; then scene="$WORK/scene_$1_velocity.ply" frame=$FRAME_VELOCITY; fi
     if [ "${3:-}" = splash ]; then scene="$WORK/scene_$1_splash.xyz" splash=(splash); fi
     if [ "${3:-}" = anisotropic ]; then kernel=(--kernel anisotropic); fi
+    if [ "${3:-}" = no-containment ]; then kernel=(--keep-inside off); fi
     [ -f "$scene" ] || target/release/examples/tile_scene "$frame" "$copies" "$scene" "${splash[@]}" >/dev/null
     local args=(reconstruct "$scene" -r 0.012 -o "$WORK/out.ply" --stats "$WORK/stats.json" -q "${kernel[@]}")
     [ "$budget" != default ] && args+=(--memory-budget "$budget")
@@ -68,6 +71,7 @@ for copies in ${SCALE_COPIES:-24 96 384 768}; do
             run "$copies" default anisotropic
             run "$copies" 512MiB anisotropic
             ;;
-        384 | 768) run "$copies" 2GiB ;;
+        384) run "$copies" 2GiB; run "$copies" 2GiB no-containment ;;
+        768) run "$copies" 3GiB; run "$copies" 2GiB no-containment ;;
     esac
 done

@@ -9,46 +9,49 @@
 //! its neighbours). On a violent splash a few centres per hundred thousand end up outside
 //! or just under the surface; on calm frames none do.
 //!
-//! **What.** After decimation, the surface *as it will be output* (the control mesh
-//! subdivided `levels` times, whether the pipeline subdivides or the `.mseq` decoder
-//! does) is measured against every non-isolated centre near it. A centre less than
-//! [`ContainmentOptions::min_depth`] under it (or outside it) pushes the control
-//! triangle under its nearest surface point outwards along the surface normal there, by
-//! what is missing (1.4 times that when one Loop step will average the push out over the
-//! neighbours). Pushes are combined per control vertex by taking the largest, and halved
-//! around any control triangle they would turn by more than about 75°, so they never fold
-//! the surface. The surface is then moved by what Loop's (linear) masks make of the pushes
-//! and the watched centres (those within r of being too shallow) near the moved part are
-//! measured again, for at most [`ContainmentOptions::max_rounds`] rounds; a push of more
-//! than r subdivides and measures everything again. Only control vertices move, the
-//! topology does not change, so a closed 2-manifold stays one; the output is exactly the
-//! subdivision of the moved control mesh (what a `.mseq` decoder makes of it).
+//! **What.** After decimation and before subdivision, the surface *as one Loop step
+//! will make it* (whether the pipeline subdivides or the `.mseq` decoder does) is
+//! measured against every non-isolated centre near it. A centre less than
+//! [`ContainmentOptions::min_depth`] under it (or outside it) pushes the control triangle
+//! under its nearest surface point outwards along the surface normal there, by what is
+//! missing (1.4 times that when Loop will average the push out over the neighbours).
+//! Pushes are combined per control vertex by taking the largest, and halved around any
+//! control triangle they would turn by more than about 75°, so they never fold the
+//! surface. The one-step surface is recomputed where the pushes reach and the watched
+//! centres (those within r of being too shallow) near them are measured again, for at
+//! most [`ContainmentOptions::max_rounds`] rounds; a push of more than r measures every
+//! centre again. Only control vertices move: the topology does not change, so a closed
+//! 2-manifold stays one, and subdivision then runs on the moved control mesh as always.
+//! With two or more steps the surface is measured after the first (the later ones move
+//! it far less: the edges halve each step).
 //!
-//! **Measure.** A centre's nearest surface vertices are looked up in a cell hash of the
-//! surface's vertices (cells of `2r`, the 2 × 2 × 2 cells nearest the centre: every
-//! vertex within r of it); a centre with none there is deep inside or isolated. A centre
-//! deep under the tangent plane of its nearest vertex (normal from the control mesh),
-//! deeper than the depth plus `0.15 r` plus `l²/2r` for a vertex `l` aside (what a
-//! surface curved to a radius of r or more can lose against its tangent plane), is
-//! taken at that depth. Otherwise its nearest point is measured exactly on the surface
-//! triangles over the control triangles around the control triangle of its nearest vertex,
-//! and its side is that of the angle-weighted pseudo-normal of the nearest feature (face,
-//! edge or vertex; Bærentzen and Aanæs 2005).
+//! **Measure.** The one-step surface is never built as a mesh: its points (Loop's vertex
+//! point of every control vertex, the edge points of every control triangle's sides) are
+//! computed from the control mesh, and its triangles are the four children of each
+//! control triangle, so the stage holds about half of what the subdivided mesh would take
+//! and stays under the subdivision's peak of memory. A centre's nearest points are looked
+//! up in a cell hash of them (cells of `2r`, the 2 × 2 × 2 cells nearest the centre: every
+//! point within r of it); a centre with none there is deep inside or isolated. A centre
+//! deep under the tangent plane of its nearest point (normal from the control mesh),
+//! deeper than the depth plus `0.15 r` plus `l²/2r` for a point `l` aside (what a surface
+//! curved to a radius of r or more can lose against its tangent plane), is taken at that
+//! depth. Otherwise its nearest point is measured exactly on the children of the control
+//! triangles around the control triangle of its nearest point, and its side is that of
+//! the angle-weighted pseudo-normal of the nearest feature (face, edge or vertex;
+//! Bærentzen and Aanæs 2005).
 //!
 //! **Order.** Every centre is measured on its own and the pushes are combined per vertex
 //! by taking the largest (ties: the lowest particle index), so the result depends neither
 //! on the thread count nor on the order in which the particles are visited (tiles, spill
 //! cells).
 //!
-//! **Cost** (frame 25, 42k particles: about 6 % of the pipeline; the 4M scene: see
-//! `docs/performance-log.md`): one subdivision more when something moved, and on the
-//! first round one look-up per particle, a few hundred nanoseconds for the quarter of
-//! them near the surface.
+//! **Cost**: on the first round one cell look-up per particle, and about a microsecond
+//! for each of the quarter of them near the surface; figures in
+//! `docs/performance-log.md`.
 
 use crate::cancel::CancelToken;
 use crate::error::Result;
 use crate::mesh::TriMesh;
-use crate::subdivision::{subdivide, SubdivideOptions};
 use glam::{DVec3, Vec3};
 use hashbrown::{HashMap, HashSet};
 use rayon::prelude::*;
@@ -89,8 +92,8 @@ pub struct ContainmentStats {
     pub rounds: u32,
     /// Centres still less than the depth under the surface after the last round.
     pub remaining: usize,
-    /// Seconds of Loop subdivision inside the stage (the surface it measures).
-    pub subdivision_seconds: f64,
+    /// Seconds spent computing the one-step surface it measures (points and cells).
+    pub surface_seconds: f64,
 }
 
 /// What [`Centres::visit`] calls on each chunk: positions and their particle indices.
@@ -118,15 +121,15 @@ impl<S: crate::io::particles::ParticleSource> Centres for crate::tiles::Particle
 
 /// Moves the vertices of `control` (a closed surface, world units) so that every centre
 /// of `centres` that lies near it ends at least `options.min_depth · particle_radius`
-/// under the surface `control` becomes after `levels` Loop subdivision steps; returns
-/// that subdivided surface (with its vertex normals) and what was done.
+/// under the surface `control` becomes after `levels` Loop subdivision steps (measured
+/// after one step; see the module docs); returns what was done.
 pub fn contain(
     control: &mut TriMesh,
     levels: u32,
     centres: &[Vec3],
     particle_radius: f32,
     options: &ContainmentOptions,
-) -> (TriMesh, ContainmentStats) {
+) -> ContainmentStats {
     contain_centres(
         control,
         levels,
@@ -149,7 +152,7 @@ pub(crate) fn contain_centres(
     particle_radius: f32,
     options: &ContainmentOptions,
     cancel: &CancelToken,
-) -> Result<(TriMesh, ContainmentStats)> {
+) -> Result<ContainmentStats> {
     let mut stats = ContainmentStats::default();
     let r = particle_radius as f64;
     let depth = options.min_depth.max(0.0) as f64 * r;
@@ -161,29 +164,18 @@ pub(crate) fn contain_centres(
     // the triangle moves by 3/4 to 7/8 of it for one step; push more so that one round
     // usually suffices.
     let gain = if levels == 0 { 1.0 } else { 1.4 };
-    let clock = Instant::now();
-    let mut surface = subdivided(control, levels);
-    stats.subdivision_seconds += clock.elapsed().as_secs_f64();
+    stats.rounds = 1;
     if control.triangles.is_empty() {
-        stats.rounds = 1;
-        return Ok((surface, stats));
+        return Ok(stats);
     }
+    let clock = Instant::now();
+    let tris = VertexTriangles::new(control);
+    let mut loop_surface = LoopSurface::new(control, &tris, levels > 0);
     // The tangent-plane shortcut reads the control mesh's normals.
     control.compute_normals();
-    let control_tris = VertexTriangles::new(control);
-    let valence: Vec<u32> = (0..control.positions.len() as u32)
-        .map(|v| control_tris.of(v).len() as u32)
-        .collect();
-    let betas = crate::subdivision::loop_betas(&valence);
-    // One triangle of the subdivided surface at each of its vertices (the topology is
-    // the same every round).
-    let mut corner_tri = vec![0u32; surface.positions.len()];
-    for (t, tri) in surface.triangles.iter().enumerate() {
-        for &v in tri {
-            corner_tri[v as usize] = t as u32;
-        }
-    }
-    let mut cells = CellIndex::new(&surface.positions, 2.0 * r);
+    let mut cells = CellIndex::new(&loop_surface.points, 2.0 * r);
+    stats.surface_seconds += clock.elapsed().as_secs_f64();
+    stats.rounds = 0;
     // Centres within r of being too shallow in the last full round.
     let mut watch: Vec<Watched> = Vec::new();
     // Control vertices whose one-ring holds a moved vertex (Loop's masks reach that far).
@@ -193,15 +185,12 @@ pub(crate) fn contain_centres(
         stats.rounds += 1;
         let index = SurfaceIndex {
             cells: &cells,
-            surface: &surface,
+            surface: &loop_surface,
             control,
-            control_tris: &control_tris,
-            corner_tri: &corner_tri,
-            levels,
-            // The tangent-plane shortcut needs normals, which are those of the control
-            // mesh only as it was when last subdivided whole; with two or more steps a
-            // surface vertex is no longer tied to one control vertex or edge.
-            fast_depth: if full_round && levels <= 1 {
+            control_tris: &tris,
+            // The tangent-plane shortcut needs normals, which are the control mesh's
+            // only as it was when last measured whole.
+            fast_depth: if full_round {
                 depth + FAST_MARGIN * r
             } else {
                 f64::INFINITY
@@ -222,16 +211,15 @@ pub(crate) fn contain_centres(
                     watch.push(Watched {
                         particle: i,
                         position: p,
-                        parent: probe.triangle >> (2 * levels),
+                        parent: probe.control_triangle,
                     });
                 }
                 if probe.signed_distance > -depth + TOLERANCE * r {
-                    let outside = probe.signed_distance > 0.0;
                     shallow.push(Shallow {
                         particle: i,
                         push: probe.normal * (probe.signed_distance + aim),
-                        outside,
-                        triangle: probe.triangle,
+                        outside: probe.signed_distance > 0.0,
+                        control_triangle: probe.control_triangle,
                     });
                 }
             }
@@ -288,11 +276,10 @@ pub(crate) fn contain_centres(
         let mut push: HashMap<u32, (f64, u32, DVec3)> = HashMap::new();
         let mut largest = 0.0f64;
         for s in &shallow {
-            let parent = control.triangles[(s.triangle >> (2 * levels)) as usize];
             let d = s.push * gain;
             let amount = d.length();
             largest = largest.max(amount);
-            for v in parent {
+            for v in control.triangles[s.control_triangle as usize] {
                 let e = push
                     .entry(v)
                     .or_insert((f64::NEG_INFINITY, u32::MAX, DVec3::ZERO));
@@ -308,7 +295,7 @@ pub(crate) fn contain_centres(
         for &(v, _) in &push {
             moved[v as usize] = true;
         }
-        apply_pushes(control, &control_tris, &mut push);
+        apply_pushes(control, &tris, &mut push);
         reached.fill(false);
         for t in &control.triangles {
             if t.iter().any(|&v| moved[v as usize]) {
@@ -317,45 +304,19 @@ pub(crate) fn contain_centres(
                 }
             }
         }
-        // A push of more than r may reach centres nobody watched: subdivide whole and
-        // measure every centre again. Else move the surface by what Loop's masks make of
-        // the pushes (one step) and measure the watched centres.
-        full_round = largest > r || levels > 1;
+        // The one-step surface where the pushes reach; a push of more than r may reach
+        // centres nobody watched: measure every centre again.
+        full_round = largest > r;
         let clock = Instant::now();
+        loop_surface.update(control, &tris, &reached);
         if full_round {
-            drop(std::mem::take(&mut surface));
-            surface = subdivided(control, levels);
             control.compute_normals();
-            cells = CellIndex::new(&surface.positions, 2.0 * r);
-        } else if levels == 0 {
-            surface.positions.clone_from(&control.positions);
-        } else {
-            for &(v, d) in &push {
-                loop_push(&mut surface, control, &control_tris, &betas, &valence, v, d);
-            }
+            cells = CellIndex::new(&loop_surface.points, 2.0 * r);
         }
-        stats.subdivision_seconds += clock.elapsed().as_secs_f64();
-    }
-    if !full_round && levels > 0 {
-        // The output is exactly the subdivision of the moved control mesh, as a `.mseq`
-        // decoder makes it (the measuring structures freed first: this is the stage's
-        // peak of memory).
-        drop((
-            cells,
-            corner_tri,
-            control_tris,
-            valence,
-            betas,
-            watch,
-            reached,
-        ));
-        let clock = Instant::now();
-        drop(std::mem::take(&mut surface));
-        surface = subdivided(control, levels);
-        stats.subdivision_seconds += clock.elapsed().as_secs_f64();
+        stats.surface_seconds += clock.elapsed().as_secs_f64();
     }
     control.normals = Vec::new();
-    Ok((surface, stats))
+    Ok(stats)
 }
 
 /// Moves the control vertices by `push` (sorted by vertex), halving the pushes around
@@ -415,51 +376,6 @@ fn apply_pushes(control: &mut TriMesh, tris: &VertexTriangles, push: &mut [(u32,
 /// Least cosine between a control triangle's normal before and after a round's pushes.
 const MAX_TURN_COS: f64 = 0.25;
 
-/// `control` subdivided `levels` times (positions and triangles only).
-fn subdivided(control: &TriMesh, levels: u32) -> TriMesh {
-    let mut surface = TriMesh {
-        positions: control.positions.clone(),
-        triangles: control.triangles.clone(),
-        ..TriMesh::default()
-    };
-    subdivide(&mut surface, &SubdivideOptions { levels });
-    surface
-}
-
-/// Moves the one-step Loop subdivision `surface` of `control` as moving control vertex
-/// `v` by `d` moves it (Loop's masks are linear; interior masks, as on a closed mesh):
-/// the vertex point by `(1 − nβ) d`, its neighbours' vertex points by `β d`, the edge
-/// points of its edges by `3/8 d` and of the edges opposite it by `1/8 d`.
-fn loop_push(
-    surface: &mut TriMesh,
-    control: &TriMesh,
-    tris: &VertexTriangles,
-    betas: &[f64],
-    valence: &[u32],
-    v: u32,
-    d: DVec3,
-) {
-    let mut add = |w: u32, x: DVec3| {
-        let p = &mut surface.positions[w as usize];
-        *p = (p.as_dvec3() + x).as_vec3();
-    };
-    let beta = |w: u32| betas[valence[w as usize] as usize];
-    let n = valence[v as usize] as f64;
-    add(v, (1.0 - n * beta(v)) * d);
-    for &t in tris.of(v) {
-        let tri = control.triangles[t as usize];
-        let k = tri.iter().position(|&w| w == v).expect("v is a corner");
-        let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
-        // Each neighbour and each edge at v lies on two of v's triangles.
-        add(a, 0.5 * beta(a) * d);
-        add(b, 0.5 * beta(b) * d);
-        let m = surface.triangles[4 * t as usize + 3];
-        add(m[k], 0.1875 * d);
-        add(m[(k + 2) % 3], 0.1875 * d);
-        add(m[(k + 1) % 3], 0.125 * d);
-    }
-}
-
 /// Depth, beyond the required one and in multiples of r, under the tangent plane of the
 /// nearest vertex that counts as deep enough without measuring the triangles.
 const FAST_MARGIN: f64 = 0.15;
@@ -491,8 +407,8 @@ struct Shallow {
     /// How its nearest surface point has to move, world units.
     push: DVec3,
     outside: bool,
-    /// Surface triangle of its nearest point.
-    triangle: u32,
+    /// Control triangle under its nearest surface point.
+    control_triangle: u32,
 }
 
 /// A centre that a push could bring too close to the surface.
@@ -510,8 +426,8 @@ struct Probe {
     signed_distance: f64,
     /// Outward unit normal there.
     normal: DVec3,
-    /// Surface triangle of the nearest point.
-    triangle: u32,
+    /// Control triangle under it.
+    control_triangle: u32,
 }
 
 /// The nearest feature of a triangle to a point.
@@ -664,155 +580,272 @@ impl CellIndex {
     }
 }
 
-/// What a centre is measured against: the subdivided surface, found through its
-/// vertices; its triangles found through the control mesh they subdivide.
+/// The surface one Loop step makes of a control mesh, without its triangles: every
+/// control vertex's vertex point and every control triangle's three edge points (an edge
+/// point is computed for both triangles of its edge, the same way, so the two copies are
+/// equal bit for bit). Surface triangle `s` is child `s % 4` of control triangle `s / 4`.
+struct LoopSurface {
+    /// Vertex points (one per control vertex), then edge points (three per control
+    /// triangle, side `k` from corner `k` to `k + 1`).
+    points: Vec<Vec3>,
+    vertex_count: usize,
+    /// With Loop's masks, or the control mesh itself (vertex points in place, edge points
+    /// at the midpoints) when the surface is not subdivided.
+    smooth: bool,
+}
+
+impl LoopSurface {
+    fn new(control: &TriMesh, tris: &VertexTriangles, smooth: bool) -> Self {
+        let nv = control.positions.len();
+        let mut surface = LoopSurface {
+            points: vec![Vec3::ZERO; nv + 3 * control.triangles.len()],
+            vertex_count: nv,
+            smooth,
+        };
+        surface.update(control, tris, &vec![true; nv]);
+        surface
+    }
+
+    /// Recomputes the points that depend on the vertices marked in `changed` or on their
+    /// neighbours (every vertex point of a marked vertex, every edge point of a triangle
+    /// with a marked corner: the marks must cover the one-rings of the moved vertices).
+    fn update(&mut self, control: &TriMesh, tris: &VertexTriangles, changed: &[bool]) {
+        let nv = self.vertex_count;
+        let (vertex_points, edge_points) = self.points.split_at_mut(nv);
+        let smooth = self.smooth;
+        let betas = crate::subdivision::loop_betas(&[64]);
+        vertex_points
+            .par_iter_mut()
+            .enumerate()
+            .filter(|(v, _)| changed[*v])
+            .for_each(|(v, out)| {
+                *out = vertex_point(control, tris, v as u32, smooth, &betas);
+            });
+        edge_points
+            .par_chunks_mut(3)
+            .enumerate()
+            .filter(|(t, _)| control.triangles[*t].iter().any(|&v| changed[v as usize]))
+            .for_each(|(t, out)| {
+                for (k, e) in out.iter_mut().enumerate() {
+                    *e = edge_point(control, tris, t as u32, k, smooth);
+                }
+            });
+    }
+
+    /// Point index of control triangle `t`'s edge point on side `k`.
+    fn edge(&self, t: u32, k: usize) -> u32 {
+        (self.vertex_count + 3 * t as usize + k) as u32
+    }
+
+    /// Corner point indices of surface triangle `s`.
+    fn triangle(&self, control: &TriMesh, s: u32) -> [u32; 3] {
+        let t = s >> 2;
+        let tri = control.triangles[t as usize];
+        let m = [0, 1, 2].map(|k| self.edge(t, k));
+        crate::subdivision::children(tri, m)[(s & 3) as usize]
+    }
+}
+
+/// Loop's vertex point of control vertex `v` (interior mask; the vertex itself when not
+/// `smooth`, or when its fan is not a closed ring).
+fn vertex_point(
+    control: &TriMesh,
+    tris: &VertexTriangles,
+    v: u32,
+    smooth: bool,
+    betas: &[f64],
+) -> Vec3 {
+    let x = control.positions[v as usize];
+    let fan = tris.of(v);
+    if !smooth || fan.len() < 3 {
+        return x;
+    }
+    // In a closed fan every neighbour follows v in exactly one triangle.
+    let mut sum = DVec3::ZERO;
+    for &t in fan {
+        let tri = control.triangles[t as usize];
+        let k = tri.iter().position(|&w| w == v).expect("v is a corner");
+        sum += control.positions[tri[(k + 1) % 3] as usize].as_dvec3();
+    }
+    let n = fan.len();
+    let beta = if n < betas.len() {
+        betas[n]
+    } else {
+        crate::subdivision::loop_betas(&[n as u32])[n]
+    };
+    ((1.0 - n as f64 * beta) * x.as_dvec3() + beta * sum).as_vec3()
+}
+
+/// Loop's edge point on side `k` of control triangle `t`: `3/8 (a + b) + 1/8 (c + d)`
+/// with `d` the far corner of the triangle across the side (the midpoint when not
+/// `smooth` or when the side has not exactly one triangle across). Summed in vertex-index
+/// order, so both triangles of the edge compute the same bits.
+fn edge_point(control: &TriMesh, tris: &VertexTriangles, t: u32, k: usize, smooth: bool) -> Vec3 {
+    let tri = control.triangles[t as usize];
+    let (a, b, c) = (tri[k], tri[(k + 1) % 3], tri[(k + 2) % 3]);
+    let x = |v: u32| control.positions[v as usize].as_dvec3();
+    let pair = |u: u32, w: u32| if u < w { x(u) + x(w) } else { x(w) + x(u) };
+    let mut across = tris
+        .of(a)
+        .iter()
+        .filter(|&&u| u != t && control.triangles[u as usize].contains(&b));
+    let d = match (smooth, across.next(), across.next()) {
+        (true, Some(&u), None) => control.triangles[u as usize]
+            .into_iter()
+            .find(|&w| w != a && w != b),
+        _ => None,
+    };
+    match d {
+        Some(d) => (0.375 * pair(a, b) + 0.125 * pair(c, d)).as_vec3(),
+        None => (0.5 * pair(a, b)).as_vec3(),
+    }
+}
+
+/// What a centre is measured against: the one-step Loop surface, found through its
+/// points; its triangles through the control mesh they subdivide.
 struct SurfaceIndex<'a> {
     cells: &'a CellIndex,
-    surface: &'a TriMesh,
+    surface: &'a LoopSurface,
     control: &'a TriMesh,
     control_tris: &'a VertexTriangles,
-    /// One triangle of the surface at every surface vertex.
-    corner_tri: &'a [u32],
-    levels: u32,
-    /// Depth under the nearest vertex's tangent plane that is deep enough.
+    /// Depth under the nearest point's tangent plane that is deep enough.
     fast_depth: f64,
 }
 
 impl SurfaceIndex<'_> {
-    fn corners(&self, t: u32) -> [DVec3; 3] {
-        self.surface.triangles[t as usize].map(|v| self.surface.positions[v as usize].as_dvec3())
+    fn corners(&self, s: u32) -> [DVec3; 3] {
+        self.surface
+            .triangle(self.control, s)
+            .map(|i| self.surface.points[i as usize].as_dvec3())
     }
 
-    fn face_normal(&self, t: u32) -> DVec3 {
-        let [a, b, c] = self.corners(t);
+    fn face_normal(&self, s: u32) -> DVec3 {
+        let [a, b, c] = self.corners(s);
         (b - a).cross(c - a).normalize_or_zero()
     }
 
-    /// The nearest surface point of `p`, when a surface vertex lies within half a cell
-    /// of it; a centre deep under the tangent plane of its nearest vertex, close to
-    /// that vertex's normal line, is taken at that depth without measuring triangles.
-    fn probe(&self, p: DVec3) -> Option<Probe> {
-        let best = self
-            .cells
-            .nearest::<PROBE_VERTICES>(&self.surface.positions, p);
-        let (d2, v0) = best[0];
-        if v0 == u32::MAX {
-            return None;
+    /// A control triangle at surface point `i`.
+    fn parent(&self, i: u32) -> u32 {
+        let nv = self.surface.vertex_count as u32;
+        if i < nv {
+            self.control_tris.of(i)[0]
+        } else {
+            (i - nv) / 3
         }
-        if self.fast_depth == f64::INFINITY {
-            return self.measure(p, &best);
-        }
-        let n0 = self.vertex_normal(v0);
-        let along = (p - self.surface.positions[v0 as usize].as_dvec3()).dot(n0);
-        let lateral2 = d2 as f64 - along * along;
-        let r = self.cells.cell / 2.0;
-        // Under a surface curved to a radius of r/2 or more, the tangent plane of a
-        // vertex `l` aside overstates the depth by at most l²/r.
-        if along + lateral2.max(0.0) / (2.0 * r) < -self.fast_depth {
-            return Some(Probe {
-                signed_distance: along,
-                normal: n0,
-                triangle: self.corner_tri[v0 as usize],
-            });
-        }
-        self.measure(p, &best)
     }
 
-    /// The unit normal of the subdivided surface at its vertex `v`, from the control mesh
-    /// (one subdivision step or none): a control vertex's own, or the mean of the two
-    /// ends of the control edge that `v` splits.
-    fn vertex_normal(&self, v: u32) -> DVec3 {
+    /// The unit normal of the surface at point `i`, from the control mesh: a control
+    /// vertex's own, or the mean of the two ends of the side an edge point splits.
+    fn point_normal(&self, i: u32) -> DVec3 {
         let normals = &self.control.normals;
-        if (v as usize) < self.control.positions.len() {
-            return normals[v as usize].as_dvec3();
+        let nv = self.surface.vertex_count as u32;
+        if i < nv {
+            return normals[i as usize].as_dvec3();
         }
-        let parent = (self.corner_tri[v as usize] >> 2) as usize;
-        let tri = self.control.triangles[parent];
-        let m = self.surface.triangles[4 * parent + 3];
-        let k = m
-            .iter()
-            .position(|&w| w == v)
-            .expect("an edge point of its parent");
+        let (t, k) = ((i - nv) / 3, ((i - nv) % 3) as usize);
+        let tri = self.control.triangles[t as usize];
         (normals[tri[k] as usize] + normals[tri[(k + 1) % 3] as usize])
             .as_dvec3()
             .normalize_or_zero()
     }
 
+    /// The nearest surface point of `p`, when a surface point lies within half a cell of
+    /// it; a centre deep under the tangent plane of its nearest point, close to that
+    /// point's normal line, is taken at that depth without measuring triangles.
+    fn probe(&self, p: DVec3) -> Option<Probe> {
+        let best = self
+            .cells
+            .nearest::<PROBE_VERTICES>(&self.surface.points, p);
+        let (d2, i0) = best[0];
+        if i0 == u32::MAX {
+            return None;
+        }
+        if self.fast_depth < f64::INFINITY {
+            let n0 = self.point_normal(i0);
+            let along = (p - self.surface.points[i0 as usize].as_dvec3()).dot(n0);
+            let lateral2 = d2 as f64 - along * along;
+            let r = self.cells.cell / 2.0;
+            // Under a surface curved to a radius of r or more, the tangent plane of a
+            // point `l` aside overstates the depth by at most l²/2r.
+            if along + lateral2.max(0.0) / (2.0 * r) < -self.fast_depth {
+                return Some(Probe {
+                    signed_distance: along,
+                    normal: n0,
+                    control_triangle: self.parent(i0),
+                });
+            }
+        }
+        self.measure(p, self.parent(i0))
+    }
+
     /// The nearest surface point of `p` among the surface triangles over the control
-    /// triangles around the parent of `p`'s nearest vertex (`best`).
-    fn measure(&self, p: DVec3, best: &[(f32, u32)]) -> Option<Probe> {
-        // The control triangles over which the nearest vertices lie, and their
-        // neighbours: the surface triangles they become.
+    /// triangles around the corners of control triangle `parent`.
+    fn measure(&self, p: DVec3, parent: u32) -> Option<Probe> {
         let mut controls = [u32::MAX; 64];
         let mut count = 0;
-        for &(_, v) in best.iter().take(1) {
-            let parent = self.corner_tri[v as usize] >> (2 * self.levels);
-            for &c in self.control.triangles[parent as usize].iter() {
-                for &t in self.control_tris.of(c) {
-                    if count < controls.len() && !controls[..count].contains(&t) {
-                        controls[count] = t;
-                        count += 1;
-                    }
+        for &c in self.control.triangles[parent as usize].iter() {
+            for &t in self.control_tris.of(c) {
+                if count < controls.len() && !controls[..count].contains(&t) {
+                    controls[count] = t;
+                    count += 1;
                 }
             }
         }
-        let per = 1u32 << (2 * self.levels);
         let mut nearest = (f64::INFINITY, u32::MAX, DVec3::ZERO, Feature::Face);
         for &c in &controls[..count] {
-            let triangles = c * per..(c + 1) * per;
+            let children = 4 * c..4 * c + 4;
             // Skip a control triangle whose surface lies in a box farther than the best.
             let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
-            for t in triangles.clone() {
-                for q in self.corners(t) {
-                    lo = lo.min(q);
-                    hi = hi.max(q);
-                }
+            for i in self.control.triangles[c as usize]
+                .into_iter()
+                .chain([0, 1, 2].map(|k| self.surface.edge(c, k)))
+            {
+                let q = self.surface.points[i as usize].as_dvec3();
+                lo = lo.min(q);
+                hi = hi.max(q);
             }
             let gap = (lo - p).max(p - hi).max(DVec3::ZERO);
             if gap.length_squared() > nearest.0 {
                 continue;
             }
-            for t in triangles {
-                let (q, feature) = closest_on_triangle(p, self.corners(t));
+            for s in children {
+                let (q, feature) = closest_on_triangle(p, self.corners(s));
                 let d2 = (q - p).length_squared();
-                if (d2, t) < (nearest.0, nearest.1) {
-                    nearest = (d2, t, q, feature);
+                if (d2, s) < (nearest.0, nearest.1) {
+                    nearest = (d2, s, q, feature);
                 }
             }
         }
-        let (d2, t, q, feature) = nearest;
+        let (d2, s, q, feature) = nearest;
+        if s == u32::MAX {
+            return None;
+        }
         // The pseudo-normal of the nearest feature, from the measured triangles that
-        // share it (every one, when the feature lies inside the measured patch).
-        let tri = self.surface.triangles[t as usize];
-        let shares = |u: u32, verts: &[u32]| {
-            let ut = self.surface.triangles[u as usize];
-            verts.iter().all(|v| ut.contains(v))
+        // share it (by position: an edge point has one index per triangle of its edge).
+        let corners = self.corners(s);
+        let has = |u: u32, xs: &[DVec3]| {
+            let uc = self.corners(u);
+            xs.iter().all(|x| uc.contains(x))
         };
+        let measured = || controls[..count].iter().flat_map(|&c| 4 * c..4 * c + 4);
         let normal = match feature {
-            Feature::Face => self.face_normal(t),
+            Feature::Face => self.face_normal(s),
             Feature::Edge(k) => {
-                let edge = [tri[k], tri[(k + 1) % 3]];
-                let mut n = DVec3::ZERO;
-                for &c in &controls[..count] {
-                    for u in (c * per..(c + 1) * per).filter(|&u| shares(u, &edge)) {
-                        n += self.face_normal(u);
-                    }
-                }
-                n
+                let edge = [corners[k], corners[(k + 1) % 3]];
+                measured()
+                    .filter(|&u| has(u, &edge))
+                    .map(|u| self.face_normal(u))
+                    .sum::<DVec3>()
             }
             Feature::Vertex(k) => {
-                let v = tri[k];
+                let x = corners[k];
                 let mut n = DVec3::ZERO;
-                for &c in &controls[..count] {
-                    for u in (c * per..(c + 1) * per).filter(|&u| shares(u, &[v])) {
-                        let ut = self.surface.triangles[u as usize];
-                        let j = ut.iter().position(|&w| w == v).expect("shares v");
-                        let pc = self.corners(u);
-                        let angle =
-                            (pc[(j + 1) % 3] - pc[j]).angle_between(pc[(j + 2) % 3] - pc[j]);
-                        if angle.is_finite() {
-                            n += angle * self.face_normal(u);
-                        }
+                for u in measured().filter(|&u| has(u, &[x])) {
+                    let uc = self.corners(u);
+                    let j = uc.iter().position(|&w| w == x).expect("shares x");
+                    let angle = (uc[(j + 1) % 3] - x).angle_between(uc[(j + 2) % 3] - x);
+                    if angle.is_finite() {
+                        n += angle * self.face_normal(u);
                     }
                 }
                 n
@@ -820,7 +853,7 @@ impl SurfaceIndex<'_> {
         }
         .normalize_or_zero();
         let normal = if normal == DVec3::ZERO {
-            self.face_normal(t)
+            self.face_normal(s)
         } else {
             normal
         };
@@ -832,7 +865,7 @@ impl SurfaceIndex<'_> {
                 -distance
             },
             normal,
-            triangle: t,
+            control_triangle: s >> 2,
         })
     }
 }
@@ -920,32 +953,66 @@ mod tests {
         assert!(f == Feature::Vertex(2));
     }
 
-    /// Measures points against `mesh` taken as its own control mesh (cells of `2r`).
-    fn with_index<T>(mesh: &TriMesh, r: f64, f: impl FnOnce(&SurfaceIndex) -> T) -> T {
-        let surface = mesh.clone();
+    /// Measures points against `mesh` taken as its own control mesh, unsubdivided (cells
+    /// of `2r`).
+    fn with_index<T>(mesh: &TriMesh, r: f64, fast: bool, f: impl FnOnce(&SurfaceIndex) -> T) -> T {
         let mut control = mesh.clone();
         control.compute_normals();
         let tris = VertexTriangles::new(mesh);
-        let corner_tri: Vec<u32> = {
-            let mut c = vec![0; mesh.positions.len()];
-            for (t, tri) in mesh.triangles.iter().enumerate() {
-                for &v in tri {
-                    c[v as usize] = t as u32;
-                }
-            }
-            c
-        };
-        let cells = CellIndex::new(&surface.positions, 2.0 * r);
+        let surface = LoopSurface::new(mesh, &tris, false);
+        let cells = CellIndex::new(&surface.points, 2.0 * r);
         let index = SurfaceIndex {
             cells: &cells,
             surface: &surface,
             control: &control,
             control_tris: &tris,
-            corner_tri: &corner_tri,
-            levels: 0,
-            fast_depth: 0.25 * r + FAST_MARGIN * r,
+            fast_depth: if fast {
+                0.25 * r + FAST_MARGIN * r
+            } else {
+                f64::INFINITY
+            },
         };
         f(&index)
+    }
+
+    /// The one-step surface measured is Loop's subdivision: every triangle's corners as
+    /// `subdivide` makes them (to f32 rounding), after moving a few vertices too.
+    #[test]
+    fn loop_surface_is_the_subdivision() {
+        let mut control = icosphere(2, 1.0);
+        for (i, p) in control.positions.iter_mut().enumerate() {
+            *p *= 1.0 + 0.1 * ((i * 7 % 5) as f32 / 5.0);
+        }
+        let tris = VertexTriangles::new(&control);
+        let mut surface = LoopSurface::new(&control, &tris, true);
+        let check = |control: &TriMesh, surface: &LoopSurface| {
+            let mut expected = control.clone();
+            crate::subdivision::subdivide(
+                &mut expected,
+                &crate::subdivision::SubdivideOptions { levels: 1 },
+            );
+            for s in 0..expected.triangles.len() as u32 {
+                let want = expected.triangles[s as usize].map(|v| expected.positions[v as usize]);
+                let got = surface
+                    .triangle(control, s)
+                    .map(|i| surface.points[i as usize]);
+                for (w, g) in want.iter().zip(&got) {
+                    assert!((*w - *g).length() < 1e-6, "triangle {s}: {w} against {g}");
+                }
+            }
+        };
+        check(&control, &surface);
+        let mut changed = vec![false; control.positions.len()];
+        control.positions[3] += Vec3::splat(0.05);
+        for t in &control.triangles {
+            if t.contains(&3) {
+                for &v in t {
+                    changed[v as usize] = true;
+                }
+            }
+        }
+        surface.update(&control, &tris, &changed);
+        check(&control, &surface);
     }
 
     /// Signed distances to a fine sphere match the analytic ones, inside and outside,
@@ -953,7 +1020,7 @@ mod tests {
     #[test]
     fn probe_signs_and_distances_on_a_sphere() {
         let sphere = icosphere(4, 1.0);
-        with_index(&sphere, 0.2, |index| {
+        with_index(&sphere, 0.2, true, |index| {
             for (k, &radius) in [0.9, 0.95, 0.98, 1.02, 1.05, 1.1].iter().enumerate() {
                 for i in 0..50 {
                     let u = (i as f64 * 0.618034 + k as f64 * 0.1).fract() * 2.0 - 1.0;
@@ -990,10 +1057,15 @@ mod tests {
                 min_depth: 1.0,
                 max_rounds: 6,
             };
-            let (surface, stats) = contain(&mut control, levels, &centres, 0.3, &options);
+            let stats = contain(&mut control, levels, &centres, 0.3, &options);
+            let mut surface = control.clone();
+            crate::subdivision::subdivide(
+                &mut surface,
+                &crate::subdivision::SubdivideOptions { levels },
+            );
             assert_eq!(stats.remaining, 0, "levels {levels}: {stats:?}");
             assert!(stats.outside >= 1 && stats.too_shallow >= 2, "{stats:?}");
-            with_index(&surface, 0.3, |index| {
+            with_index(&surface, 0.3, false, |index| {
                 for p in &centres[..2] {
                     let probe = index.probe(p.as_dvec3()).unwrap();
                     assert!(

@@ -10,7 +10,7 @@
 //! 4. quadric decimation ([`crate::decimation`]), unless the tiles did it;
 //! 5. containment: every non-isolated particle centre pushed under the surface that
 //!    subdivision will make ([`crate::containment`]);
-//! 6. Loop subdivision ([`crate::subdivision`]): the surface containment measured;
+//! 6. Loop subdivision ([`crate::subdivision`]);
 //! 7. icospheres of radius `r` at the isolated particles ([`crate::isolated`]);
 //! 8. area-weighted vertex normals;
 //! 9. the particles' payload carried to the final vertices ([`crate::attributes`]).
@@ -220,6 +220,7 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
         &options.tiles,
         output_bytes_per_triangle(
             decimating.map(|d| d.target_reduction.unwrap_or(0.8)),
+            options.containment.is_some(),
             options.subdivide.levels,
         ),
         decimating.is_some(),
@@ -340,13 +341,12 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
     }
 
     cancel.check()?;
-    // 5. Containment, on the surface as subdivision will make it; 6. subdivision.
+    // 5. Containment, on the surface as subdivision will make it.
     let levels = options.subdivide.levels;
-    let mut subdivided = None;
     if let (Some(containment), Some(store)) = (&options.containment, &store) {
         progress("containment");
         let clock = Instant::now();
-        let (surface, contained) = contain_centres(
+        let contained = contain_centres(
             &mut fluid,
             levels + options.deferred_subdivision,
             store,
@@ -355,23 +355,25 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
             containment,
             cancel,
         )?;
-        let seconds = clock.elapsed().as_secs_f64() - contained.subdivision_seconds;
-        stats.push_stage("containment", seconds, fluid.triangle_count());
-        if levels > 0 && options.deferred_subdivision == 0 {
-            subdivided = Some((surface, contained.subdivision_seconds));
-        }
+        stats.push_stage(
+            "containment",
+            clock.elapsed().as_secs_f64(),
+            fluid.triangle_count(),
+        );
         stats.containment = Some(contained);
     }
+
     cancel.check()?;
+    // 6. Subdivision.
     progress("subdivision");
     if levels > 0 {
-        let (surface, seconds) = subdivided.unwrap_or_else(|| {
-            let clock = Instant::now();
-            subdivide(&mut fluid, &options.subdivide);
-            (std::mem::take(&mut fluid), clock.elapsed().as_secs_f64())
-        });
-        fluid = surface;
-        stats.push_stage("subdivision", seconds, fluid.triangle_count());
+        let clock = Instant::now();
+        subdivide(&mut fluid, &options.subdivide);
+        stats.push_stage(
+            "subdivision",
+            clock.elapsed().as_secs_f64(),
+            fluid.triangle_count(),
+        );
     }
 
     cancel.check()?;

@@ -43,6 +43,13 @@ pub(crate) const MC_TRIANGLES_PER_SURFACE_BLOCK: f64 = 140.0;
 /// before writing the triangles (2026-11-24) that run peaks at 1762 MiB: the estimate is
 /// now 8 % high, kept as margin.
 pub(crate) const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 110.0;
+/// Peak working set of the containment stage, bytes per decimated (control) triangle,
+/// everything after the tiles included: the control mesh, its vertex → triangle lists,
+/// the one-step Loop surface's points and their cell hash, the centres watched. Measured
+/// on the 32M scene under a 2 GiB budget: 2685 MiB at the stage (17.2 M control
+/// triangles), 154 bytes per triangle over the process and the tiles' leftovers; 160
+/// kept as margin (the 4M scene at 512 MiB: 391 MiB measured).
+pub(crate) const CONTAINMENT_BYTES_PER_INPUT_TRIANGLE: f64 = 160.0;
 /// Memory of the process before any particle (code, thread stacks, allocator), bytes.
 pub(crate) const BASE_BYTES: u64 = 64 << 20;
 /// What the tiles leave in memory under the post-processing, beyond the surface (mostly
@@ -113,8 +120,13 @@ impl SceneShape {
 
 /// Memory the surface needs after the tiles (the post-processing's peak), bytes per
 /// marching-cubes triangle, for decimation removing `reduction` of the triangles (`None`:
-/// no decimation; an error-bounded run counts as 0.8) and `subdivide_levels` Loop steps.
-pub(crate) fn output_bytes_per_triangle(reduction: Option<f32>, subdivide_levels: u32) -> f64 {
+/// no decimation; an error-bounded run counts as 0.8), the containment stage when
+/// `containment`, and `subdivide_levels` Loop steps.
+pub(crate) fn output_bytes_per_triangle(
+    reduction: Option<f32>,
+    containment: bool,
+    subdivide_levels: u32,
+) -> f64 {
     let mut triangles = 1.0;
     // Without decimation the block surfaces (≈ 20 B per triangle) and the stitched mesh
     // (≈ 18 B) exist together.
@@ -125,6 +137,9 @@ pub(crate) fn output_bytes_per_triangle(reduction: Option<f32>, subdivide_levels
             triangles * MESH_BYTES_PER_TRIANGLE
         }
     };
+    if containment {
+        peak = peak.max(triangles * CONTAINMENT_BYTES_PER_INPUT_TRIANGLE);
+    }
     for _ in 0..subdivide_levels {
         peak = peak.max(triangles * SUBDIVISION_BYTES_PER_INPUT_TRIANGLE);
         triangles *= 4.0;
@@ -206,7 +221,7 @@ pub(super) fn choose_tile_blocks(
             return Err(Error::MemoryBudget {
                 budget_mib: mib(budget),
                 message: format!(
-                    "the process and the surface of {particles} particles (≈ {:.1} M triangles before decimation) need ≈ {} MiB after the tiles (decimation and subdivision): a larger budget or fewer subdivision steps would fit",
+                    "the process and the surface of {particles} particles (≈ {:.1} M triangles before decimation) need ≈ {} MiB after the tiles (decimation, containment and subdivision): a larger budget, fewer subdivision steps or containment off (keep_inside) would fit",
                     triangles / 1e6,
                     mib(output)
                 ),
@@ -359,7 +374,7 @@ mod tests {
         // body runs untiled in.
         let body = lattice(24, 1, 64);
         let spray = lattice(24, 3, 64);
-        let output = output_bytes_per_triangle(Some(0.8), 0);
+        let output = output_bytes_per_triangle(Some(0.8), false, 0);
         let plan = |counts: &HashMap<BlockKey, u64>, budget: Option<u64>| {
             let options = TileOptions {
                 memory_budget_bytes: budget,
