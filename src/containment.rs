@@ -51,7 +51,7 @@
 
 use crate::cancel::CancelToken;
 use crate::error::Result;
-use crate::mesh::TriMesh;
+use crate::mesh::{TriMesh, VertexTriangles};
 use glam::{DVec3, Vec3};
 use hashbrown::{HashMap, HashSet};
 use rayon::prelude::*;
@@ -437,40 +437,6 @@ enum Feature {
     /// Corners `k` and `k + 1`.
     Edge(usize),
     Vertex(usize),
-}
-
-/// Each vertex's triangles (a compressed list).
-struct VertexTriangles {
-    start: Vec<u32>,
-    triangles: Vec<u32>,
-}
-
-impl VertexTriangles {
-    fn new(mesh: &TriMesh) -> Self {
-        let nv = mesh.positions.len();
-        let mut start = vec![0u32; nv + 1];
-        for t in &mesh.triangles {
-            for &v in t {
-                start[v as usize + 1] += 1;
-            }
-        }
-        for i in 0..nv {
-            start[i + 1] += start[i];
-        }
-        let mut fill = start.clone();
-        let mut triangles = vec![0u32; start[nv] as usize];
-        for (t, tri) in mesh.triangles.iter().enumerate() {
-            for &v in tri {
-                triangles[fill[v as usize] as usize] = t as u32;
-                fill[v as usize] += 1;
-            }
-        }
-        VertexTriangles { start, triangles }
-    }
-
-    fn of(&self, v: u32) -> &[u32] {
-        &self.triangles[self.start[v as usize] as usize..self.start[v as usize + 1] as usize]
-    }
 }
 
 /// Points hashed by cell: blocks of [`BLOCK`]³ cells, each with the start of every

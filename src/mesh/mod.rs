@@ -22,6 +22,43 @@ use rayon::prelude::*;
 /// triangle).
 const NORMALS_MIN_CHUNK: usize = 1 << 14;
 
+/// Each vertex's triangles, in increasing order (a compressed list: offsets per vertex
+/// into one array).
+pub(crate) struct VertexTriangles {
+    start: Vec<u32>,
+    triangles: Vec<u32>,
+}
+
+impl VertexTriangles {
+    /// The lists of `mesh`'s vertices.
+    pub(crate) fn new(mesh: &TriMesh) -> Self {
+        let nv = mesh.positions.len();
+        let mut start = vec![0u32; nv + 1];
+        for t in &mesh.triangles {
+            for &v in t {
+                start[v as usize + 1] += 1;
+            }
+        }
+        for i in 0..nv {
+            start[i + 1] += start[i];
+        }
+        let mut fill = start.clone();
+        let mut triangles = vec![0u32; start[nv] as usize];
+        for (t, tri) in mesh.triangles.iter().enumerate() {
+            for &v in tri {
+                triangles[fill[v as usize] as usize] = t as u32;
+                fill[v as usize] += 1;
+            }
+        }
+        VertexTriangles { start, triangles }
+    }
+
+    /// The triangles at vertex `v`.
+    pub(crate) fn of(&self, v: u32) -> &[u32] {
+        &self.triangles[self.start[v as usize] as usize..self.start[v as usize + 1] as usize]
+    }
+}
+
 /// An indexed triangle mesh. Positions are world units.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TriMesh {

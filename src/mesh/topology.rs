@@ -77,26 +77,10 @@ pub fn validate(mesh: &TriMesh) -> TopologyReport {
 
     // Vertex fans: union triangles around each vertex that share an edge through it; a
     // manifold vertex has exactly one group.
-    let mut corner_start = vec![0u32; n + 1];
-    for t in &mesh.triangles {
-        for &v in t {
-            corner_start[v as usize + 1] += 1;
-        }
-    }
-    for i in 0..n {
-        corner_start[i + 1] += corner_start[i];
-    }
-    let mut fill = corner_start.clone();
-    let mut corners = vec![0u32; mesh.triangles.len() * 3];
-    for (ti, t) in mesh.triangles.iter().enumerate() {
-        for &v in t {
-            corners[fill[v as usize] as usize] = ti as u32;
-            fill[v as usize] += 1;
-        }
-    }
+    let fans = super::VertexTriangles::new(mesh);
     let mut parent: Vec<u32> = Vec::new();
     for v in 0..n {
-        let tris = &corners[corner_start[v] as usize..corner_start[v + 1] as usize];
+        let tris = fans.of(v as u32);
         if tris.len() < 2 {
             continue;
         }
