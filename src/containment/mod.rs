@@ -1,0 +1,466 @@
+//! Containment: every non-isolated particle centre at least a given depth under the
+//! surface, whatever decimation and Loop subdivision did to it.
+//!
+//! **Why.** The raw marching-cubes surface of the field (with its particle-coverage
+//! balls) leaves no centre outside. Decimation and Loop both move the surface inwards
+//! where it is strongly curved: decimation collapses thin sheets, filament tips and
+//! coverage balls past their centres, and Loop pulls the coarse convex parts of the
+//! decimated mesh further in (a vertex of valence 6 moves 3/8 of the way to the mean of
+//! its neighbours). On a violent splash a few centres per hundred thousand end up outside
+//! or just under the surface; on calm frames none do.
+//!
+//! **What.** After decimation and before subdivision, the surface *as one Loop step
+//! will make it* (whether the pipeline subdivides or the `.mseq` decoder does) is
+//! measured against every non-isolated centre near it. A centre less than
+//! [`ContainmentOptions::min_depth`] under it (or outside it) pushes the control triangle
+//! under its nearest surface point outwards along the surface normal there, by what is
+//! missing (1.4 times that when Loop will average the push out over the neighbours).
+//! Pushes are combined per control vertex by taking the largest, and halved around any
+//! control triangle they would turn by more than about 75°, so they never fold the
+//! surface. The one-step surface is recomputed where the pushes reach and the watched
+//! centres (those within r of being too shallow) near them are measured again, for at
+//! most [`ContainmentOptions::max_rounds`] rounds; a push of more than r measures every
+//! centre again. Only control vertices move: the topology does not change, so a closed
+//! 2-manifold stays one, and subdivision then runs on the moved control mesh as always.
+//! With two or more steps the surface is measured after the first (the later ones move
+//! it far less: the edges halve each step).
+//!
+//! **Measure.** The one-step surface is never built as a mesh: its points (Loop's vertex
+//! point of every control vertex, the edge points of every control triangle's sides) are
+//! computed from the control mesh, and its triangles are the four children of each
+//! control triangle, so the stage holds about half of what the subdivided mesh would take
+//! and stays under the subdivision's peak of memory. A centre's nearest points are looked
+//! up in a cell hash of them (cells of `2r`, the 2 × 2 × 2 cells nearest the centre: every
+//! point within r of it); a centre with none there is deep inside or isolated. A centre
+//! deep under the tangent plane of its nearest point (normal from the control mesh),
+//! deeper than the depth plus `0.15 r` plus `l²/2r` for a point `l` aside (what a surface
+//! curved to a radius of r or more can lose against its tangent plane), is taken at that
+//! depth. Otherwise its nearest point is measured exactly on the children of the control
+//! triangles around the control triangle of its nearest point, and its side is that of
+//! the angle-weighted pseudo-normal of the nearest feature (face, edge or vertex;
+//! Bærentzen and Aanæs 2005).
+//!
+//! **Order.** Every centre is measured on its own and the pushes are combined per vertex
+//! by taking the largest (ties: the lowest particle index), so the result depends neither
+//! on the thread count nor on the order in which the particles are visited (tiles, spill
+//! cells).
+//!
+//! **Cost**: on the first round one cell look-up per particle, and about a microsecond
+//! for each of the quarter of them near the surface; figures in
+//! `docs/performance-log.md`.
+
+mod measure;
+mod surface;
+
+use crate::cancel::CancelToken;
+use crate::error::Result;
+use crate::mesh::{TriMesh, VertexTriangles};
+use glam::{DVec3, Vec3};
+use hashbrown::{HashMap, HashSet};
+use measure::{CellIndex, SurfaceIndex};
+use rayon::prelude::*;
+use std::time::Instant;
+use surface::LoopSurface;
+
+/// Options of [`contain`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ContainmentOptions {
+    /// Least depth of a particle centre under the output surface, multiples of the particle
+    /// radius r. Default 0.25.
+    pub min_depth: f32,
+    /// Rounds of measuring and pushing at most. Default 4.
+    pub max_rounds: u32,
+}
+
+impl Default for ContainmentOptions {
+    fn default() -> Self {
+        ContainmentOptions {
+            min_depth: 0.25,
+            max_rounds: 4,
+        }
+    }
+}
+
+/// What [`contain`] did.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct ContainmentStats {
+    /// Centres with a surface vertex within r or so (see the module docs), measured in
+    /// the first round.
+    pub near_centres: usize,
+    /// Centres less than the depth under the surface in the first round (outside included).
+    pub too_shallow: usize,
+    /// Of those, centres outside the surface.
+    pub outside: usize,
+    /// Control vertices moved, summed over the rounds.
+    pub moved_vertices: usize,
+    /// Rounds of measuring (1 when nothing had to move).
+    pub rounds: u32,
+    /// Centres still less than the depth under the surface after the last round.
+    pub remaining: usize,
+    /// Seconds spent computing the one-step surface it measures (points and cells).
+    pub surface_seconds: f64,
+}
+
+/// What [`Centres::visit`] calls on each chunk: positions and their particle indices.
+pub(crate) type VisitChunk<'a> = dyn FnMut(&[Vec3], &[u32]) -> Result<()> + 'a;
+
+/// Where the centres come from: visited in chunks of positions with their particle
+/// indices (any order, any chunking).
+pub(crate) trait Centres {
+    /// Calls `visit` on every chunk of centres.
+    fn visit(&self, visit: &mut VisitChunk<'_>) -> Result<()>;
+}
+
+impl Centres for [Vec3] {
+    fn visit(&self, visit: &mut VisitChunk<'_>) -> Result<()> {
+        let indices: Vec<u32> = (0..self.len() as u32).collect();
+        visit(self, &indices)
+    }
+}
+
+impl<S: crate::io::particles::ParticleSource> Centres for crate::tiles::ParticleStore<S> {
+    fn visit(&self, visit: &mut VisitChunk<'_>) -> Result<()> {
+        self.for_each_stored(&mut |positions, indices, _| visit(positions, indices))
+    }
+}
+
+/// Moves the vertices of `control` (a closed surface, world units) so that every centre
+/// of `centres` that lies near it ends at least `options.min_depth · particle_radius`
+/// under the surface `control` becomes after `levels` Loop subdivision steps (measured
+/// after one step; see the module docs); returns what was done.
+pub fn contain(
+    control: &mut TriMesh,
+    levels: u32,
+    centres: &[Vec3],
+    particle_radius: f32,
+    options: &ContainmentOptions,
+) -> ContainmentStats {
+    contain_centres(
+        control,
+        levels,
+        centres,
+        &[],
+        particle_radius,
+        options,
+        &CancelToken::new(),
+    )
+    .expect("centres in memory cannot fail")
+}
+
+/// [`contain`] over any [`Centres`], skipping the centres at the positions of
+/// `isolated` (the particles that have spheres of their own).
+pub(crate) fn contain_centres(
+    control: &mut TriMesh,
+    levels: u32,
+    centres: &(impl Centres + ?Sized),
+    isolated: &[Vec3],
+    particle_radius: f32,
+    options: &ContainmentOptions,
+    cancel: &CancelToken,
+) -> Result<ContainmentStats> {
+    let mut stats = ContainmentStats::default();
+    let r = particle_radius as f64;
+    let depth = options.min_depth.max(0.0) as f64 * r;
+    // Pushes aim a little deeper than required, so that rounding cannot leave a centre
+    // a hair short of the depth for another round.
+    let aim = depth + AIM_BEYOND * r;
+    let isolated: HashSet<[u32; 3]> = isolated.iter().map(|p| bits(*p)).collect();
+    // Loop averages a push of a control triangle over its neighbours: the surface over
+    // the triangle moves by 3/4 to 7/8 of it for one step; push more so that one round
+    // usually suffices.
+    let gain = if levels == 0 { 1.0 } else { 1.4 };
+    if control.triangles.is_empty() {
+        stats.rounds = 1;
+        return Ok(stats);
+    }
+    let clock = Instant::now();
+    let tris = VertexTriangles::new(control);
+    let mut loop_surface = LoopSurface::new(control, &tris, levels > 0);
+    // The tangent-plane shortcut reads the control mesh's normals.
+    control.compute_normals();
+    let mut cells = CellIndex::new(&loop_surface.points, 2.0 * r);
+    stats.surface_seconds += clock.elapsed().as_secs_f64();
+    // Centres within r of being too shallow in the last full round.
+    let mut watch: Vec<Watched> = Vec::new();
+    // Control vertices whose one-ring holds a moved vertex (Loop's masks reach that far).
+    let mut reached = vec![false; control.positions.len()];
+    let mut full_round = true;
+    loop {
+        stats.rounds += 1;
+        let index = SurfaceIndex {
+            cells: &cells,
+            surface: &loop_surface,
+            control,
+            control_tris: &tris,
+            // The tangent-plane shortcut needs normals, which are the control mesh's
+            // only as it was when last measured whole.
+            fast_depth: if full_round {
+                depth + FAST_MARGIN * r
+            } else {
+                f64::INFINITY
+            },
+        };
+        let probe_all = |ps: &[Vec3], is: &[u32]| -> (usize, Vec<Shallow>, Vec<Watched>) {
+            let mut near = 0;
+            let (mut shallow, mut watch) = (Vec::new(), Vec::new());
+            for (&p, &i) in ps.iter().zip(is) {
+                let Some(probe) = index.probe(p.as_dvec3()) else {
+                    continue;
+                };
+                if !isolated.is_empty() && isolated.contains(&bits(p)) {
+                    continue;
+                }
+                near += 1;
+                if probe.signed_distance > -(depth + r) {
+                    watch.push(Watched {
+                        particle: i,
+                        position: p,
+                        parent: probe.control_triangle,
+                    });
+                }
+                if probe.signed_distance > -depth + TOLERANCE * r {
+                    shallow.push(Shallow {
+                        particle: i,
+                        push: probe.normal * (probe.signed_distance + aim),
+                        outside: probe.signed_distance > 0.0,
+                        control_triangle: probe.control_triangle,
+                    });
+                }
+            }
+            (near, shallow, watch)
+        };
+        let mut near = 0usize;
+        let mut shallow: Vec<Shallow> = Vec::new();
+        let mut gather = |ps: &[Vec3], is: &[u32], watched: &mut Vec<Watched>| {
+            let found: Vec<_> = ps
+                .par_chunks(PROBE_CHUNK)
+                .zip(is.par_chunks(PROBE_CHUNK))
+                .map(|(ps, is)| probe_all(ps, is))
+                .collect();
+            for (n, s, w) in found {
+                near += n;
+                shallow.extend(s);
+                watched.extend(w);
+            }
+        };
+        if full_round {
+            // Every centre; those that a push could bring too close are watched after.
+            watch.clear();
+            centres.visit(&mut |positions, indices| {
+                cancel.check()?;
+                gather(positions, indices, &mut watch);
+                Ok(())
+            })?;
+        } else {
+            // Pushes of less than r: only the watched centres whose nearest surface lay
+            // over a control triangle the pushes reached can be too close now.
+            cancel.check()?;
+            let (is, ps): (Vec<u32>, Vec<Vec3>) = watch
+                .iter()
+                .filter(|w| {
+                    control.triangles[w.parent as usize]
+                        .iter()
+                        .any(|&v| reached[v as usize])
+                })
+                .map(|w| (w.particle, w.position))
+                .unzip();
+            gather(&ps, &is, &mut Vec::new());
+        }
+        if stats.rounds == 1 {
+            stats.near_centres = near;
+            stats.too_shallow = shallow.len();
+            stats.outside = shallow.iter().filter(|s| s.outside).count();
+        }
+        if shallow.is_empty() || stats.rounds > options.max_rounds {
+            stats.remaining = shallow.len();
+            break;
+        }
+        // The largest push per control vertex (ties: the lowest particle index).
+        shallow.sort_unstable_by_key(|s| s.particle);
+        let mut push: HashMap<u32, (f64, u32, DVec3)> = HashMap::new();
+        let mut largest = 0.0f64;
+        for s in &shallow {
+            let d = s.push * gain;
+            let amount = d.length();
+            largest = largest.max(amount);
+            for v in control.triangles[s.control_triangle as usize] {
+                let e = push
+                    .entry(v)
+                    .or_insert((f64::NEG_INFINITY, u32::MAX, DVec3::ZERO));
+                if amount > e.0 {
+                    *e = (amount, s.particle, d);
+                }
+            }
+        }
+        let mut push: Vec<(u32, DVec3)> = push.into_iter().map(|(v, (_, _, d))| (v, d)).collect();
+        push.sort_unstable_by_key(|&(v, _)| v);
+        stats.moved_vertices += push.len();
+        apply_pushes(control, &tris, &mut push);
+        reached.fill(false);
+        for &(v, _) in &push {
+            for &t in tris.of(v) {
+                for w in control.triangles[t as usize] {
+                    reached[w as usize] = true;
+                }
+            }
+        }
+        // The one-step surface where the pushes reach; a push of more than r may reach
+        // centres nobody watched: measure every centre again.
+        full_round = largest > r;
+        let clock = Instant::now();
+        loop_surface.update(control, &tris, &reached);
+        if full_round {
+            control.compute_normals();
+            cells = CellIndex::new(&loop_surface.points, 2.0 * r);
+        }
+        stats.surface_seconds += clock.elapsed().as_secs_f64();
+    }
+    control.normals = Vec::new();
+    Ok(stats)
+}
+
+/// Moves the control vertices by `push` (sorted by vertex), halving the pushes around
+/// any triangle they would turn by more than [`MAX_TURN_COS`] (up to three times, then
+/// leaving those vertices where they were), so that pushes never fold the surface; the
+/// pushes that were made are left in `push`.
+fn apply_pushes(control: &mut TriMesh, tris: &VertexTriangles, push: &mut [(u32, DVec3)]) {
+    let before: Vec<Vec3> = push
+        .iter()
+        .map(|&(v, _)| control.positions[v as usize])
+        .collect();
+    let normal = |positions: &[Vec3], t: u32| {
+        let [a, b, c] = control.triangles[t as usize].map(|v| positions[v as usize].as_dvec3());
+        (b - a).cross(c - a).normalize_or_zero()
+    };
+    // Every triangle around a pushed vertex, once, with its normal before.
+    let mut around: Vec<u32> = push
+        .iter()
+        .flat_map(|&(v, _)| tris.of(v).iter().copied())
+        .collect();
+    around.sort_unstable();
+    around.dedup();
+    let old: Vec<DVec3> = around
+        .iter()
+        .map(|&t| normal(&control.positions, t))
+        .collect();
+    for attempt in 0..=3 {
+        for (k, &(v, d)) in push.iter().enumerate() {
+            control.positions[v as usize] = (before[k].as_dvec3() + d).as_vec3();
+        }
+        let folded: Vec<u32> = around
+            .iter()
+            .zip(&old)
+            .filter(|&(&t, n)| normal(&control.positions, t).dot(*n) < MAX_TURN_COS)
+            .map(|(&t, _)| t)
+            .collect();
+        if folded.is_empty() {
+            return;
+        }
+        for t in folded {
+            for v in control.triangles[t as usize] {
+                if let Ok(k) = push.binary_search_by_key(&v, |&(w, _)| w) {
+                    push[k].1 = if attempt == 3 {
+                        DVec3::ZERO
+                    } else {
+                        push[k].1 * 0.5
+                    };
+                }
+            }
+        }
+    }
+    for (k, &(v, d)) in push.iter().enumerate() {
+        control.positions[v as usize] = (before[k].as_dvec3() + d).as_vec3();
+    }
+}
+
+/// Least cosine between a control triangle's normal before and after a round's pushes.
+const MAX_TURN_COS: f64 = 0.25;
+
+/// Depth, beyond the required one and in multiples of r, under the tangent plane of the
+/// nearest vertex that counts as deep enough without measuring the triangles.
+pub(super) const FAST_MARGIN: f64 = 0.15;
+
+/// How much deeper than required a push aims, multiples of r.
+const AIM_BEYOND: f64 = 0.02;
+/// How much shallower than required a centre may be before it is pushed, multiples of r
+/// (float rounding of the pushed positions).
+const TOLERANCE: f64 = 1e-3;
+
+/// Centres per parallel task.
+const PROBE_CHUNK: usize = 4096;
+
+/// The exact bits of a position (isolated centres are matched by position).
+fn bits(p: Vec3) -> [u32; 3] {
+    p.to_array().map(f32::to_bits)
+}
+
+/// A centre found too close to the surface.
+struct Shallow {
+    particle: u32,
+    /// How its nearest surface point has to move, world units.
+    push: DVec3,
+    outside: bool,
+    /// Control triangle under its nearest surface point.
+    control_triangle: u32,
+}
+
+/// A centre that a push could bring too close to the surface.
+#[derive(Clone, Copy)]
+struct Watched {
+    particle: u32,
+    position: Vec3,
+    /// Control triangle over which its nearest surface point lay.
+    parent: u32,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::measure::with_index;
+    use super::*;
+    use crate::isolated::icosphere;
+
+    /// A centre outside a coarse closed surface ends inside at the depth, after pushes that
+    /// move only the triangles over it; centres already deep enough move nothing.
+    #[test]
+    fn pushes_shallow_centres_under_the_surface() {
+        for levels in [0, 1] {
+            let mut control = icosphere(1, 1.0);
+            let before = control.clone();
+            let centres = [
+                DVec3::new(0.0, 1.05, 0.0).as_vec3(), // outside
+                DVec3::new(0.7, 0.0, 0.0).as_vec3(),  // shallow
+                DVec3::new(0.0, 0.0, 0.0).as_vec3(),  // deep
+            ];
+            let options = ContainmentOptions {
+                min_depth: 1.0,
+                max_rounds: 6,
+            };
+            let stats = contain(&mut control, levels, &centres, 0.3, &options);
+            let mut surface = control.clone();
+            crate::subdivision::subdivide(
+                &mut surface,
+                &crate::subdivision::SubdivideOptions { levels },
+            );
+            assert_eq!(stats.remaining, 0, "levels {levels}: {stats:?}");
+            assert!(stats.outside >= 1 && stats.too_shallow >= 2, "{stats:?}");
+            with_index(&surface, 0.3, false, |index| {
+                for p in &centres[..2] {
+                    let probe = index.probe(p.as_dvec3()).unwrap();
+                    assert!(
+                        probe.signed_distance <= -0.3 + 1e-6,
+                        "{}",
+                        probe.signed_distance
+                    );
+                }
+            });
+            let moved = before
+                .positions
+                .iter()
+                .zip(&control.positions)
+                .filter(|(a, b)| a != b)
+                .count();
+            assert!(moved > 0 && moved < before.positions.len() / 2, "{moved}");
+            assert!(crate::mesh::validate(&surface).is_closed_manifold());
+        }
+    }
+}
