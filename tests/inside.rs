@@ -137,3 +137,27 @@ fn a_deeper_setting_moves_more_and_threads_do_not_matter() {
     assert_eq!(b.remaining, 0);
     assert_eq!(one.fluid, two.fluid, "the thread count changed the surface");
 }
+
+/// Measuring the surface in slabs (a few thousand control triangles each, so that a
+/// splash takes a dozen or more) gives the surface of measuring it whole, bit for bit,
+/// also through later rounds, tiled or not.
+#[test]
+fn slabs_do_not_change_the_surface() {
+    let (positions, r) = splash_of("datasets/dambreak_small/ParticleData_Fluid_1.xyz", 0.012);
+    for tile_size in [None, Some(24)] {
+        let whole = options(r, Kernel::Anisotropic, tile_size);
+        let mut sliced = whole.clone();
+        sliced.containment.as_mut().unwrap().chunk_triangles = 1500;
+        let (a, sa) = reconstruct(&positions, &whole).unwrap();
+        let (b, sb) = reconstruct(&positions, &sliced).unwrap();
+        let (sa, sb) = (sa.containment.unwrap(), sb.containment.unwrap());
+        assert_eq!(sa.slabs, 1, "{sa:?}");
+        assert!(sb.slabs >= 10, "{sb:?}");
+        assert!(sa.rounds >= 2 && sa.moved_vertices > 0, "{sa:?}");
+        assert_eq!((sa.too_shallow, sa.rounds), (sb.too_shallow, sb.rounds));
+        assert_eq!(
+            a.fluid, b.fluid,
+            "tiles {tile_size:?}: slabs changed the surface"
+        );
+    }
+}

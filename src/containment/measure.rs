@@ -3,7 +3,9 @@
 //! control triangles around it, and the side by pseudo-normal (see the module docs of
 //! [`super`]).
 
-use super::surface::LoopSurface;
+#[cfg(test)]
+use super::surface::Slots;
+use super::surface::{LoopSurface, Owner};
 use crate::mesh::{TriMesh, VertexTriangles};
 use glam::{DVec3, Vec3};
 use hashbrown::HashMap;
@@ -166,11 +168,9 @@ impl SurfaceIndex<'_> {
 
     /// A control triangle at surface point `i`.
     fn parent(&self, i: u32) -> u32 {
-        let nv = self.surface.vertex_count as u32;
-        if i < nv {
-            self.control_tris.of(i)[0]
-        } else {
-            (i - nv) / 3
+        match self.surface.owner(i) {
+            Owner::Vertex(v) => self.control_tris.of(v)[0],
+            Owner::Edge(t, _) => t,
         }
     }
 
@@ -178,15 +178,15 @@ impl SurfaceIndex<'_> {
     /// vertex's own, or the mean of the two ends of the side an edge point splits.
     fn point_normal(&self, i: u32) -> DVec3 {
         let normals = &self.control.normals;
-        let nv = self.surface.vertex_count as u32;
-        if i < nv {
-            return normals[i as usize].as_dvec3();
+        match self.surface.owner(i) {
+            Owner::Vertex(v) => normals[v as usize].as_dvec3(),
+            Owner::Edge(t, k) => {
+                let tri = self.control.triangles[t as usize];
+                (normals[tri[k] as usize] + normals[tri[(k + 1) % 3] as usize])
+                    .as_dvec3()
+                    .normalize_or_zero()
+            }
         }
-        let (t, k) = ((i - nv) / 3, ((i - nv) % 3) as usize);
-        let tri = self.control.triangles[t as usize];
-        (normals[tri[k] as usize] + normals[tri[(k + 1) % 3] as usize])
-            .as_dvec3()
-            .normalize_or_zero()
     }
 
     /// The nearest surface point of `p`, when a surface point lies within half a cell of
@@ -237,6 +237,7 @@ impl SurfaceIndex<'_> {
             // Skip a control triangle whose surface lies in a box farther than the best.
             let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
             for i in self.control.triangles[c as usize]
+                .map(|v| self.surface.vertex(v))
                 .into_iter()
                 .chain([0, 1, 2].map(|k| self.surface.edge(c, k)))
             {
@@ -381,7 +382,8 @@ pub(super) fn with_index<T>(
     let mut control = mesh.clone();
     control.compute_normals();
     let tris = VertexTriangles::new(mesh);
-    let surface = LoopSurface::new(mesh, &tris, false);
+    let all = (0..mesh.triangles.len() as u32).collect();
+    let surface = LoopSurface::new(mesh, &tris, all, false, Slots::new(mesh));
     let cells = CellIndex::new(&surface.points, 2.0 * r);
     let index = SurfaceIndex {
         cells: &cells,

@@ -17,10 +17,10 @@
 //! missing (1.4 times that when Loop will average the push out over the neighbours).
 //! Pushes are combined per control vertex by taking the largest, and halved around any
 //! control triangle they would turn by more than about 75°, so they never fold the
-//! surface. The one-step surface is recomputed where the pushes reach and the watched
-//! centres (those within r of being too shallow) near them are measured again, for at
-//! most [`ContainmentOptions::max_rounds`] rounds; a push of more than r measures every
-//! centre again. Only control vertices move: the topology does not change, so a closed
+//! surface. The watched centres (those within r of being too shallow) whose nearest
+//! surface lay where the pushes reach are measured again, against the one-step surface
+//! recomputed around them, for at most [`ContainmentOptions::max_rounds`] rounds; a
+//! push of more than r measures every centre again. Only control vertices move: the topology does not change, so a closed
 //! 2-manifold stays one, and subdivision then runs on the moved control mesh as always.
 //! With two or more steps the surface is measured after the first (the later ones move
 //! it far less: the edges halve each step).
@@ -28,8 +28,11 @@
 //! **Measure.** The one-step surface is never built as a mesh: its points (Loop's vertex
 //! point of every control vertex, the edge points of every control triangle's sides) are
 //! computed from the control mesh, and its triangles are the four children of each
-//! control triangle, so the stage holds about half of what the subdivided mesh would take
-//! and stays under the subdivision's peak of memory. A centre's nearest points are looked
+//! control triangle. It is not even computed for the whole mesh at once: the centres are
+//! measured in slabs across the scene, each against the one-step surface of the control
+//! triangles it can reach ([`slabs`]; [`ContainmentOptions::chunk_triangles`] per slab),
+//! so the stage's memory beyond the control mesh follows the slab and stays far under
+//! the subdivision's peak. A centre's nearest points are looked
 //! up in a cell hash of them (cells of `2r`, the 2 × 2 × 2 cells nearest the centre: every
 //! point within r of it); a centre with none there is deep inside or isolated. A centre
 //! deep under the tangent plane of its nearest point (normal from the control mesh),
@@ -50,6 +53,7 @@
 //! `docs/performance-log.md`.
 
 mod measure;
+mod slabs;
 mod surface;
 
 use crate::cancel::CancelToken;
@@ -59,8 +63,9 @@ use glam::{DVec3, Vec3};
 use hashbrown::{HashMap, HashSet};
 use measure::{CellIndex, SurfaceIndex};
 use rayon::prelude::*;
+use slabs::Slabs;
 use std::time::Instant;
-use surface::LoopSurface;
+use surface::{LoopSurface, Slots};
 
 /// Options of [`contain`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -70,6 +75,15 @@ pub struct ContainmentOptions {
     pub min_depth: f32,
     /// Rounds of measuring and pushing at most. Default 4.
     pub max_rounds: u32,
+    /// Control triangles measured at once, about: the surface is measured in slabs of
+    /// that many, so that the stage's memory follows the slab rather than the whole
+    /// surface. The output does not depend on it. Default 2²⁰.
+    #[serde(default = "default_chunk_triangles")]
+    pub chunk_triangles: usize,
+}
+
+fn default_chunk_triangles() -> usize {
+    1 << 20
 }
 
 impl Default for ContainmentOptions {
@@ -77,6 +91,7 @@ impl Default for ContainmentOptions {
         ContainmentOptions {
             min_depth: 0.25,
             max_rounds: 4,
+            chunk_triangles: default_chunk_triangles(),
         }
     }
 }
@@ -99,6 +114,8 @@ pub struct ContainmentStats {
     pub remaining: usize,
     /// Seconds spent computing the one-step surface it measures (points and cells).
     pub surface_seconds: f64,
+    /// Slabs the surface was measured in (see [`ContainmentOptions::chunk_triangles`]).
+    pub slabs: u32,
 }
 
 /// What [`Centres::visit`] calls on each chunk: positions and their particle indices.
@@ -109,6 +126,19 @@ pub(crate) type VisitChunk<'a> = dyn FnMut(&[Vec3], &[u32]) -> Result<()> + 'a;
 pub(crate) trait Centres {
     /// Calls `visit` on every chunk of centres.
     fn visit(&self, visit: &mut VisitChunk<'_>) -> Result<()>;
+
+    /// Calls `visit` on chunks that hold every centre whose coordinate `axis` lies from
+    /// `lo` to `hi` (and maybe others): by default every chunk.
+    fn visit_between(
+        &self,
+        axis: usize,
+        lo: f32,
+        hi: f32,
+        visit: &mut VisitChunk<'_>,
+    ) -> Result<()> {
+        let _ = (axis, lo, hi);
+        self.visit(visit)
+    }
 }
 
 impl Centres for [Vec3] {
@@ -121,6 +151,16 @@ impl Centres for [Vec3] {
 impl<S: crate::io::particles::ParticleSource> Centres for crate::tiles::ParticleStore<S> {
     fn visit(&self, visit: &mut VisitChunk<'_>) -> Result<()> {
         self.for_each_stored(&mut |positions, indices, _| visit(positions, indices))
+    }
+
+    fn visit_between(
+        &self,
+        axis: usize,
+        lo: f32,
+        hi: f32,
+        visit: &mut VisitChunk<'_>,
+    ) -> Result<()> {
+        self.for_each_stored_between(axis, lo, hi, visit)
     }
 }
 
@@ -175,11 +215,12 @@ pub(crate) fn contain_centres(
     }
     let clock = Instant::now();
     let tris = VertexTriangles::new(control);
-    let mut loop_surface = LoopSurface::new(control, &tris, levels > 0);
     // The tangent-plane shortcut reads the control mesh's normals.
     control.compute_normals();
-    let mut cells = CellIndex::new(&loop_surface.points, 2.0 * r);
+    let slabs = Slabs::new(control, &tris, options.chunk_triangles, r);
+    stats.slabs = slabs.count() as u32;
     stats.surface_seconds += clock.elapsed().as_secs_f64();
+    let mut slots = Some(Slots::new(control));
     // Centres within r of being too shallow in the last full round.
     let mut watch: Vec<Watched> = Vec::new();
     // Control vertices whose one-ring holds a moved vertex (Loop's masks reach that far).
@@ -187,84 +228,128 @@ pub(crate) fn contain_centres(
     let mut full_round = true;
     loop {
         stats.rounds += 1;
-        let index = SurfaceIndex {
-            cells: &cells,
-            surface: &loop_surface,
-            control,
-            control_tris: &tris,
-            // The tangent-plane shortcut needs normals, which are the control mesh's
-            // only as it was when last measured whole.
-            fast_depth: if full_round {
-                depth + FAST_MARGIN * r
-            } else {
-                f64::INFINITY
-            },
-        };
-        let probe_all = |ps: &[Vec3], is: &[u32]| -> (usize, Vec<Shallow>, Vec<Watched>) {
-            let mut near = 0;
-            let (mut shallow, mut watch) = (Vec::new(), Vec::new());
-            for (&p, &i) in ps.iter().zip(is) {
-                let Some(probe) = index.probe(p.as_dvec3()) else {
-                    continue;
-                };
-                if !isolated.is_empty() && isolated.contains(&bits(p)) {
-                    continue;
-                }
-                near += 1;
-                if probe.signed_distance > -(depth + r) {
-                    watch.push(Watched {
-                        particle: i,
-                        position: p,
-                        parent: probe.control_triangle,
-                    });
-                }
-                if probe.signed_distance > -depth + TOLERANCE * r {
-                    shallow.push(Shallow {
-                        particle: i,
-                        push: probe.normal * (probe.signed_distance + aim),
-                        outside: probe.signed_distance > 0.0,
-                        control_triangle: probe.control_triangle,
-                    });
-                }
-            }
-            (near, shallow, watch)
-        };
-        let mut near = 0usize;
-        let mut shallow: Vec<Shallow> = Vec::new();
-        let mut gather = |ps: &[Vec3], is: &[u32], watched: &mut Vec<Watched>| {
-            let found: Vec<_> = ps
-                .par_chunks(PROBE_CHUNK)
-                .zip(is.par_chunks(PROBE_CHUNK))
-                .map(|(ps, is)| probe_all(ps, is))
-                .collect();
-            for (n, s, w) in found {
-                near += n;
-                shallow.extend(s);
-                watched.extend(w);
-            }
-        };
-        if full_round {
-            // Every centre; those that a push could bring too close are watched after.
-            watch.clear();
-            centres.visit(&mut |positions, indices| {
-                cancel.check()?;
-                gather(positions, indices, &mut watch);
-                Ok(())
-            })?;
+        // Pushes of less than r: only the watched centres whose nearest surface lay over
+        // a control triangle the pushes reached can be too close now.
+        let again: Vec<Watched> = if full_round {
+            Vec::new()
         } else {
-            // Pushes of less than r: only the watched centres whose nearest surface lay
-            // over a control triangle the pushes reached can be too close now.
-            cancel.check()?;
-            let (is, ps): (Vec<u32>, Vec<Vec3>) = watch
+            watch
                 .iter()
                 .filter(|w| {
                     control.triangles[w.parent as usize]
                         .iter()
                         .any(|&v| reached[v as usize])
                 })
-                .map(|w| (w.particle, w.position))
-                .unzip();
-            gather(&ps, &is, &mut Vec::new());
+                .copied()
+                .collect()
+        };
+        let near_again = (!full_round).then(|| {
+            let ps: Vec<Vec3> = again.iter().map(|w| w.position).collect();
+            slabs.near(&ps)
+        });
+        let mut near = 0usize;
+        let mut shallow: Vec<Shallow> = Vec::new();
+        let mut watched: Vec<Watched> = Vec::new();
+        for slab in 0..slabs.count() {
+            let again: Vec<&Watched> = again
+                .iter()
+                .filter(|w| slabs.of(w.position) == slab)
+                .collect();
+            if !full_round && again.is_empty() {
+                continue;
+            }
+            cancel.check()?;
+            // The one-step surface over the slab (where the centres measured again are).
+            let clock = Instant::now();
+            let ids = slabs.triangles(control, slab, near_again.as_ref());
+            let slots_here = slots.take().expect("returned after each slab");
+            let surface = LoopSurface::new(control, &tris, ids, levels > 0, slots_here);
+            let cells = CellIndex::new(&surface.points, 2.0 * r);
+            stats.surface_seconds += clock.elapsed().as_secs_f64();
+            let index = SurfaceIndex {
+                cells: &cells,
+                surface: &surface,
+                control,
+                control_tris: &tris,
+                // The tangent-plane shortcut needs normals, which are the control mesh's
+                // only as it was when last measured whole.
+                fast_depth: if full_round {
+                    depth + FAST_MARGIN * r
+                } else {
+                    f64::INFINITY
+                },
+            };
+            let probe_all = |ps: &[Vec3], is: &[u32]| -> (usize, Vec<Shallow>, Vec<Watched>) {
+                let mut near = 0;
+                let (mut shallow, mut watch) = (Vec::new(), Vec::new());
+                for (&p, &i) in ps.iter().zip(is) {
+                    let Some(probe) = index.probe(p.as_dvec3()) else {
+                        continue;
+                    };
+                    if !isolated.is_empty() && isolated.contains(&bits(p)) {
+                        continue;
+                    }
+                    near += 1;
+                    if probe.signed_distance > -(depth + r) {
+                        watch.push(Watched {
+                            particle: i,
+                            position: p,
+                            parent: probe.control_triangle,
+                        });
+                    }
+                    if probe.signed_distance > -depth + TOLERANCE * r {
+                        shallow.push(Shallow {
+                            particle: i,
+                            push: probe.normal * (probe.signed_distance + aim),
+                            outside: probe.signed_distance > 0.0,
+                            control_triangle: probe.control_triangle,
+                        });
+                    }
+                }
+                (near, shallow, watch)
+            };
+            let mut gather = |ps: &[Vec3], is: &[u32]| {
+                let found: Vec<_> = ps
+                    .par_chunks(PROBE_CHUNK)
+                    .zip(is.par_chunks(PROBE_CHUNK))
+                    .map(|(ps, is)| probe_all(ps, is))
+                    .collect();
+                for (n, s, w) in found {
+                    near += n;
+                    shallow.extend(s);
+                    watched.extend(w);
+                }
+            };
+            if full_round {
+                // Every centre of the slab.
+                let whole = slabs.count() == 1;
+                let (axis, lo, hi) = slabs.range(slab);
+                centres.visit_between(axis, lo, hi, &mut |positions, indices| {
+                    cancel.check()?;
+                    if whole {
+                        gather(positions, indices);
+                    } else {
+                        let (ps, is): (Vec<Vec3>, Vec<u32>) = positions
+                            .iter()
+                            .zip(indices)
+                            .filter(|(p, _)| (lo..hi).contains(&p[axis]))
+                            .map(|(p, i)| (*p, *i))
+                            .unzip();
+                        gather(&ps, &is);
+                    }
+                    Ok(())
+                })?;
+            } else {
+                let (is, ps): (Vec<u32>, Vec<Vec3>) =
+                    again.iter().map(|w| (w.particle, w.position)).unzip();
+                gather(&ps, &is);
+            }
+            drop(cells);
+            slots = Some(surface.into_slots());
+        }
+        if full_round {
+            // Those that a push could bring too close are watched after.
+            watch = watched;
         }
         if stats.rounds == 1 {
             stats.near_centres = near;
@@ -304,16 +389,12 @@ pub(crate) fn contain_centres(
                 }
             }
         }
-        // The one-step surface where the pushes reach; a push of more than r may reach
-        // centres nobody watched: measure every centre again.
+        // A push of more than r may reach centres nobody watched: measure every centre
+        // again.
         full_round = largest > r;
-        let clock = Instant::now();
-        loop_surface.update(control, &tris, &reached);
         if full_round {
             control.compute_normals();
-            cells = CellIndex::new(&loop_surface.points, 2.0 * r);
         }
-        stats.surface_seconds += clock.elapsed().as_secs_f64();
     }
     control.normals = Vec::new();
     Ok(stats)
@@ -434,6 +515,7 @@ mod tests {
             let options = ContainmentOptions {
                 min_depth: 1.0,
                 max_rounds: 6,
+                ..Default::default()
             };
             let stats = contain(&mut control, levels, &centres, 0.3, &options);
             let mut surface = control.clone();

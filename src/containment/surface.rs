@@ -5,70 +5,148 @@ use crate::mesh::{TriMesh, VertexTriangles};
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
-/// The surface one Loop step makes of a control mesh, without its triangles: every
-/// control vertex's vertex point and every control triangle's three edge points (an edge
-/// point is computed for both triangles of its edge, the same way, so the two copies are
-/// equal bit for bit). Surface triangle `s` is child `s % 4` of control triangle `s / 4`.
+/// The surface one Loop step makes of a part of a control mesh, without its triangles:
+/// the vertex point of every corner of the chosen control triangles and every chosen
+/// triangle's three edge points (an edge point is computed for both triangles of its
+/// edge, the same way, so two copies are equal bit for bit). Surface triangle `s` is child
+/// `s % 4` of control triangle `s / 4`. Points are numbered in the order of the whole
+/// mesh's (vertex points by control vertex, then edge points by control triangle and
+/// side), so that ties between equally near points break the same way in any part.
 pub(super) struct LoopSurface {
-    /// Vertex points (one per control vertex), then edge points (three per control
-    /// triangle, side `k` from corner `k` to `k + 1`).
+    /// Vertex points (one per control vertex of [`Self::vertex_ids`]), then edge points
+    /// (three per control triangle of [`Self::triangle_ids`], side `k` from corner `k` to
+    /// `k + 1`).
     pub(super) points: Vec<Vec3>,
-    pub(super) vertex_count: usize,
-    /// With Loop's masks, or the control mesh itself (vertex points in place, edge points
-    /// at the midpoints) when the surface is not subdivided.
-    smooth: bool,
+    /// Control vertices with a vertex point, ascending.
+    pub(super) vertex_ids: Vec<u32>,
+    /// Control triangles with edge points, ascending.
+    pub(super) triangle_ids: Vec<u32>,
+    slots: Slots,
 }
 
-impl LoopSurface {
-    pub(super) fn new(control: &TriMesh, tris: &VertexTriangles, smooth: bool) -> Self {
-        let nv = control.positions.len();
-        let mut surface = LoopSurface {
-            points: vec![Vec3::ZERO; nv + 3 * control.triangles.len()],
-            vertex_count: nv,
-            smooth,
-        };
-        surface.update(control, tris, &vec![true; nv]);
-        surface
-    }
+/// Control vertex → its vertex point and control triangle → its place in a part
+/// ([`ABSENT`] when not in it): tables the size of the whole control mesh, passed from
+/// one part to the next.
+pub(super) struct Slots {
+    vertex: Vec<u32>,
+    triangle: Vec<u32>,
+}
 
-    /// Recomputes the points that depend on the vertices marked in `changed` or on their
-    /// neighbours (every vertex point of a marked vertex, every edge point of a triangle
-    /// with a marked corner: the marks must cover the one-rings of the moved vertices).
-    pub(super) fn update(&mut self, control: &TriMesh, tris: &VertexTriangles, changed: &[bool]) {
-        let nv = self.vertex_count;
-        let (vertex_points, edge_points) = self.points.split_at_mut(nv);
-        let smooth = self.smooth;
+impl Slots {
+    pub(super) fn new(control: &TriMesh) -> Self {
+        Slots {
+            vertex: vec![ABSENT; control.positions.len()],
+            triangle: vec![ABSENT; control.triangles.len()],
+        }
+    }
+}
+
+/// Slot of a vertex or triangle not in the part.
+const ABSENT: u32 = u32::MAX;
+
+impl LoopSurface {
+    /// The one-step surface over control triangles `triangle_ids` (ascending), with
+    /// Loop's masks when `smooth`, else the control mesh itself (vertex points in place,
+    /// edge points at the midpoints). The masks read the whole control mesh: a point is
+    /// the same in every part that holds it. `slots` come from [`Slots::new`] or
+    /// [`Self::into_slots`].
+    pub(super) fn new(
+        control: &TriMesh,
+        tris: &VertexTriangles,
+        triangle_ids: Vec<u32>,
+        smooth: bool,
+        mut slots: Slots,
+    ) -> Self {
+        let mut vertex_ids: Vec<u32> = triangle_ids
+            .iter()
+            .flat_map(|&t| control.triangles[t as usize])
+            .collect();
+        vertex_ids.par_sort_unstable();
+        vertex_ids.dedup();
+        for (k, &t) in triangle_ids.iter().enumerate() {
+            slots.triangle[t as usize] = k as u32;
+        }
+        for (k, &v) in vertex_ids.iter().enumerate() {
+            slots.vertex[v as usize] = k as u32;
+        }
         let betas = crate::subdivision::loop_betas(&[64]);
+        let mut points = vec![Vec3::ZERO; vertex_ids.len() + 3 * triangle_ids.len()];
+        let (vertex_points, edge_points) = points.split_at_mut(vertex_ids.len());
         vertex_points
             .par_iter_mut()
-            .enumerate()
-            .filter(|(v, _)| changed[*v])
-            .for_each(|(v, out)| {
-                *out = vertex_point(control, tris, v as u32, smooth, &betas);
-            });
+            .zip(&vertex_ids)
+            .for_each(|(out, &v)| *out = vertex_point(control, tris, v, smooth, &betas));
         edge_points
             .par_chunks_mut(3)
-            .enumerate()
-            .filter(|(t, _)| control.triangles[*t].iter().any(|&v| changed[v as usize]))
-            .for_each(|(t, out)| {
+            .zip(&triangle_ids)
+            .for_each(|(out, &t)| {
                 for (k, e) in out.iter_mut().enumerate() {
-                    *e = edge_point(control, tris, t as u32, k, smooth);
+                    *e = edge_point(control, tris, t, k, smooth);
                 }
             });
+        LoopSurface {
+            points,
+            vertex_ids,
+            triangle_ids,
+            slots,
+        }
     }
 
-    /// Point index of control triangle `t`'s edge point on side `k`.
+    /// The slot tables, emptied, for the next part.
+    pub(super) fn into_slots(self) -> Slots {
+        let mut slots = self.slots;
+        for &v in &self.vertex_ids {
+            slots.vertex[v as usize] = ABSENT;
+        }
+        for &t in &self.triangle_ids {
+            slots.triangle[t as usize] = ABSENT;
+        }
+        slots
+    }
+
+    /// Point index of control vertex `v`'s vertex point (`v` must be a corner of a
+    /// triangle of the part).
+    pub(super) fn vertex(&self, v: u32) -> u32 {
+        let i = self.slots.vertex[v as usize];
+        debug_assert!(i != ABSENT, "control vertex {v} outside the part");
+        i
+    }
+
+    /// Point index of control triangle `t`'s edge point on side `k` (`t` must be in the
+    /// part).
     pub(super) fn edge(&self, t: u32, k: usize) -> u32 {
-        (self.vertex_count + 3 * t as usize + k) as u32
+        let slot = self.slots.triangle[t as usize];
+        debug_assert!(slot != ABSENT, "control triangle {t} outside the part");
+        (self.vertex_ids.len() + 3 * slot as usize + k) as u32
     }
 
     /// Corner point indices of surface triangle `s`.
     pub(super) fn triangle(&self, control: &TriMesh, s: u32) -> [u32; 3] {
         let t = s >> 2;
-        let tri = control.triangles[t as usize];
+        let tri = control.triangles[t as usize].map(|v| self.vertex(v));
         let m = [0, 1, 2].map(|k| self.edge(t, k));
         crate::subdivision::children(tri, m)[(s & 3) as usize]
     }
+
+    /// The control vertex of vertex point `i`, or the control triangle and side of edge
+    /// point `i`.
+    pub(super) fn owner(&self, i: u32) -> Owner {
+        let nv = self.vertex_ids.len() as u32;
+        if i < nv {
+            Owner::Vertex(self.vertex_ids[i as usize])
+        } else {
+            let e = i - nv;
+            Owner::Edge(self.triangle_ids[(e / 3) as usize], (e % 3) as usize)
+        }
+    }
+}
+
+/// What a point of the one-step surface is computed from.
+pub(super) enum Owner {
+    /// The vertex point of this control vertex.
+    Vertex(u32),
+    /// The edge point of this control triangle's side.
+    Edge(u32, usize),
 }
 
 /// Loop's vertex point of control vertex `v` (interior mask; the vertex itself when not
@@ -140,7 +218,8 @@ mod tests {
             *p *= 1.0 + 0.1 * ((i * 7 % 5) as f32 / 5.0);
         }
         let tris = VertexTriangles::new(&control);
-        let mut surface = LoopSurface::new(&control, &tris, true);
+        let all = |control: &TriMesh| (0..control.triangles.len() as u32).collect();
+        let surface = LoopSurface::new(&control, &tris, all(&control), true, Slots::new(&control));
         let check = |control: &TriMesh, surface: &LoopSurface| {
             let mut expected = control.clone();
             crate::subdivision::subdivide(
@@ -158,16 +237,21 @@ mod tests {
             }
         };
         check(&control, &surface);
-        let mut changed = vec![false; control.positions.len()];
         control.positions[3] += Vec3::splat(0.05);
-        for t in &control.triangles {
-            if t.contains(&3) {
-                for &v in t {
-                    changed[v as usize] = true;
-                }
+        check(
+            &control,
+            &LoopSurface::new(&control, &tris, all(&control), true, Slots::new(&control)),
+        );
+        // A part holds the same points as the whole.
+        let part: Vec<u32> = (0..control.triangles.len() as u32).step_by(3).collect();
+        let whole = LoopSurface::new(&control, &tris, all(&control), true, Slots::new(&control));
+        let some = LoopSurface::new(&control, &tris, part.clone(), true, Slots::new(&control));
+        for &t in &part {
+            for s in 4 * t..4 * t + 4 {
+                let [a, b] =
+                    [&whole, &some].map(|x| x.triangle(&control, s).map(|i| x.points[i as usize]));
+                assert_eq!(a, b, "surface triangle {s}");
             }
         }
-        surface.update(&control, &tris, &changed);
-        check(&control, &surface);
     }
 }

@@ -44,12 +44,13 @@ pub(crate) const MC_TRIANGLES_PER_SURFACE_BLOCK: f64 = 140.0;
 /// now 8 % high, kept as margin.
 pub(crate) const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 110.0;
 /// Peak working set of the containment stage, bytes per decimated (control) triangle,
-/// everything after the tiles included: the control mesh, its vertex → triangle lists,
-/// the one-step Loop surface's points and their cell hash, the centres watched. Measured
-/// on the 32M scene under a 2 GiB budget: 2685 MiB at the stage (17.2 M control
-/// triangles), 154 bytes per triangle over the process and the tiles' leftovers; 160
-/// kept as margin (the 4M scene at 512 MiB: 391 MiB measured).
-pub(crate) const CONTAINMENT_BYTES_PER_INPUT_TRIANGLE: f64 = 160.0;
+/// everything after the tiles included: the control mesh, its vertex → triangle lists
+/// and normals, the slab tables, one slab's one-step Loop surface and cell hash, the
+/// centres watched. Measured on the 32M scene under a 2 GiB budget: 1315 MiB at the stage
+/// (17.2 M control triangles, 17 slabs), 70 bytes per triangle over the process and the
+/// tiles' leftovers; 80 kept as margin. (Before the slabs, 2026-11-26: 2685 MiB, 154 B.)
+/// Below the subdivision's, so the stage never sets a run's estimate.
+pub(crate) const CONTAINMENT_BYTES_PER_INPUT_TRIANGLE: f64 = 80.0;
 /// Memory of the process before any particle (code, thread stacks, allocator), bytes.
 pub(crate) const BASE_BYTES: u64 = 64 << 20;
 /// What the tiles leave in memory under the post-processing, beyond the surface (mostly

@@ -3,12 +3,12 @@
 //! canonical load order (home half-block, input index), with the payload (the selected
 //! attributes) as rows beside the positions when asked for.
 
-use super::plan::{cell_of, TilePlan};
+use super::plan::{cell_of, TilePlan, SPILL_CELL_BLOCKS};
 use super::spill::SpillFile;
 use crate::cancel::CancelToken;
 use crate::error::Result;
 use crate::field::{block_of_half, home_block, home_half_block, BlockRange};
-use crate::grid::BlockKey;
+use crate::grid::{BlockKey, BLOCK_EDGE};
 use crate::io::particles::ParticleSource;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -24,7 +24,11 @@ pub(crate) enum ParticleStore<S> {
         payload: Vec<f32>,
     },
     /// Binned on disk by spill cell: a tiled run.
-    Spilled(SpillFile),
+    Spilled {
+        spill: SpillFile,
+        /// Inverse cell edge of the plan that binned it (spill cells group home blocks).
+        inv_h: f64,
+    },
 }
 
 /// Particles of a zone with their payload, in the canonical order.
@@ -69,7 +73,10 @@ impl<S: ParticleSource> ParticleStore<S> {
                 cancel.check()
             })?;
             writer.finish()?;
-            return Ok(ParticleStore::Spilled(spill));
+            return Ok(ParticleStore::Spilled {
+                spill,
+                inv_h: plan.inv_h,
+            });
         }
         if source.as_slices().is_some() {
             return Ok(ParticleStore::Source(source));
@@ -87,7 +94,7 @@ impl<S: ParticleSource> ParticleStore<S> {
     /// Bytes of particle records on disk (0 in memory).
     pub(crate) fn spill_bytes(&self) -> u64 {
         match self {
-            ParticleStore::Spilled(spill) => spill.bytes(),
+            ParticleStore::Spilled { spill, .. } => spill.bytes(),
             _ => 0,
         }
     }
@@ -100,7 +107,7 @@ impl<S: ParticleSource> ParticleStore<S> {
         visit: &mut dyn FnMut(&[Vec3], &[u32], &[f32]) -> Result<()>,
     ) -> Result<()> {
         match self {
-            ParticleStore::Spilled(spill) => {
+            ParticleStore::Spilled { spill, .. } => {
                 let (mut records, mut rows) = (Vec::new(), Vec::new());
                 for cell in spill.cells() {
                     records.clear();
@@ -120,12 +127,45 @@ impl<S: ParticleSource> ParticleStore<S> {
         }
     }
 
+    /// Calls `visit(positions, input indices)` for the stored particles whose coordinate
+    /// `axis` lies from `lo` to `hi`, and some others: spilled, only the spill cells that
+    /// reach that range are read.
+    #[allow(clippy::type_complexity)]
+    pub(crate) fn for_each_stored_between(
+        &self,
+        axis: usize,
+        lo: f32,
+        hi: f32,
+        visit: &mut dyn FnMut(&[Vec3], &[u32]) -> Result<()>,
+    ) -> Result<()> {
+        let ParticleStore::Spilled { spill, inv_h } = self else {
+            return self.for_each_stored(&mut |positions, indices, _| visit(positions, indices));
+        };
+        // A spill cell holds the particles whose home blocks it groups: world
+        // coordinates from `c·edge` to `(c + 1)·edge`, widened by a block for rounding.
+        let edge = (SPILL_CELL_BLOCKS * BLOCK_EDGE) as f64 / inv_h;
+        let block = BLOCK_EDGE as f64 / inv_h;
+        let mut records = Vec::new();
+        for cell in spill.cells() {
+            let start = cell[axis] as f64 * edge - block;
+            let end = (cell[axis] + 1) as f64 * edge + block;
+            if end < lo as f64 || start > hi as f64 {
+                continue;
+            }
+            records.clear();
+            spill.read_cell(cell, &mut records, None)?;
+            let (positions, indices): (Vec<Vec3>, Vec<u32>) = records.iter().copied().unzip();
+            visit(&positions, &indices)?;
+        }
+        Ok(())
+    }
+
     /// Positions and payload rows, when in memory.
     fn in_memory(&self) -> Option<(&[Vec3], &[f32])> {
         match self {
             ParticleStore::Source(source) => source.as_slices(),
             ParticleStore::Copied { positions, payload } => Some((positions, payload)),
-            ParticleStore::Spilled(_) => None,
+            ParticleStore::Spilled { .. } => None,
         }
     }
 
@@ -140,7 +180,7 @@ impl<S: ParticleSource> ParticleStore<S> {
     ) -> Result<()> {
         let home_of = |p: &Vec3| home_half_block(*p, plan.inv_h);
         match self {
-            ParticleStore::Spilled(spill) => {
+            ParticleStore::Spilled { spill, .. } => {
                 let mut records = Vec::new();
                 spill.read_cells(cell_of(zone.lo), cell_of(zone.hi), &mut records, None)?;
                 let mut homes: Vec<BlockKey> = records.par_iter().map(|r| home_of(&r.0)).collect();
@@ -188,7 +228,7 @@ impl<S: ParticleSource> ParticleStore<S> {
                 }
             };
         match self {
-            ParticleStore::Spilled(spill) => {
+            ParticleStore::Spilled { spill, .. } => {
                 let mut records = Vec::new();
                 let mut rows = Vec::new();
                 spill.read_cells(
