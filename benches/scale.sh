@@ -14,9 +14,8 @@
 # (`tile_scene ... splash`: 1.4 times the surface per particle, 27k isolated particles)
 # under 512MiB, 1GiB and 2GiB, like the plain scene, and with anisotropic kernels
 # (`--kernel anisotropic`) with the default budget and 512MiB. At 16M and 32M also with
-# `--keep-inside off` (containment needs ≈ 160 B per decimated triangle: 32M under 2GiB
-# fits only without it) and 32M with containment under 3GiB. Each run writes a fresh
-# output after a `sync`. Needs python3 for the summary.
+# `--keep-inside off` (what containment costs). Each run writes a fresh output after a
+# `sync`. Needs python3 for the summary.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release --quiet
@@ -72,6 +71,6 @@ for copies in ${SCALE_COPIES:-24 96 384 768}; do
             run "$copies" 512MiB anisotropic
             ;;
         384) run "$copies" 2GiB; run "$copies" 2GiB no-containment ;;
-        768) run "$copies" 3GiB; run "$copies" 2GiB no-containment ;;
+        768) run "$copies" 2GiB; run "$copies" 2GiB no-containment ;;
     esac
 done

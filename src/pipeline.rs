@@ -353,6 +353,7 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
             &isolated_centers,
             r,
             containment,
+            containment.slab_triangles(options.tiles.memory_budget_bytes),
             cancel,
         )?;
         stats.push_stage(

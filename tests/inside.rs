@@ -147,7 +147,7 @@ fn slabs_do_not_change_the_surface() {
     for tile_size in [None, Some(24)] {
         let whole = options(r, Kernel::Anisotropic, tile_size);
         let mut sliced = whole.clone();
-        sliced.containment.as_mut().unwrap().chunk_triangles = 1500;
+        sliced.containment.as_mut().unwrap().chunk_triangles = Some(1500);
         let (a, sa) = reconstruct(&positions, &whole).unwrap();
         let (b, sb) = reconstruct(&positions, &sliced).unwrap();
         let (sa, sb) = (sa.containment.unwrap(), sb.containment.unwrap());

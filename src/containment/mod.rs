@@ -77,13 +77,29 @@ pub struct ContainmentOptions {
     pub max_rounds: u32,
     /// Control triangles measured at once, about: the surface is measured in slabs of
     /// that many, so that the stage's memory follows the slab rather than the whole
-    /// surface. The output does not depend on it. Default 2²⁰.
-    #[serde(default = "default_chunk_triangles")]
-    pub chunk_triangles: usize,
+    /// surface. `None`: from the memory budget (an eighth of it per slab, see
+    /// [`Self::slab_triangles`]), one slab without a budget. The output does not depend
+    /// on it. Default `None`.
+    #[serde(default)]
+    pub chunk_triangles: Option<usize>,
 }
 
-fn default_chunk_triangles() -> usize {
-    1 << 20
+/// Working set of a slab, bytes per control triangle in it: its triangle and vertex
+/// lists, the one-step surface's points (3.5 per triangle), their cell hash and what
+/// building it takes.
+const SLAB_BYTES_PER_TRIANGLE: u64 = 96;
+
+impl ContainmentOptions {
+    /// Control triangles per slab under a memory budget of `budget` bytes (`None`: no
+    /// limit): [`Self::chunk_triangles`] when given, else as many as an eighth of the
+    /// budget holds, at least 2¹⁸.
+    pub fn slab_triangles(&self, budget: Option<u64>) -> usize {
+        match (self.chunk_triangles, budget) {
+            (Some(n), _) => n.max(1),
+            (None, Some(b)) => ((b / 8 / SLAB_BYTES_PER_TRIANGLE) as usize).max(1 << 18),
+            (None, None) => usize::MAX,
+        }
+    }
 }
 
 impl Default for ContainmentOptions {
@@ -91,7 +107,7 @@ impl Default for ContainmentOptions {
         ContainmentOptions {
             min_depth: 0.25,
             max_rounds: 4,
-            chunk_triangles: default_chunk_triangles(),
+            chunk_triangles: None,
         }
     }
 }
@@ -114,7 +130,8 @@ pub struct ContainmentStats {
     pub remaining: usize,
     /// Seconds spent computing the one-step surface it measures (points and cells).
     pub surface_seconds: f64,
-    /// Slabs the surface was measured in (see [`ContainmentOptions::chunk_triangles`]).
+    /// Slabs the surface was measured in, in the first round (see
+    /// [`ContainmentOptions::chunk_triangles`]).
     pub slabs: u32,
 }
 
@@ -182,13 +199,16 @@ pub fn contain(
         &[],
         particle_radius,
         options,
+        options.slab_triangles(None),
         &CancelToken::new(),
     )
     .expect("centres in memory cannot fail")
 }
 
 /// [`contain`] over any [`Centres`], skipping the centres at the positions of
-/// `isolated` (the particles that have spheres of their own).
+/// `isolated` (the particles that have spheres of their own), in slabs of about
+/// `slab_triangles` control triangles ([`ContainmentOptions::slab_triangles`]).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn contain_centres(
     control: &mut TriMesh,
     levels: u32,
@@ -196,6 +216,7 @@ pub(crate) fn contain_centres(
     isolated: &[Vec3],
     particle_radius: f32,
     options: &ContainmentOptions,
+    slab_triangles: usize,
     cancel: &CancelToken,
 ) -> Result<ContainmentStats> {
     let mut stats = ContainmentStats::default();
@@ -217,7 +238,7 @@ pub(crate) fn contain_centres(
     let tris = VertexTriangles::new(control);
     // The tangent-plane shortcut reads the control mesh's normals.
     control.compute_normals();
-    let slabs = Slabs::new(control, &tris, options.chunk_triangles, r);
+    let slabs = Slabs::new(control, &tris, slab_triangles, r);
     stats.slabs = slabs.count() as u32;
     stats.surface_seconds += clock.elapsed().as_secs_f64();
     let mut slots = Some(Slots::new(control));

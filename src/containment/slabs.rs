@@ -2,7 +2,7 @@
 //! its cell hash never exist for the whole mesh at once.
 //!
 //! The centres are cut into slabs across the longest axis of the control mesh, each
-//! with about [`super::ContainmentOptions::chunk_triangles`] control triangles. A slab's
+//! with about [`super::ContainmentOptions::slab_triangles`] control triangles. A slab's
 //! surface is built over every control triangle with a corner whose reach meets the slab
 //! along the axis: whatever measuring a centre of the slab reads lies there (see
 //! [`Slabs::new`]), so a centre is measured the same in any slab layout, and the output

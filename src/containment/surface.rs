@@ -57,15 +57,29 @@ impl LoopSurface {
         smooth: bool,
         mut slots: Slots,
     ) -> Self {
-        let mut vertex_ids: Vec<u32> = triangle_ids
-            .iter()
-            .flat_map(|&t| control.triangles[t as usize])
-            .collect();
-        vertex_ids.par_sort_unstable();
-        vertex_ids.dedup();
         for (k, &t) in triangle_ids.iter().enumerate() {
             slots.triangle[t as usize] = k as u32;
         }
+        // The corners, ascending: sorted when the part is small, else marked and read off
+        // the table in order.
+        let vertex_ids: Vec<u32> = if 8 * triangle_ids.len() < control.positions.len() {
+            let mut ids: Vec<u32> = triangle_ids
+                .iter()
+                .flat_map(|&t| control.triangles[t as usize])
+                .collect();
+            ids.par_sort_unstable();
+            ids.dedup();
+            ids
+        } else {
+            for &t in &triangle_ids {
+                for v in control.triangles[t as usize] {
+                    slots.vertex[v as usize] = 0;
+                }
+            }
+            (0..control.positions.len() as u32)
+                .filter(|&v| slots.vertex[v as usize] != ABSENT)
+                .collect()
+        };
         for (k, &v) in vertex_ids.iter().enumerate() {
             slots.vertex[v as usize] = k as u32;
         }
