@@ -86,6 +86,23 @@ pub(crate) fn keep_freed_memory(keep: bool) -> bool {
     keep
 }
 
+/// Returns the free memory inside the heap to the system (glibc's `malloc_trim`), unless
+/// freed buffers are being kept: after a stage that made many mid-sized blocks (under the
+/// mapping threshold [`tune_allocator`] sets) whose holes the next stage would not
+/// reuse. Only in a program that called [`tune_allocator`].
+pub(crate) fn release_freed_memory() {
+    if !TUNED.load(Ordering::SeqCst) {
+        return;
+    }
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    if !KEEPING.load(Ordering::SeqCst) {
+        // SAFETY: malloc_trim only returns free memory to the system.
+        unsafe {
+            libc::malloc_trim(0);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -356,6 +356,9 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
             containment.slab_triangles(options.tiles.memory_budget_bytes),
             cancel,
         )?;
+        // The slabs' tables and lists leave holes in the heap that subdivision's large
+        // arrays cannot fill.
+        crate::allocator::release_freed_memory();
         stats.push_stage(
             "containment",
             clock.elapsed().as_secs_f64(),
