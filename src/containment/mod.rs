@@ -20,10 +20,10 @@
 //! surface. The watched centres (those within r of being too shallow) whose nearest
 //! surface lay where the pushes reach are measured again, against the one-step surface
 //! recomputed around them, for at most [`ContainmentOptions::max_rounds`] rounds; a
-//! push of more than r measures every centre again. Only control vertices move: the topology does not change, so a closed
-//! 2-manifold stays one, and subdivision then runs on the moved control mesh as always.
-//! With two or more steps the surface is measured after the first (the later ones move
-//! it far less: the edges halve each step).
+//! push of more than r measures every centre again. Only control vertices move: the
+//! topology does not change, so a closed 2-manifold stays one, and subdivision then runs
+//! on the moved control mesh as always. With two or more steps the surface is measured
+//! after the first (the later ones move it far less: the edges halve each step).
 //!
 //! **Measure.** The one-step surface is never built as a mesh: its points (Loop's vertex
 //! point of every control vertex, the edge points of every control triangle's sides) are
@@ -32,9 +32,9 @@
 //! measured in slabs across the scene, each against the one-step surface of the control
 //! triangles it can reach ([`slabs`]; [`ContainmentOptions::chunk_triangles`] per slab),
 //! so the stage's memory beyond the control mesh follows the slab and stays far under
-//! the subdivision's peak. A centre's nearest points are looked
-//! up in a cell hash of them (cells of `2r`, the 2 × 2 × 2 cells nearest the centre: every
-//! point within r of it); a centre with none there is deep inside or isolated. A centre
+//! the subdivision's peak. A centre's nearest points are looked up in a cell hash of
+//! them (cells of `2r`, the 2 × 2 × 2 cells nearest the centre: every point within r of
+//! it); a centre with none there is deep inside or isolated. A centre
 //! deep under the tangent plane of its nearest point (normal from the control mesh),
 //! deeper than the depth plus `0.15 r` plus `l²/2r` for a point `l` aside (what a surface
 //! curved to a radius of r or more can lose against its tangent plane), is taken at that
@@ -135,41 +135,32 @@ pub struct ContainmentStats {
     pub slabs: u32,
 }
 
-/// What [`Centres::visit`] calls on each chunk: positions and their particle indices.
+/// What [`Centres::visit_between`] calls on each chunk: positions and their particle
+/// indices.
 pub(crate) type VisitChunk<'a> = dyn FnMut(&[Vec3], &[u32]) -> Result<()> + 'a;
 
 /// Where the centres come from: visited in chunks of positions with their particle
 /// indices (any order, any chunking).
 pub(crate) trait Centres {
-    /// Calls `visit` on every chunk of centres.
-    fn visit(&self, visit: &mut VisitChunk<'_>) -> Result<()>;
-
     /// Calls `visit` on chunks that hold every centre whose coordinate `axis` lies from
-    /// `lo` to `hi` (and maybe others): by default every chunk.
+    /// `lo` to `hi`, and maybe others.
     fn visit_between(
         &self,
         axis: usize,
         lo: f32,
         hi: f32,
         visit: &mut VisitChunk<'_>,
-    ) -> Result<()> {
-        let _ = (axis, lo, hi);
-        self.visit(visit)
-    }
+    ) -> Result<()>;
 }
 
 impl Centres for [Vec3] {
-    fn visit(&self, visit: &mut VisitChunk<'_>) -> Result<()> {
+    fn visit_between(&self, _: usize, _: f32, _: f32, visit: &mut VisitChunk<'_>) -> Result<()> {
         let indices: Vec<u32> = (0..self.len() as u32).collect();
         visit(self, &indices)
     }
 }
 
 impl<S: crate::io::particles::ParticleSource> Centres for crate::tiles::ParticleStore<S> {
-    fn visit(&self, visit: &mut VisitChunk<'_>) -> Result<()> {
-        self.for_each_stored(&mut |positions, indices, _| visit(positions, indices))
-    }
-
     fn visit_between(
         &self,
         axis: usize,
@@ -241,7 +232,7 @@ pub(crate) fn contain_centres(
     let slabs = Slabs::new(control, &tris, slab_triangles, r);
     stats.slabs = slabs.count() as u32;
     stats.surface_seconds += clock.elapsed().as_secs_f64();
-    let mut slots = Some(Slots::new(control));
+    let mut slots = Slots::new(control);
     // Centres within r of being too shallow in the last full round.
     let mut watch: Vec<Watched> = Vec::new();
     // Control vertices whose one-ring holds a moved vertex (Loop's masks reach that far).
@@ -268,9 +259,7 @@ pub(crate) fn contain_centres(
             let ps: Vec<Vec3> = again.iter().map(|w| w.position).collect();
             slabs.near(&ps)
         });
-        let mut near = 0usize;
-        let mut shallow: Vec<Shallow> = Vec::new();
-        let mut watched: Vec<Watched> = Vec::new();
+        let mut found = Found::default();
         for slab in 0..slabs.count() {
             let again: Vec<&Watched> = again
                 .iter()
@@ -283,7 +272,7 @@ pub(crate) fn contain_centres(
             // The one-step surface over the slab (where the centres measured again are).
             let clock = Instant::now();
             let ids = slabs.triangles(control, slab, near_again.as_ref());
-            let slots_here = slots.take().expect("returned after each slab");
+            let slots_here = std::mem::take(&mut slots);
             let surface = LoopSurface::new(control, &tris, ids, levels > 0, slots_here);
             let cells = CellIndex::new(&surface.points, 2.0 * r);
             stats.surface_seconds += clock.elapsed().as_secs_f64();
@@ -300,46 +289,8 @@ pub(crate) fn contain_centres(
                     f64::INFINITY
                 },
             };
-            let probe_all = |ps: &[Vec3], is: &[u32]| -> (usize, Vec<Shallow>, Vec<Watched>) {
-                let mut near = 0;
-                let (mut shallow, mut watch) = (Vec::new(), Vec::new());
-                for (&p, &i) in ps.iter().zip(is) {
-                    let Some(probe) = index.probe(p.as_dvec3()) else {
-                        continue;
-                    };
-                    if !isolated.is_empty() && isolated.contains(&bits(p)) {
-                        continue;
-                    }
-                    near += 1;
-                    if probe.signed_distance > -(depth + r) {
-                        watch.push(Watched {
-                            particle: i,
-                            position: p,
-                            parent: probe.control_triangle,
-                        });
-                    }
-                    if probe.signed_distance > -depth + TOLERANCE * r {
-                        shallow.push(Shallow {
-                            particle: i,
-                            push: probe.normal * (probe.signed_distance + aim),
-                            outside: probe.signed_distance > 0.0,
-                            control_triangle: probe.control_triangle,
-                        });
-                    }
-                }
-                (near, shallow, watch)
-            };
             let mut gather = |ps: &[Vec3], is: &[u32]| {
-                let found: Vec<_> = ps
-                    .par_chunks(PROBE_CHUNK)
-                    .zip(is.par_chunks(PROBE_CHUNK))
-                    .map(|(ps, is)| probe_all(ps, is))
-                    .collect();
-                for (n, s, w) in found {
-                    near += n;
-                    shallow.extend(s);
-                    watched.extend(w);
-                }
+                found.extend(measure_centres(&index, &isolated, depth, r, aim, ps, is));
             };
             if full_round {
                 // Every centre of the slab.
@@ -365,9 +316,13 @@ pub(crate) fn contain_centres(
                     again.iter().map(|w| (w.particle, w.position)).unzip();
                 gather(&ps, &is);
             }
-            drop(cells);
-            slots = Some(surface.into_slots());
+            slots = surface.into_slots();
         }
+        let Found {
+            near,
+            mut shallow,
+            watched,
+        } = found;
         if full_round {
             // Those that a push could bring too close are watched after.
             watch = watched;
@@ -419,6 +374,77 @@ pub(crate) fn contain_centres(
     }
     control.normals = Vec::new();
     Ok(stats)
+}
+
+/// What measuring some centres found.
+#[derive(Default)]
+struct Found {
+    /// Centres with the surface near.
+    near: usize,
+    /// Centres less than the depth under it.
+    shallow: Vec<Shallow>,
+    /// Centres within r of that.
+    watched: Vec<Watched>,
+}
+
+impl Found {
+    fn extend(&mut self, other: Found) {
+        self.near += other.near;
+        self.shallow.extend(other.shallow);
+        self.watched.extend(other.watched);
+    }
+}
+
+/// Measures the centres `ps` (particle indices `is`) against `index`, in parallel,
+/// skipping those at the positions of `isolated`: shallower than `depth` (world units)
+/// they are pushed to `aim`, within `r` of that they are watched.
+fn measure_centres(
+    index: &SurfaceIndex,
+    isolated: &HashSet<[u32; 3]>,
+    depth: f64,
+    r: f64,
+    aim: f64,
+    ps: &[Vec3],
+    is: &[u32],
+) -> Found {
+    let measure = |ps: &[Vec3], is: &[u32]| {
+        let mut found = Found::default();
+        for (&p, &i) in ps.iter().zip(is) {
+            let Some(probe) = index.probe(p.as_dvec3()) else {
+                continue;
+            };
+            if !isolated.is_empty() && isolated.contains(&bits(p)) {
+                continue;
+            }
+            found.near += 1;
+            if probe.signed_distance > -(depth + r) {
+                found.watched.push(Watched {
+                    particle: i,
+                    position: p,
+                    parent: probe.control_triangle,
+                });
+            }
+            if probe.signed_distance > -depth + TOLERANCE * r {
+                found.shallow.push(Shallow {
+                    particle: i,
+                    push: probe.normal * (probe.signed_distance + aim),
+                    outside: probe.signed_distance > 0.0,
+                    control_triangle: probe.control_triangle,
+                });
+            }
+        }
+        found
+    };
+    let parts: Vec<Found> = ps
+        .par_chunks(PROBE_CHUNK)
+        .zip(is.par_chunks(PROBE_CHUNK))
+        .map(|(ps, is)| measure(ps, is))
+        .collect();
+    let mut found = Found::default();
+    for part in parts {
+        found.extend(part);
+    }
+    found
 }
 
 /// Moves the control vertices by `push` (sorted by vertex), halving the pushes around

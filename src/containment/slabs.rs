@@ -53,31 +53,8 @@ impl Slabs {
         chunk_triangles: usize,
         particle_radius: f64,
     ) -> Self {
-        let x = |v: u32| control.positions[v as usize];
-        // Longest edge at each vertex, then at it or a neighbour.
-        let longest: Vec<f32> = (0..control.positions.len() as u32)
-            .into_par_iter()
-            .map(|v| {
-                let neighbours = tris
-                    .of(v)
-                    .iter()
-                    .flat_map(|&t| control.triangles[t as usize]);
-                neighbours
-                    .map(|w| (x(w) - x(v)).length())
-                    .fold(0.0, f32::max)
-            })
-            .collect();
         let r = particle_radius as f32;
-        let reach: Vec<f32> = (0..control.positions.len() as u32)
-            .into_par_iter()
-            .map(|v| {
-                let neighbours = tris
-                    .of(v)
-                    .iter()
-                    .flat_map(|&t| control.triangles[t as usize]);
-                8.0 * r + 2.0 * neighbours.map(|w| longest[w as usize]).fold(0.0, f32::max)
-            })
-            .collect();
+        let reach = reaches(control, tris, r);
         let (lo, hi) = control
             .positions
             .par_iter()
@@ -102,79 +79,12 @@ impl Slabs {
             .len()
             .div_ceil(chunk_triangles.max(1))
             .max(1);
-        let mut bounds = Vec::new();
-        if count > 1 && extent[axis] > 0.0 {
-            // Triangles by their first corner, in bins along the axis; a boundary where
-            // the running count passes each multiple of the share.
-            let (lo, width) = (lo[axis], extent[axis] / BINS as f32);
-            let bin = |x: f32| (((x - lo) / width) as usize).min(BINS - 1);
-            let histogram = control
-                .triangles
-                .par_iter()
-                .fold(
-                    || vec![0usize; BINS],
-                    |mut h, t| {
-                        h[bin(control.positions[t[0] as usize][axis])] += 1;
-                        h
-                    },
-                )
-                .reduce(
-                    || vec![0usize; BINS],
-                    |mut a, b| {
-                        a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-                        a
-                    },
-                );
-            let share = control.triangles.len().div_ceil(count);
-            let mut running = 0;
-            for (k, n) in histogram.iter().enumerate() {
-                running += n;
-                if running >= share * (bounds.len() + 1) && bounds.len() + 1 < count {
-                    bounds.push(lo + width * (k + 1) as f32);
-                }
-            }
-        }
-        // Each triangle's slabs: those its corners' reaches meet.
-        let mut starts = vec![0usize; bounds.len() + 2];
-        let mut members = Vec::new();
-        if !bounds.is_empty() {
-            let span = |t: &[u32; 3]| {
-                let (mut a, mut b) = (f32::INFINITY, f32::NEG_INFINITY);
-                for &v in t {
-                    let (x, m) = (control.positions[v as usize][axis], reach[v as usize]);
-                    a = a.min(x - m);
-                    b = b.max(x + m);
-                }
-                (
-                    bounds.partition_point(|&x| x <= a),
-                    bounds.partition_point(|&x| x < b),
-                )
-            };
-            let spans: Vec<(u32, u32)> = control
-                .triangles
-                .par_iter()
-                .map(|t| {
-                    let (a, b) = span(t);
-                    (a as u32, b as u32)
-                })
-                .collect();
-            for &(a, b) in &spans {
-                for k in a..=b {
-                    starts[k as usize + 1] += 1;
-                }
-            }
-            for k in 0..=bounds.len() {
-                starts[k + 1] += starts[k];
-            }
-            let mut fill = starts.clone();
-            members = vec![0u32; starts[bounds.len() + 1]];
-            for (t, &(a, b)) in spans.iter().enumerate() {
-                for k in a..=b {
-                    members[fill[k as usize]] = t as u32;
-                    fill[k as usize] += 1;
-                }
-            }
-        }
+        let bounds = if count > 1 && extent[axis] > 0.0 {
+            boundaries(control, axis, lo[axis], extent[axis], count)
+        } else {
+            Vec::new()
+        };
+        let (starts, members) = members(control, axis, &bounds, &reach);
         Slabs {
             axis,
             bounds,
@@ -263,6 +173,110 @@ impl Slabs {
         }
         Near { cell, dilated }
     }
+}
+
+/// The reach of every control vertex: `8r` plus twice the longest edge at it or at a
+/// neighbour (see [`Slabs::new`]).
+fn reaches(control: &TriMesh, tris: &VertexTriangles, r: f32) -> Vec<f32> {
+    // The largest `f` over the corners of `v`'s fan (`v` and its neighbours).
+    let fan_max = |v: u32, f: &(dyn Fn(u32) -> f32 + Sync)| {
+        tris.of(v)
+            .iter()
+            .flat_map(|&t| control.triangles[t as usize])
+            .map(f)
+            .fold(0.0, f32::max)
+    };
+    let n = control.positions.len() as u32;
+    let x = |v: u32| control.positions[v as usize];
+    let longest: Vec<f32> = (0..n)
+        .into_par_iter()
+        .map(|v| fan_max(v, &|w| (x(w) - x(v)).length()))
+        .collect();
+    (0..n)
+        .into_par_iter()
+        .map(|v| 8.0 * r + 2.0 * fan_max(v, &|w| longest[w as usize]))
+        .collect()
+}
+
+/// Boundaries along `axis` that cut the control triangles (by first corner) into `count`
+/// slabs of about equal numbers: a histogram of [`BINS`] bins from `lo` over `extent`,
+/// a boundary where the running count passes each multiple of the share.
+fn boundaries(control: &TriMesh, axis: usize, lo: f32, extent: f32, count: usize) -> Vec<f32> {
+    let width = extent / BINS as f32;
+    let bin = |x: f32| (((x - lo) / width) as usize).min(BINS - 1);
+    let histogram = control
+        .triangles
+        .par_iter()
+        .fold(
+            || vec![0usize; BINS],
+            |mut h, t| {
+                h[bin(control.positions[t[0] as usize][axis])] += 1;
+                h
+            },
+        )
+        .reduce(
+            || vec![0usize; BINS],
+            |mut a, b| {
+                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+                a
+            },
+        );
+    let share = control.triangles.len().div_ceil(count);
+    let (mut bounds, mut running) = (Vec::new(), 0);
+    for (k, n) in histogram.iter().enumerate() {
+        running += n;
+        if running >= share * (bounds.len() + 1) && bounds.len() + 1 < count {
+            bounds.push(lo + width * (k + 1) as f32);
+        }
+    }
+    bounds
+}
+
+/// The control triangles of every slab, ascending, as (starts, members): each triangle
+/// in the slabs its corners' reaches meet. Empty with one slab.
+fn members(
+    control: &TriMesh,
+    axis: usize,
+    bounds: &[f32],
+    reach: &[f32],
+) -> (Vec<usize>, Vec<u32>) {
+    let mut starts = vec![0usize; bounds.len() + 2];
+    if bounds.is_empty() {
+        return (starts, Vec::new());
+    }
+    let spans: Vec<(u32, u32)> = control
+        .triangles
+        .par_iter()
+        .map(|t| {
+            let (mut a, mut b) = (f32::INFINITY, f32::NEG_INFINITY);
+            for &v in t {
+                let (x, m) = (control.positions[v as usize][axis], reach[v as usize]);
+                a = a.min(x - m);
+                b = b.max(x + m);
+            }
+            (
+                bounds.partition_point(|&x| x <= a) as u32,
+                bounds.partition_point(|&x| x < b) as u32,
+            )
+        })
+        .collect();
+    for &(a, b) in &spans {
+        for k in a..=b {
+            starts[k as usize + 1] += 1;
+        }
+    }
+    for k in 0..=bounds.len() {
+        starts[k + 1] += starts[k];
+    }
+    let mut fill = starts.clone();
+    let mut members = vec![0u32; starts[bounds.len() + 1]];
+    for (t, &(a, b)) in spans.iter().enumerate() {
+        for k in a..=b {
+            members[fill[k as usize]] = t as u32;
+            fill[k as usize] += 1;
+        }
+    }
+    (starts, members)
 }
 
 /// Edge of [`Near`]'s cells, multiples of r: a point whose reach is at most this less

@@ -26,7 +26,8 @@ pub(super) struct LoopSurface {
 
 /// Control vertex → its vertex point and control triangle → its place in a part
 /// ([`ABSENT`] when not in it): tables the size of the whole control mesh, passed from
-/// one part to the next.
+/// one part to the next (`Default`: empty, to take a table's place meanwhile).
+#[derive(Default)]
 pub(super) struct Slots {
     vertex: Vec<u32>,
     triangle: Vec<u32>,

@@ -106,25 +106,7 @@ impl<S: ParticleSource> ParticleStore<S> {
         &self,
         visit: &mut dyn FnMut(&[Vec3], &[u32], &[f32]) -> Result<()>,
     ) -> Result<()> {
-        match self {
-            ParticleStore::Spilled { spill, .. } => {
-                let (mut records, mut rows) = (Vec::new(), Vec::new());
-                for cell in spill.cells() {
-                    records.clear();
-                    rows.clear();
-                    spill.read_cell(cell, &mut records, Some(&mut rows))?;
-                    let (positions, indices): (Vec<Vec3>, Vec<u32>) =
-                        records.iter().copied().unzip();
-                    visit(&positions, &indices, &rows)?;
-                }
-                Ok(())
-            }
-            _ => {
-                let (all, rows) = self.in_memory().expect("in memory");
-                let indices: Vec<u32> = (0..all.len() as u32).collect();
-                visit(all, &indices, rows)
-            }
-        }
+        self.for_each_stored_where(&|_| true, true, visit)
     }
 
     /// Calls `visit(positions, input indices)` for the stored particles whose coordinate
@@ -138,24 +120,46 @@ impl<S: ParticleSource> ParticleStore<S> {
         hi: f32,
         visit: &mut dyn FnMut(&[Vec3], &[u32]) -> Result<()>,
     ) -> Result<()> {
-        let ParticleStore::Spilled { spill, inv_h } = self else {
-            return self.for_each_stored(&mut |positions, indices, _| visit(positions, indices));
+        let inv_h = match self {
+            ParticleStore::Spilled { inv_h, .. } => *inv_h,
+            _ => 1.0,
         };
         // A spill cell holds the particles whose home blocks it groups: world
         // coordinates from `c·edge` to `(c + 1)·edge`, widened by a block for rounding.
         let edge = (SPILL_CELL_BLOCKS * BLOCK_EDGE) as f64 / inv_h;
         let block = BLOCK_EDGE as f64 / inv_h;
-        let mut records = Vec::new();
-        for cell in spill.cells() {
+        let reaches = |cell: BlockKey| {
             let start = cell[axis] as f64 * edge - block;
             let end = (cell[axis] + 1) as f64 * edge + block;
-            if end < lo as f64 || start > hi as f64 {
-                continue;
-            }
+            end >= lo as f64 && start <= hi as f64
+        };
+        self.for_each_stored_where(&reaches, false, &mut |positions, indices, _| {
+            visit(positions, indices)
+        })
+    }
+
+    /// Calls `visit(positions, input indices, payload rows)` for the particles of every
+    /// spill cell `keep` accepts (every particle, in memory), with their payload rows
+    /// when `rows` (else none).
+    #[allow(clippy::type_complexity)]
+    fn for_each_stored_where(
+        &self,
+        keep: &dyn Fn(BlockKey) -> bool,
+        rows: bool,
+        visit: &mut dyn FnMut(&[Vec3], &[u32], &[f32]) -> Result<()>,
+    ) -> Result<()> {
+        let ParticleStore::Spilled { spill, .. } = self else {
+            let (all, payload) = self.in_memory().expect("in memory");
+            let indices: Vec<u32> = (0..all.len() as u32).collect();
+            return visit(all, &indices, if rows { payload } else { &[] });
+        };
+        let (mut records, mut payload) = (Vec::new(), Vec::new());
+        for cell in spill.cells().into_iter().filter(|&c| keep(c)) {
             records.clear();
-            spill.read_cell(cell, &mut records, None)?;
+            payload.clear();
+            spill.read_cell(cell, &mut records, rows.then_some(&mut payload))?;
             let (positions, indices): (Vec<Vec3>, Vec<u32>) = records.iter().copied().unzip();
-            visit(&positions, &indices)?;
+            visit(&positions, &indices, &payload)?;
         }
         Ok(())
     }
