@@ -8,7 +8,11 @@ use super::surface::Slots;
 use super::surface::{LoopSurface, Owner};
 use crate::mesh::{TriMesh, VertexTriangles};
 use glam::{DVec3, Vec3};
-use hashbrown::HashMap;
+use hashbrown::{HashMap, HashSet};
+use rayon::prelude::*;
+
+/// Cells per coarse cell edge in [`SurfaceIndex::confirm`].
+const COARSE: f64 = 8.0;
 
 /// Nearest vertices whose parent triangles' neighbourhoods a measure covers.
 const PROBE_VERTICES: usize = 3;
@@ -18,6 +22,7 @@ const BLOCK: i32 = 1 << 3;
 const BLOCK_CELLS: usize = (BLOCK * BLOCK * BLOCK) as usize;
 
 /// A centre's nearest surface point.
+#[derive(Clone, Copy)]
 pub(super) struct Probe {
     /// Distance to the surface, positive outside, world units.
     pub(super) signed_distance: f64,
@@ -218,33 +223,139 @@ impl SurfaceIndex<'_> {
         self.measure(p, self.parent(i0))
     }
 
-    /// The nearest surface point of `p` among the surface triangles over the control
-    /// triangles around the corners of control triangle `parent`.
-    fn measure(&self, p: DVec3, parent: u32) -> Option<Probe> {
-        let mut controls = [u32::MAX; 64];
-        let mut count = 0;
-        for &c in self.control.triangles[parent as usize].iter() {
-            for &t in self.control_tris.of(c) {
-                if count < controls.len() && !controls[..count].contains(&t) {
-                    controls[count] = t;
-                    count += 1;
+    /// Measures `probes` (centres and their probes) again over every control triangle
+    /// of the part whose one-step surface may pass nearer than the probe found. A probe
+    /// reads the triangles around the parent of the nearest surface *point*; where the
+    /// surface's triangles are large (regions decimated far) one can pass nearer than
+    /// any of its points, on another part of the surface (across a thin sheet, a fold),
+    /// and the side found would be the wrong part's: a centre well inside was taken for
+    /// 2–4 r outside on violent splashes, and the pushes that followed wrecked the
+    /// surface around it. Every control triangle whose box of one-step points lies
+    /// within a probe's distance of its centre is read (those all lie in the part: see
+    /// [`super::slabs::Slabs::new`]).
+    pub(super) fn confirm(&self, probes: &mut [(DVec3, Probe)]) {
+        if probes.is_empty() {
+            return;
+        }
+        let cell = self.cells.cell;
+        let key = |q: DVec3| floor(q / cell);
+        let coarse_key = |q: DVec3| floor(q / (COARSE * cell));
+        // The centres by the cells their distance spheres' boxes meet, and the coarse
+        // cells those lie in (most triangles are in none: one look-up rejects them).
+        let reach = |probe: &Probe| probe.signed_distance.abs() * (1.0 + 1e-9) + 1e-12;
+        let mut grid: HashMap<[i32; 3], Vec<u32>> = HashMap::new();
+        let mut coarse: HashSet<[i32; 3]> = HashSet::new();
+        for (k, (p, probe)) in probes.iter().enumerate() {
+            let rad = DVec3::splat(reach(probe));
+            let (lo, hi) = (key(*p - rad), key(*p + rad));
+            for z in lo.z..=hi.z {
+                for y in lo.y..=hi.y {
+                    for x in lo.x..=hi.x {
+                        grid.entry([x, y, z]).or_default().push(k as u32);
+                    }
+                }
+            }
+            let (lo, hi) = (coarse_key(*p - rad), coarse_key(*p + rad));
+            for z in lo.z..=hi.z {
+                for y in lo.y..=hi.y {
+                    for x in lo.x..=hi.x {
+                        coarse.insert([x, y, z]);
+                    }
                 }
             }
         }
+        // (centre, control triangle) wherever the triangle's box is within reach.
+        let mut pairs: Vec<(u32, u32)> = self
+            .surface
+            .triangle_ids
+            .par_chunks(4096)
+            .flat_map_iter(|chunk| {
+                let mut out = Vec::new();
+                for &t in chunk {
+                    let (lo, hi) = self.child_box(t);
+                    let (a, b) = (coarse_key(lo), coarse_key(hi));
+                    if a == b && !coarse.contains(&a.to_array()) {
+                        continue;
+                    }
+                    let (a, b) = (key(lo), key(hi));
+                    for z in a.z..=b.z {
+                        for y in a.y..=b.y {
+                            for x in a.x..=b.x {
+                                let Some(near) = grid.get(&[x, y, z]) else {
+                                    continue;
+                                };
+                                for &k in near {
+                                    let (p, probe) = &probes[k as usize];
+                                    let gap = (lo - *p).max(*p - hi).max(DVec3::ZERO);
+                                    if gap.length() <= reach(probe) {
+                                        out.push((k, t));
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+                out
+            })
+            .collect();
+        pairs.par_sort_unstable();
+        pairs.dedup();
+        let mut groups: Vec<&[(u32, u32)]> = vec![&[]; probes.len()];
+        for group in pairs.chunk_by(|a, b| a.0 == b.0) {
+            groups[group[0].0 as usize] = group;
+        }
+        probes
+            .par_iter_mut()
+            .zip(groups)
+            .for_each(|((p, probe), group)| {
+                let controls: Vec<u32> = group.iter().map(|&(_, t)| t).collect();
+                if let Some(exact) = self.nearest_among(*p, &controls) {
+                    *probe = exact;
+                }
+            });
+    }
+
+    /// The box of the one-step points of control triangle `t` (its children's corners).
+    fn child_box(&self, t: u32) -> (DVec3, DVec3) {
+        let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+        for i in self.control.triangles[t as usize]
+            .map(|v| self.surface.vertex(v))
+            .into_iter()
+            .chain([0, 1, 2].map(|k| self.surface.edge(t, k)))
+        {
+            let q = self.surface.points[i as usize].as_dvec3();
+            lo = lo.min(q);
+            hi = hi.max(q);
+        }
+        (lo, hi)
+    }
+
+    /// The control triangles around the corners of control triangle `t`, ascending.
+    fn fan(&self, t: u32) -> Vec<u32> {
+        let mut around: Vec<u32> = self.control.triangles[t as usize]
+            .iter()
+            .flat_map(|&c| self.control_tris.of(c).iter().copied())
+            .collect();
+        around.sort_unstable();
+        around.dedup();
+        around
+    }
+
+    /// The nearest surface point of `p` among the surface triangles over the control
+    /// triangles around the corners of control triangle `parent`.
+    fn measure(&self, p: DVec3, parent: u32) -> Option<Probe> {
+        self.nearest_among(p, &self.fan(parent))
+    }
+
+    /// The nearest surface point of `p` among the surface triangles over the control
+    /// triangles `controls` (ties: the lowest surface triangle), with the side of the
+    /// pseudo-normal of its feature.
+    fn nearest_among(&self, p: DVec3, controls: &[u32]) -> Option<Probe> {
         let mut nearest = (f64::INFINITY, u32::MAX, DVec3::ZERO, Feature::Face);
-        for &c in &controls[..count] {
+        for &c in controls {
             let children = 4 * c..4 * c + 4;
             // Skip a control triangle whose surface lies in a box farther than the best.
-            let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
-            for i in self.control.triangles[c as usize]
-                .map(|v| self.surface.vertex(v))
-                .into_iter()
-                .chain([0, 1, 2].map(|k| self.surface.edge(c, k)))
-            {
-                let q = self.surface.points[i as usize].as_dvec3();
-                lo = lo.min(q);
-                hi = hi.max(q);
-            }
+            let (lo, hi) = self.child_box(c);
             let gap = (lo - p).max(p - hi).max(DVec3::ZERO);
             if gap.length_squared() > nearest.0 {
                 continue;
@@ -261,14 +372,18 @@ impl SurfaceIndex<'_> {
         if s == u32::MAX {
             return None;
         }
-        // The pseudo-normal of the nearest feature, from the measured triangles that
-        // share it (by position: an edge point has one index per triangle of its edge).
+        // The pseudo-normal of the nearest feature, from every surface triangle that
+        // shares it (by position: an edge point has one index per triangle of its edge).
+        // Those lie over the control triangles around the corners of the nearest one's
+        // parent: a vertex point's triangles over the control triangles around its
+        // vertex, an edge point's over the two that share its side.
         let corners = self.corners(s);
         let has = |u: u32, xs: &[DVec3]| {
             let uc = self.corners(u);
             xs.iter().all(|x| uc.contains(x))
         };
-        let measured = || controls[..count].iter().flat_map(|&c| 4 * c..4 * c + 4);
+        let around = self.fan(s >> 2);
+        let measured = || around.iter().flat_map(|&c| 4 * c..4 * c + 4);
         let normal = match feature {
             Feature::Face => self.face_normal(s),
             Feature::Edge(k) => {
@@ -421,6 +536,56 @@ mod tests {
         assert!(f == Feature::Vertex(1));
         let (_, f) = closest_on_triangle(DVec3::new(-0.5, 3.0, 0.0), t);
         assert!(f == Feature::Vertex(2));
+    }
+
+    /// A centre just under a large face, with no corner of it within reach but a small
+    /// sphere just over the face: the probe reads the sphere (the nearest points) and
+    /// takes the centre for outside it; confirming finds the face and the right side.
+    #[test]
+    fn confirming_finds_a_nearer_large_triangle_and_its_side() {
+        // Away from the face's corners and edge midpoints (points of the surface).
+        let (x, y) = (5.0, -8.0);
+        let mut mesh = icosphere(2, 1.0);
+        for p in &mut mesh.positions {
+            *p += Vec3::new(x, y, 1.5);
+        }
+        let base = mesh.positions.len() as u32;
+        for k in 0..8 {
+            let bit = |b: u32, lo: f32, hi: f32| if k >> b & 1 == 1 { hi } else { lo };
+            let corner = Vec3::new(bit(0, -20.0, 20.0), bit(1, -20.0, 20.0), bit(2, -40.0, 0.0));
+            mesh.positions.push(corner);
+        }
+        for t in [
+            [0, 2, 3],
+            [0, 3, 1],
+            [4, 5, 7],
+            [4, 7, 6],
+            [0, 1, 5],
+            [0, 5, 4],
+            [2, 6, 7],
+            [2, 7, 3],
+            [0, 4, 6],
+            [0, 6, 2],
+            [1, 3, 7],
+            [1, 7, 5],
+        ] {
+            mesh.triangles.push(t.map(|v| base + v));
+        }
+        assert!(crate::mesh::validate(&mesh).is_closed_manifold());
+        with_index(&mesh, 1.0, false, |index| {
+            let p = DVec3::new(x as f64 + 0.1, y as f64 - 0.2, -0.3);
+            let probe = index.probe(p).expect("the sphere is within reach");
+            assert!(probe.signed_distance > 0.5, "{}", probe.signed_distance);
+            let mut probes = vec![(p, probe)];
+            index.confirm(&mut probes);
+            let probe = &probes[0].1;
+            assert!(
+                (probe.signed_distance + 0.3).abs() < 1e-6,
+                "{}",
+                probe.signed_distance
+            );
+            assert!((probe.normal - DVec3::Z).length() < 1e-9);
+        });
     }
 
     /// Signed distances to a fine sphere match the analytic ones, inside and outside,

@@ -61,7 +61,7 @@ use crate::error::Result;
 use crate::mesh::{TriMesh, VertexTriangles};
 use glam::{DVec3, Vec3};
 use hashbrown::{HashMap, HashSet};
-use measure::{CellIndex, SurfaceIndex};
+use measure::{CellIndex, Probe, SurfaceIndex};
 use rayon::prelude::*;
 use slabs::Slabs;
 use std::time::Instant;
@@ -407,8 +407,13 @@ fn measure_centres(
     ps: &[Vec3],
     is: &[u32],
 ) -> Found {
-    let measure = |ps: &[Vec3], is: &[u32]| {
+    let watched = |probe: &Probe| probe.signed_distance > -(depth + r);
+    let shallow = |probe: &Probe| probe.signed_distance > -depth + TOLERANCE * r;
+    // Every centre's probe: those within r of being too shallow are watched, those too
+    // shallow kept to be confirmed.
+    let probe = |ps: &[Vec3], is: &[u32]| {
         let mut found = Found::default();
+        let mut pending = Vec::new();
         for (&p, &i) in ps.iter().zip(is) {
             let Some(probe) = index.probe(p.as_dvec3()) else {
                 continue;
@@ -417,32 +422,52 @@ fn measure_centres(
                 continue;
             }
             found.near += 1;
-            if probe.signed_distance > -(depth + r) {
+            if shallow(&probe) {
+                pending.push((i, p, probe));
+            } else if watched(&probe) {
                 found.watched.push(Watched {
                     particle: i,
                     position: p,
                     parent: probe.control_triangle,
                 });
             }
-            if probe.signed_distance > -depth + TOLERANCE * r {
-                found.shallow.push(Shallow {
-                    particle: i,
-                    push: probe.normal * (probe.signed_distance + aim),
-                    outside: probe.signed_distance > 0.0,
-                    control_triangle: probe.control_triangle,
-                });
-            }
         }
-        found
+        (found, pending)
     };
-    let parts: Vec<Found> = ps
+    let parts: Vec<_> = ps
         .par_chunks(PROBE_CHUNK)
         .zip(is.par_chunks(PROBE_CHUNK))
-        .map(|(ps, is)| measure(ps, is))
+        .map(|(ps, is)| probe(ps, is))
         .collect();
     let mut found = Found::default();
-    for part in parts {
+    let mut pending = Vec::new();
+    for (part, more) in parts {
         found.extend(part);
+        pending.extend(more);
+    }
+    // Those a push would move are measured again over every triangle that may pass
+    // nearer (`SurfaceIndex::confirm`).
+    let mut probes: Vec<(DVec3, Probe)> = pending
+        .iter()
+        .map(|&(_, p, probe)| (p.as_dvec3(), probe))
+        .collect();
+    index.confirm(&mut probes);
+    for ((i, p, _), (_, probe)) in pending.into_iter().zip(probes) {
+        if watched(&probe) {
+            found.watched.push(Watched {
+                particle: i,
+                position: p,
+                parent: probe.control_triangle,
+            });
+        }
+        if shallow(&probe) {
+            found.shallow.push(Shallow {
+                particle: i,
+                push: probe.normal * (probe.signed_distance + aim),
+                outside: probe.signed_distance > 0.0,
+                control_triangle: probe.control_triangle,
+            });
+        }
     }
     found
 }
