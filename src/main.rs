@@ -149,10 +149,12 @@ struct ReconstructArgs {
         default_value_t = 1.0
     )]
     cell_size: f32,
-    /// Lower eigenvalue threshold t_low of the Solenthaler concavity factor.
+    /// Lower eigenvalue threshold t_low of the Solenthaler concavity factor (isotropic
+    /// kernel).
     #[arg(long, default_value_t = 0.4)]
     t_low: f32,
-    /// Upper eigenvalue threshold t_high of the Solenthaler concavity factor.
+    /// Upper eigenvalue threshold t_high of the Solenthaler concavity factor (isotropic
+    /// kernel).
     #[arg(long, default_value_t = 3.5)]
     t_high: f32,
     /// Icosphere subdivision level for isolated particles (no neighbour within R), or
@@ -160,35 +162,45 @@ struct ReconstructArgs {
     #[arg(long, default_value = "2")]
     isolated_spheres: String,
     /// Quadric decimation: fraction of triangles to remove (0.8 = the paper's), `adaptive`
-    /// (stop on an error bound of 0.1 r only: flat regions simplify, curved ones keep
-    /// their triangles), or `off`.
-    #[arg(long, default_value = "0.8")]
-    decimate: String,
+    /// (stop on the error bound only: flat regions simplify, curved ones keep their
+    /// triangles), or `off` [default: 0.81, which holds the anisotropic surface to the
+    /// paper's triangle count]
+    #[arg(long)]
+    decimate: Option<String>,
     /// Error bound of decimation, multiples of r (RMS distance of a collapse to the
-    /// original planes); with a fraction, whichever is reached first stops it.
-    #[arg(long, allow_negative_numbers = true)]
-    decimate_error: Option<f32>,
+    /// original planes), or `off`; with a fraction, whichever is reached first stops it
+    /// [default: 0.1]
+    #[arg(long, allow_hyphen_values = true)]
+    decimate_error: Option<String>,
     /// Loop subdivision steps after decimation (0 = off).
     #[arg(long, default_value_t = 1)]
     subdivide: u32,
     /// Least depth of every non-isolated particle centre under the final surface,
     /// multiples of r (0 to 1): where decimation or subdivision left one shallower or
-    /// outside, the surface over it is pushed out; `off` leaves the surface as they made it.
-    #[arg(long, default_value = "0.25")]
-    keep_inside: String,
+    /// outside, the surface over it is pushed out; `off` leaves the surface as they made
+    /// it [default: 0.25]
+    #[arg(long)]
+    keep_inside: Option<String>,
     /// Coverage radius c, multiples of r: particles the paper's surface would leave
-    /// outside are enclosed in a ball of c·r (0 = off, the pure Solenthaler field).
-    #[arg(allow_negative_numbers = true, long, default_value_t = 0.9)]
-    particle_coverage: f32,
+    /// outside are enclosed in a ball of c·r (0 = off, the pure Solenthaler field)
+    /// [default: 0.9]
+    #[arg(allow_negative_numbers = true, long)]
+    particle_coverage: Option<f32>,
     /// Iso-surface offset, multiples of r: extract where phi = offset·r, moving the surface
     /// outwards by about that much (0 = the paper's surface; 0.133 removes its inward
     /// bias on the shipped frames, at some flat-region smoothness).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     iso_offset: f32,
-    /// Particle kernel: `isotropic` (the paper's Solenthaler field) or `anisotropic` (Yu &
-    /// Turk 2013 kernels stretched along the local surface).
-    #[arg(long, value_enum, default_value_t = KernelArg::Isotropic)]
-    kernel: KernelArg,
+    /// Particle kernel: `anisotropic` (Yu & Turk 2013 kernels stretched along the local
+    /// surface: smoother, and on the particles instead of inside them) or `isotropic` (the
+    /// paper's Solenthaler field) [default: anisotropic]
+    #[arg(long, value_enum)]
+    kernel: Option<KernelArg>,
+    /// The pipeline of Akinci et al. 2013 exactly: `--kernel isotropic
+    /// --particle-coverage 0 --decimate 0.8 --decimate-error off --keep-inside off`
+    /// (any of those given beside it wins).
+    #[arg(long)]
+    paper: bool,
     /// Anisotropic kernels: radius h_a of an unstretched kernel, multiples of r.
     #[arg(long, default_value_t = AnisotropyOptions::default().kernel_radius)]
     kernel_radius: f32,
@@ -547,34 +559,50 @@ enum KernelArg {
 }
 
 fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, Failure> {
+    let r = args.particle_radius;
+    let base = match args.paper {
+        true => ReconstructSettings::paper(r),
+        false => ReconstructSettings::new(r),
+    };
     let settings = ReconstructSettings {
-        particle_radius: args.particle_radius,
+        particle_radius: r,
         influence_radius: args.influence_radius,
         cell_size: args.cell_size,
         t_low: args.t_low,
         t_high: args.t_high,
-        particle_coverage: args.particle_coverage,
+        particle_coverage: args.particle_coverage.unwrap_or(base.particle_coverage),
         iso_offset: args.iso_offset,
         kernel: match args.kernel {
-            KernelArg::Isotropic => meniscus::field::Kernel::Isotropic,
-            KernelArg::Anisotropic => meniscus::field::Kernel::Anisotropic,
+            None => base.kernel,
+            Some(KernelArg::Isotropic) => meniscus::field::Kernel::Isotropic,
+            Some(KernelArg::Anisotropic) => meniscus::field::Kernel::Anisotropic,
         },
         kernel_radius: args.kernel_radius,
         max_stretch: args.max_stretch,
         min_neighbours: args.min_neighbours,
         centre_smoothing: args.centre_smoothing,
         isolated_spheres: parse_level(&args.isolated_spheres, "--isolated-spheres")?,
-        decimate: args
-            .decimate
-            .parse()
-            .map_err(|e| Failure::option("--decimate", e))?,
-        decimate_error: args.decimate_error,
+        decimate: match &args.decimate {
+            None => base.decimate,
+            Some(text) => text.parse().map_err(|e| Failure::option("--decimate", e))?,
+        },
+        decimate_error: match args.decimate_error.as_deref() {
+            None => base.decimate_error,
+            Some("off") => None,
+            Some(v) => Some(v.parse().map_err(|_| {
+                Failure::option(
+                    "--decimate-error",
+                    format!("takes a bound (multiples of r) or `off`, got {v:?}"),
+                )
+            })?),
+        },
         subdivide: args.subdivide,
         // A `.mseq` output defers it by itself (see `job`).
         defer_subdivision: false,
-        keep_inside: match args.keep_inside.as_str() {
-            "off" => None,
-            v => Some(v.parse().map_err(|_| {
+        keep_inside: match args.keep_inside.as_deref() {
+            None => base.keep_inside,
+            Some("off") => None,
+            Some(v) => Some(v.parse().map_err(|_| {
                 Failure::option(
                     "--keep-inside",
                     format!("takes a depth (multiples of r) or `off`, got {v:?}"),
@@ -821,11 +849,12 @@ fn ineffective_options(
             "--keep-going has no effect: a single file has no other frames to go on with".into(),
         );
     }
-    if given("decimate_error") && args.decimate.parse() == Ok(Decimation::Off) {
-        warnings.push(format!(
-            "--decimate-error has no effect: decimation is off (--decimate {})",
-            args.decimate
-        ));
+    if let (true, Some(decimate)) = (given("decimate_error"), &args.decimate) {
+        if decimate.parse() == Ok(Decimation::Off) {
+            warnings.push(format!(
+                "--decimate-error has no effect: decimation is off (--decimate {decimate})"
+            ));
+        }
     }
     warnings
 }

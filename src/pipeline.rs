@@ -23,7 +23,7 @@ use crate::containment::{contain_centres, ContainmentOptions, ContainmentStats};
 use crate::decimation::TileDecimation;
 use crate::decimation::{decimate, DecimateOptions, DecimateStats};
 use crate::error::Result;
-use crate::field::{FieldOptions, FieldStats};
+use crate::field::{FieldOptions, FieldStats, Kernel};
 use crate::io::particles::ParticleSource;
 use crate::marching_cubes::MarchingCubesStats;
 use crate::mesh::{SphereInstances, Surface};
@@ -36,7 +36,24 @@ use crate::tiles::{
 use glam::Vec3;
 use std::time::Instant;
 
-/// Options of the whole pipeline. Defaults are the paper's.
+/// Fraction of the triangles the default decimation removes. Above the paper's 0.8: the
+/// default anisotropic surface sits on the outer particles instead of inside them, so it
+/// is larger and marching cubes gives it about 2 % more triangles; 0.81 keeps the default
+/// output at most as large as the isotropic 0.8 surface (dam break frame 25: 126 352
+/// against 128 648 triangles; `docs/quality.md`).
+pub const DEFAULT_DECIMATION: f32 = 0.81;
+
+/// Error bound of the default decimation, multiples of the particle radius: no collapse
+/// moves the surface by more than this (RMS distance to the original planes), so where
+/// the fraction would take more (thin sheets and filaments of violent splashes),
+/// decimation stops short of it. Unbounded, decimation collapses one-particle sheets into
+/// fins that cross the surface elsewhere; particle centres then end up outside where no
+/// local measure can tell (see [`crate::containment`]). On calm frames it does not bind:
+/// dam break frame 25, the analytic sphere and box come out the same.
+pub const DEFAULT_DECIMATION_ERROR: f32 = 0.1;
+
+/// Options of the whole pipeline. [`Self::new`] gives meniscus's defaults,
+/// [`Self::paper`] the pipeline of Akinci et al. 2013 exactly.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct ReconstructOptions {
     /// Field parameters (particle radius, influence radius, cell size, thresholds).
@@ -46,7 +63,8 @@ pub struct ReconstructOptions {
     pub isolated_sphere_level: Option<u32>,
     /// How the lattice is cut into tiles. Default: one tile.
     pub tiles: TileOptions,
-    /// Quadric decimation, or `None` to skip it. Default: remove 80 % of the triangles.
+    /// Quadric decimation, or `None` to skip it. Default: remove [`DEFAULT_DECIMATION`]
+    /// of the triangles, no collapse beyond [`DEFAULT_DECIMATION_ERROR`].
     pub decimate: Option<DecimateOptions>,
     /// Loop subdivision steps after decimation. Default 1 (0 skips it).
     pub subdivide: SubdivideOptions,
@@ -70,16 +88,40 @@ impl ReconstructOptions {
         }
     }
 
-    /// The paper's defaults for particle radius `r` (world units).
+    /// meniscus's defaults for particle radius `r` (world units): the paper's stages, with
+    /// anisotropic kernels ([`Kernel::Anisotropic`]), decimation by
+    /// [`DEFAULT_DECIMATION`] within [`DEFAULT_DECIMATION_ERROR`], the coverage balls of
+    /// [`FieldOptions::new`] and every non-isolated centre kept inside
+    /// ([`ContainmentOptions::default`]).
     pub fn new(particle_radius: f32) -> Self {
+        let mut field = FieldOptions::new(particle_radius);
+        field.kernel = Kernel::Anisotropic;
         ReconstructOptions {
-            field: FieldOptions::new(particle_radius),
+            field,
+            decimate: Some(DecimateOptions {
+                target_reduction: Some(DEFAULT_DECIMATION),
+                max_error: Some(DEFAULT_DECIMATION_ERROR * particle_radius),
+                ..Default::default()
+            }),
+            containment: Some(ContainmentOptions::default()),
+            ..Self::paper(particle_radius)
+        }
+    }
+
+    /// The pipeline of Akinci et al. 2013 exactly: the Solenthaler field with isotropic
+    /// kernels and no coverage balls, decimation by 80 % without an error bound, one Loop
+    /// step, icospheres of level 2 for isolated particles, no containment.
+    pub fn paper(particle_radius: f32) -> Self {
+        let mut field = FieldOptions::new(particle_radius);
+        field.particle_coverage = 0.0;
+        ReconstructOptions {
+            field,
             isolated_sphere_level: Some(2),
             tiles: TileOptions::default(),
             decimate: Some(DecimateOptions::default()),
             subdivide: SubdivideOptions::default(),
             deferred_subdivision: 0,
-            containment: Some(ContainmentOptions::default()),
+            containment: None,
         }
     }
 }

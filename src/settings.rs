@@ -9,22 +9,19 @@ use crate::containment::ContainmentOptions;
 use crate::decimation::DecimateOptions;
 use crate::error::{Error, Result};
 use crate::field::{AnisotropyOptions, Kernel};
-use crate::pipeline::ReconstructOptions;
+use crate::pipeline::{ReconstructOptions, DEFAULT_DECIMATION, DEFAULT_DECIMATION_ERROR};
 use std::path::PathBuf;
-
-/// Error bound of [`Decimation::Adaptive`] when no `decimate_error` is given, multiples
-/// of `r`.
-pub const ADAPTIVE_ERROR_RADII: f32 = 0.1;
 
 /// How much quadric decimation removes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Decimation {
     /// No decimation.
     Off,
-    /// Remove this fraction of the triangles, in `[0, 1)` (0.8 is the paper's).
+    /// Remove this fraction of the triangles, in `[0, 1)` (0.8 is the paper's, 0.81 the
+    /// default).
     Fraction(f32),
-    /// Stop on the error bound only (`decimate_error`, default
-    /// [`ADAPTIVE_ERROR_RADII`]): flat regions simplify, curved ones keep their
+    /// Stop on the error bound only (`decimate_error`; without one
+    /// [`DEFAULT_DECIMATION_ERROR`]): flat regions simplify, curved ones keep their
     /// triangles.
     Adaptive,
 }
@@ -50,7 +47,8 @@ impl std::str::FromStr for Decimation {
 }
 
 /// The options of one reconstruction in the units users give them. [`Self::new`] holds
-/// the defaults of the CLI and the Python package.
+/// the defaults of the CLI and the Python package, [`Self::paper`] the pipeline of
+/// Akinci et al. 2013 exactly.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ReconstructSettings {
     /// Particle radius `r`, world units (half the rest spacing).
@@ -67,7 +65,8 @@ pub struct ReconstructSettings {
     pub particle_coverage: f32,
     /// Iso-surface offset, multiples of `r`. Default 0.
     pub iso_offset: f32,
-    /// Particle kernel. Default [`Kernel::Isotropic`].
+    /// Particle kernel. Default [`Kernel::Anisotropic`] ([`Kernel::Isotropic`] is the
+    /// paper's).
     pub kernel: Kernel,
     /// Anisotropic kernels: radius `h_a` of an unstretched kernel, multiples of `r`.
     /// Default 3.5.
@@ -81,10 +80,11 @@ pub struct ReconstructSettings {
     /// Icosphere level of the spheres of isolated particles, or `None` to leave them in
     /// the field. Default `Some(2)`.
     pub isolated_spheres: Option<u32>,
-    /// Decimation. Default a fraction of 0.8.
+    /// Decimation. Default a fraction of [`DEFAULT_DECIMATION`] (0.81; the paper's is 0.8).
     pub decimate: Decimation,
-    /// Error bound of decimation, multiples of `r`; with a fraction, whichever is reached
-    /// first stops it. Default none.
+    /// Error bound of decimation, multiples of `r`: no collapse moves the surface by more;
+    /// with a fraction, whichever is reached first stops it. `None`: no bound. Default
+    /// [`DEFAULT_DECIMATION_ERROR`] (0.1).
     pub decimate_error: Option<f32>,
     /// Loop subdivision steps after decimation. Default 1.
     pub subdivide: u32,
@@ -117,20 +117,35 @@ impl ReconstructSettings {
             t_high: 3.5,
             particle_coverage: 0.9,
             iso_offset: 0.0,
-            kernel: Kernel::Isotropic,
+            kernel: Kernel::Anisotropic,
             kernel_radius: defaults.kernel_radius,
             max_stretch: defaults.max_stretch,
             min_neighbours: defaults.min_neighbours,
             centre_smoothing: defaults.centre_smoothing,
             isolated_spheres: Some(2),
-            decimate: Decimation::Fraction(0.8),
-            decimate_error: None,
+            decimate: Decimation::Fraction(DEFAULT_DECIMATION),
+            decimate_error: Some(DEFAULT_DECIMATION_ERROR),
             subdivide: 1,
             defer_subdivision: false,
             keep_inside: Some(ContainmentOptions::default().min_depth),
             tile_size: None,
             memory_budget: None,
             temp_dir: None,
+        }
+    }
+
+    /// The pipeline of Akinci et al. 2013 exactly (as
+    /// [`ReconstructOptions::paper`]): isotropic kernels, no coverage balls, decimation
+    /// by 0.8 without an error bound, no containment; the other settings as
+    /// [`Self::new`].
+    pub fn paper(particle_radius: f32) -> Self {
+        ReconstructSettings {
+            kernel: Kernel::Isotropic,
+            particle_coverage: 0.0,
+            decimate: Decimation::Fraction(0.8),
+            decimate_error: None,
+            keep_inside: None,
+            ..Self::new(particle_radius)
         }
     }
 
@@ -188,7 +203,7 @@ impl ReconstructSettings {
             Decimation::Off => None,
             Decimation::Adaptive => Some(DecimateOptions {
                 target_reduction: None,
-                max_error: Some(max_error.unwrap_or(ADAPTIVE_ERROR_RADII * r)),
+                max_error: Some(max_error.unwrap_or(DEFAULT_DECIMATION_ERROR * r)),
                 ..Default::default()
             }),
             Decimation::Fraction(f) => {
@@ -219,6 +234,11 @@ mod tests {
         let mut expected = ReconstructOptions::new(0.012);
         expected.tiles.memory_budget_bytes = crate::tiles::default_memory_budget();
         assert_eq!(ReconstructSettings::new(0.012).options().unwrap(), expected);
+        let mut paper = ReconstructOptions::paper(0.012);
+        paper.tiles.memory_budget_bytes = crate::tiles::default_memory_budget();
+        assert_eq!(ReconstructSettings::paper(0.012).options().unwrap(), paper);
+        assert_eq!(paper.field.kernel, Kernel::Isotropic);
+        assert_eq!(expected.field.kernel, Kernel::Anisotropic);
     }
 
     #[test]
@@ -244,6 +264,9 @@ mod tests {
         s.decimate = Decimation::Fraction(0.7);
         let d = s.options().unwrap().decimate.unwrap();
         assert_eq!((d.target_reduction, d.max_error), (Some(0.7), Some(0.1)));
+        s.decimate_error = None;
+        let d = s.options().unwrap().decimate.unwrap();
+        assert_eq!((d.target_reduction, d.max_error), (Some(0.7), None));
         s.decimate = Decimation::Off;
         assert_eq!(s.options().unwrap().decimate, None);
     }

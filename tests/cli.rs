@@ -1313,3 +1313,60 @@ fn shards_merged_are_byte_identical_to_one_run() {
     );
     assert!(!dir.path().join("twice.mseq").exists());
 }
+
+/// `--paper` is the paper's pipeline flag by flag, and a flag given beside it wins.
+#[test]
+fn the_paper_flag_is_the_papers_options() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dataset("double_dambreak/ParticleData_Fluid_6.xyz");
+    let mesh = |name: &str, flags: &[&str]| {
+        let out = dir.path().join(name);
+        let mut args = vec![
+            "reconstruct",
+            input.to_str().unwrap(),
+            "-r",
+            "0.025",
+            "-q",
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(flags);
+        let (ok, err) = run(&args);
+        assert!(ok, "{flags:?}: {err}");
+        std::fs::read(out).unwrap()
+    };
+    let paper = mesh("paper.ply", &["--paper"]);
+    let flags = mesh(
+        "flags.ply",
+        &[
+            "--kernel",
+            "isotropic",
+            "--particle-coverage",
+            "0",
+            "--decimate",
+            "0.8",
+            "--decimate-error",
+            "off",
+            "--keep-inside",
+            "off",
+        ],
+    );
+    assert!(paper == flags, "--paper differs from its flags");
+    assert!(mesh("default.ply", &[]) != paper);
+    let anisotropic = mesh("aniso.ply", &["--paper", "--kernel", "anisotropic"]);
+    assert!(anisotropic != paper);
+    let (ok, err) = run(&[
+        "reconstruct",
+        input.to_str().unwrap(),
+        "-r",
+        "0.025",
+        "-o",
+        dir.path().join("bad.ply").to_str().unwrap(),
+        "--decimate-error",
+        "most",
+    ]);
+    assert!(
+        !ok && err.contains("--decimate-error") && err.contains("\"most\""),
+        "{err}"
+    );
+}

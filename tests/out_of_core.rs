@@ -71,8 +71,9 @@ fn decimation_in_tiles_keeps_the_surface_closed_on_target_and_thread_independent
         assert!(stats.tiles.tiles >= 3, "{rel}: {:?}", stats.tiles);
         assert!(stats.tiles.spill_bytes >= 16 * positions.len() as u64);
         let d = stats.decimation.as_ref().expect("decimated in tiles");
+        let fraction = whole.decimate.as_ref().unwrap().target_reduction.unwrap();
         let target =
-            ((1.0 - 0.8f32 as f64) * stats.marching_cubes_triangles as f64).ceil() as usize;
+            ((1.0 - fraction as f64) * stats.marching_cubes_triangles as f64).ceil() as usize;
         // A collapse removes two triangles: one below the target at most.
         assert!(
             d.triangles_after + 1 >= target && d.triangles_after <= target + target / 50,

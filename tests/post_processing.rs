@@ -30,20 +30,24 @@ fn full_pipeline_keeps_every_frame_a_closed_manifold_and_reports_its_ratio() {
         )
         .collect();
     for (rel, r) in frames {
-        let (surface, stats) = reconstruct(&dataset(&rel), &ReconstructOptions::new(r)).unwrap();
+        let options = ReconstructOptions::new(r);
+        let fraction = options.decimate.as_ref().unwrap().target_reduction.unwrap() as f64;
+        let (surface, stats) = reconstruct(&dataset(&rel), &options).unwrap();
         let report = validate(&surface.fluid);
         assert!(report.is_closed_manifold(), "{rel}: {report:?}");
         assert!(surface.fluid.signed_volume() > 0.0, "{rel}");
         let d = stats.decimation.as_ref().unwrap();
-        // 80 % removed (up to collapses refused near the end), then ×4 by one Loop step.
+        // The fraction removed, up to collapses refused near the end and those past the
+        // error bound (double dam break 20's splash keeps 25 % instead of 19 %).
         let kept = d.triangles_after as f64 / d.triangles_before as f64;
         assert!(
-            (0.19..0.26).contains(&kept),
+            (1.0 - fraction - 0.01..1.0 - fraction + 0.08).contains(&kept),
             "{rel}: decimation kept {kept}"
         );
+        // ×4 by one Loop step.
         let ratio = surface.fluid.triangle_count() as f64 / stats.marching_cubes_triangles as f64;
         assert!(
-            (0.76..1.04).contains(&ratio),
+            (4.0 * kept - 0.01..4.0 * kept + 0.01).contains(&ratio),
             "{rel}: final/raw ratio {ratio}"
         );
         println!(

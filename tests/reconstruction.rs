@@ -16,8 +16,12 @@ fn dataset(rel: &str) -> Vec<Vec3> {
 }
 
 /// Field + marching cubes only (no decimation or subdivision), isolated spheres on.
+/// Field, marching cubes and spheres with the paper's (isotropic) field, which these
+/// tests describe.
 fn raw_options(r: f32) -> ReconstructOptions {
-    ReconstructOptions::raw(r)
+    let mut options = ReconstructOptions::raw(r);
+    options.field.kernel = meniscus::field::Kernel::Isotropic;
+    options
 }
 
 fn assert_closed_manifold(mesh: &TriMesh, what: &str) {

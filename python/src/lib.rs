@@ -626,6 +626,7 @@ fn meniscus_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(reconstruct_file, m)?)?;
     m.add_class::<archive::Archive>()?;
     m.add_function(wrap_pyfunction!(archive::merge_archives, m)?)?;
+    m.add("PAPER", options::paper(m.py())?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -35,6 +35,43 @@ pub const SETTINGS: &[&str] = &[
     "temp_dir",
 ];
 
+/// The keywords that turn the defaults into the pipeline of Akinci et al. 2013 exactly
+/// (`meniscus.PAPER`): where [`ReconstructSettings::paper`] differs from
+/// [`ReconstructSettings::new`].
+pub fn paper<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+    let (paper, defaults) = (
+        ReconstructSettings::paper(1.0),
+        ReconstructSettings::new(1.0),
+    );
+    // As written (0.8, not 0.800000011920929): an f32 prints as its shortest decimal.
+    let decimal = |x: f32| -> f64 { x.to_string().parse().expect("a float prints as one") };
+    let keywords = PyDict::new_bound(py);
+    if paper.kernel != defaults.kernel {
+        let kernel = match paper.kernel {
+            Kernel::Isotropic => "isotropic",
+            Kernel::Anisotropic => "anisotropic",
+        };
+        keywords.set_item("kernel", kernel)?;
+    }
+    if paper.particle_coverage != defaults.particle_coverage {
+        keywords.set_item("particle_coverage", decimal(paper.particle_coverage))?;
+    }
+    if paper.decimate != defaults.decimate {
+        match paper.decimate {
+            Decimation::Fraction(f) => keywords.set_item("decimate", decimal(f))?,
+            Decimation::Adaptive => keywords.set_item("decimate", "adaptive")?,
+            Decimation::Off => keywords.set_item("decimate", py.None())?,
+        }
+    }
+    if paper.decimate_error != defaults.decimate_error {
+        keywords.set_item("decimate_error", paper.decimate_error.map(decimal))?;
+    }
+    if paper.keep_inside != defaults.keep_inside {
+        keywords.set_item("keep_inside", paper.keep_inside.map(decimal))?;
+    }
+    Ok(keywords)
+}
+
 /// A function's `**options`, taken one by one; what is left at the end is an unexpected
 /// keyword (TypeError, as Python's own functions say it).
 pub struct Keywords<'py> {
@@ -124,7 +161,7 @@ pub fn settings(particle_radius: f32, keywords: &Keywords<'_>) -> PyResult<Recon
             }
         };
     }
-    // None turns these two off (absent: the default).
+    // None turns these off (absent: the default).
     if let Some(v) = keywords.take("isolated_spheres")? {
         s.isolated_spheres = match v.is_none() {
             true => None,
@@ -150,7 +187,12 @@ pub fn settings(particle_radius: f32, keywords: &Keywords<'_>) -> PyResult<Recon
             Decimation::Fraction(extract(&v, "decimate")?)
         };
     }
-    s.decimate_error = keywords.value("decimate_error")?;
+    if let Some(v) = keywords.take("decimate_error")? {
+        s.decimate_error = match v.is_none() {
+            true => None,
+            false => Some(extract(&v, "decimate_error")?),
+        };
+    }
     if let Some(v) = keywords.value("subdivide")? {
         s.subdivide = v;
     }

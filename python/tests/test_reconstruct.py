@@ -79,14 +79,19 @@ def test_write_formats(frame25, tmp_path, ext):
 @pytest.mark.parametrize(
     "options, flags",
     [
-        ({"t_low": 0.3, "t_high": 3.0}, ["--t-low", "0.3", "--t-high", "3.0"]),
+        # The concavity thresholds are the isotropic field's.
+        ({"kernel": "isotropic", "t_low": 0.3, "t_high": 3.0}, ["--kernel", "isotropic", "--t-low", "0.3", "--t-high", "3.0"]),
         ({"decimate": "adaptive"}, ["--decimate", "adaptive"]),
         ({"decimate": 0.5, "decimate_error": 0.05}, ["--decimate", "0.5", "--decimate-error", "0.05"]),
         ({"particle_coverage": 0.0, "iso_offset": 0.1}, ["--particle-coverage", "0", "--iso-offset", "0.1"]),
-        ({"kernel": "anisotropic"}, ["--kernel", "anisotropic"]),
-        ({"kernel": "anisotropic", "max_stretch": 2.0}, ["--kernel", "anisotropic", "--max-stretch", "2"]),
+        ({"kernel": "isotropic"}, ["--kernel", "isotropic"]),
+        ({"max_stretch": 2.0}, ["--max-stretch", "2"]),
+        (meniscus.PAPER, ["--paper"]),
+        # The bound holds decimation back at 0.9 on this frame: off is seen.
+        ({"decimate": 0.9, "decimate_error": None}, ["--decimate", "0.9", "--decimate-error", "off"]),
         ({"decimate": None, "subdivide": 2, "isolated_spheres": None}, ["--decimate", "off", "--subdivide", "2", "--isolated-spheres", "off"]),
-        ({"keep_inside": None}, ["--keep-inside", "off"]),
+        # Containment moves the isotropic surface of this frame (and not the default one).
+        ({"kernel": "isotropic", "keep_inside": None}, ["--kernel", "isotropic", "--keep-inside", "off"]),
         ({"keep_inside": 0.5}, ["--keep-inside", "0.5"]),
         ({"tile_size": 16, "memory_budget": "1GiB", "temp_dir": "TMP"}, ["--tile-size", "16", "--memory-budget", "1GiB", "--temp-dir", "TMP"]),
     ],

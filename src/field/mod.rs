@@ -52,9 +52,11 @@ pub struct FieldOptions {
     pub influence_radius: f32,
     /// Marching-cubes cell edge `h` in multiples of `r`. Default 1.
     pub cell_size: f32,
-    /// Lower eigenvalue threshold `t_low` of the concavity factor. Default 0.4.
+    /// Lower eigenvalue threshold `t_low` of the concavity factor ([`Kernel::Isotropic`]).
+    /// Default 0.4.
     pub t_low: f32,
-    /// Upper eigenvalue threshold `t_high` of the concavity factor. Default 3.5.
+    /// Upper eigenvalue threshold `t_high` of the concavity factor ([`Kernel::Isotropic`]).
+    /// Default 3.5.
     pub t_high: f32,
     /// Coverage radius `c`, multiples of `r`. The Solenthaler surface retreats inside
     /// particles at sharp convex corners and in one-particle films (`f → 0` there). A
@@ -76,7 +78,9 @@ pub struct FieldOptions {
     /// paper's).
     #[serde(default)]
     pub iso_offset: f32,
-    /// Which kernel the field sums. Default [`Kernel::Isotropic`] (the paper's).
+    /// Which kernel the field sums. Default [`Kernel::Isotropic`] (the paper's); the
+    /// pipeline's default ([`crate::pipeline::ReconstructOptions::new`]) is
+    /// [`Kernel::Anisotropic`].
     #[serde(default)]
     pub kernel: Kernel,
     /// Parameters of [`Kernel::Anisotropic`].
@@ -97,7 +101,8 @@ pub enum Kernel {
 }
 
 impl FieldOptions {
-    /// The defaults of the paper for a given particle radius (world units).
+    /// The paper's field for a given particle radius (world units), with coverage balls of
+    /// 0.9 r.
     pub fn new(particle_radius: f32) -> Self {
         FieldOptions {
             particle_radius,
