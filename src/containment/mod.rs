@@ -290,7 +290,7 @@ pub(crate) fn contain_centres(
                 },
             };
             let mut gather = |ps: &[Vec3], is: &[u32]| {
-                found.extend(measure_centres(&index, &isolated, depth, r, aim, ps, is));
+                found.extend(measure_centres(&index, &isolated, depth, r, ps, is));
             };
             if full_round {
                 // Every centre of the slab.
@@ -316,12 +316,14 @@ pub(crate) fn contain_centres(
                     again.iter().map(|w| (w.particle, w.position)).unzip();
                 gather(&ps, &is);
             }
+            settle(&index, &mut found, depth, r, aim);
             slots = surface.into_slots();
         }
         let Found {
             near,
             mut shallow,
             watched,
+            ..
         } = found;
         if full_round {
             // Those that a push could bring too close are watched after.
@@ -385,6 +387,8 @@ struct Found {
     shallow: Vec<Shallow>,
     /// Centres within r of that.
     watched: Vec<Watched>,
+    /// Centres whose probe found them too shallow, to be confirmed ([`settle`]).
+    pending: Vec<(u32, Vec3, Probe)>,
 }
 
 impl Found {
@@ -392,28 +396,23 @@ impl Found {
         self.near += other.near;
         self.shallow.extend(other.shallow);
         self.watched.extend(other.watched);
+        self.pending.extend(other.pending);
     }
 }
 
 /// Measures the centres `ps` (particle indices `is`) against `index`, in parallel,
-/// skipping those at the positions of `isolated`: shallower than `depth` (world units)
-/// they are pushed to `aim`, within `r` of that they are watched.
+/// skipping those at the positions of `isolated`: those shallower than `depth` (world
+/// units) are left to [`settle`], those within `r` of that are watched.
 fn measure_centres(
     index: &SurfaceIndex,
     isolated: &HashSet<[u32; 3]>,
     depth: f64,
     r: f64,
-    aim: f64,
     ps: &[Vec3],
     is: &[u32],
 ) -> Found {
-    let watched = |probe: &Probe| probe.signed_distance > -(depth + r);
-    let shallow = |probe: &Probe| probe.signed_distance > -depth + TOLERANCE * r;
-    // Every centre's probe: those within r of being too shallow are watched, those too
-    // shallow kept to be confirmed.
-    let probe = |ps: &[Vec3], is: &[u32]| {
+    let measure = |ps: &[Vec3], is: &[u32]| {
         let mut found = Found::default();
-        let mut pending = Vec::new();
         for (&p, &i) in ps.iter().zip(is) {
             let Some(probe) = index.probe(p.as_dvec3()) else {
                 continue;
@@ -422,9 +421,9 @@ fn measure_centres(
                 continue;
             }
             found.near += 1;
-            if shallow(&probe) {
-                pending.push((i, p, probe));
-            } else if watched(&probe) {
+            if shallow(&probe, depth, r) {
+                found.pending.push((i, p, probe));
+            } else if probe.signed_distance > -(depth + r) {
                 found.watched.push(Watched {
                     particle: i,
                     position: p,
@@ -432,35 +431,45 @@ fn measure_centres(
                 });
             }
         }
-        (found, pending)
+        found
     };
-    let parts: Vec<_> = ps
+    let parts: Vec<Found> = ps
         .par_chunks(PROBE_CHUNK)
         .zip(is.par_chunks(PROBE_CHUNK))
-        .map(|(ps, is)| probe(ps, is))
+        .map(|(ps, is)| measure(ps, is))
         .collect();
     let mut found = Found::default();
-    let mut pending = Vec::new();
-    for (part, more) in parts {
+    for part in parts {
         found.extend(part);
-        pending.extend(more);
     }
-    // Those a push would move are measured again over every triangle that may pass
-    // nearer (`SurfaceIndex::confirm`).
+    found
+}
+
+/// Whether a centre at `probe` is to be pushed: less than `depth` under the surface.
+fn shallow(probe: &Probe, depth: f64, r: f64) -> bool {
+    probe.signed_distance > -depth + TOLERANCE * r
+}
+
+/// Measures the centres of `found.pending` again over every triangle that may pass nearer
+/// than their probes found (`SurfaceIndex::confirm`; once per slab, as it reads all of
+/// the slab's triangles), and files them: too shallow they are pushed to `aim`, within
+/// `r` of that they are watched.
+fn settle(index: &SurfaceIndex, found: &mut Found, depth: f64, r: f64, aim: f64) {
+    let pending = std::mem::take(&mut found.pending);
     let mut probes: Vec<(DVec3, Probe)> = pending
         .iter()
         .map(|&(_, p, probe)| (p.as_dvec3(), probe))
         .collect();
     index.confirm(&mut probes);
     for ((i, p, _), (_, probe)) in pending.into_iter().zip(probes) {
-        if watched(&probe) {
+        if probe.signed_distance > -(depth + r) {
             found.watched.push(Watched {
                 particle: i,
                 position: p,
                 parent: probe.control_triangle,
             });
         }
-        if shallow(&probe) {
+        if shallow(&probe, depth, r) {
             found.shallow.push(Shallow {
                 particle: i,
                 push: probe.normal * (probe.signed_distance + aim),
@@ -469,7 +478,6 @@ fn measure_centres(
             });
         }
     }
-    found
 }
 
 /// Moves the control vertices by `push` (sorted by vertex), halving the pushes around
