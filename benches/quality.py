@@ -5,7 +5,10 @@ independent ruler meshq.py (not part of this repository; its venv needs numpy, s
 trimesh).
 
     python3 benches/quality.py --meshq ../shared/eval/meshq.py --python /path/to/venv/bin/python \
-        [--binary target/release/meniscus] [--kernels isotropic anisotropic] [--out table.md]
+        [--binary target/release/meniscus] [--runs default isotropic paper] [--out table.md]
+
+Runs: `default` (the defaults: anisotropic kernels), `isotropic` (`--kernel isotropic`, the
+other defaults), `paper` (`--paper`: the pipeline of Akinci et al. 2013 exactly).
 
 Splash frames are made with `examples/tile_scene` (`cargo build --release --example
 tile_scene`). Times are the CLI's own stage total (one run; for comparisons only within
@@ -20,6 +23,8 @@ import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DATA = os.path.join(ROOT, "datasets")
+
+RUNS = {"default": [], "isotropic": ["--kernel", "isotropic"], "paper": ["--paper"]}
 
 ANALYTIC = {
     "sphere": ["--sphere", "0,0,0,0.5"],
@@ -53,18 +58,18 @@ def main():
     ap.add_argument("--python", default=sys.executable, help="python with meshq's dependencies")
     ap.add_argument("--binary", default=os.path.join(ROOT, "target", "release", "meniscus"))
     ap.add_argument("--tile-scene", default=os.path.join(ROOT, "target", "release", "examples", "tile_scene"))
-    ap.add_argument("--kernels", nargs="+", default=["isotropic", "anisotropic"])
+    ap.add_argument("--runs", nargs="+", default=list(RUNS), choices=list(RUNS))
     ap.add_argument("--out")
     args = ap.parse_args()
-    rows = ["| case | kernel | triangles | flat bumpiness [r] | normal error [°] | volume | mean \\|d − r\\| [r] | depth bias [r] | centres outside | time [ms] |",
+    rows = ["| case | run | triangles | flat bumpiness [r] | normal error [°] | volume | mean \\|d − r\\| [r] | depth bias [r] | centres outside | time [ms] |",
             "|---|---|---|---|---|---|---|---|---|---|"]
     with tempfile.TemporaryDirectory() as tmp:
         for name, path, r, ref in cases(tmp, args.tile_scene):
-            for kernel in args.kernels:
+            for run in args.runs:
                 mesh = os.path.join(tmp, "m.ply")
                 stats = os.path.join(tmp, "s.json")
                 subprocess.run([args.binary, "reconstruct", path, "-r", str(r), "-o", mesh, "--quiet",
-                                "--kernel", kernel, "--stats", stats], check=True)
+                                *RUNS[run], "--stats", stats], check=True)
                 q = json.loads(subprocess.run([args.python, args.meshq, mesh, "--particles", path, "-r", str(r),
                                                "--json", *ref], check=True, capture_output=True, text=True).stdout)
                 rec = json.load(open(stats))["frames"][0]["reconstruction"]
@@ -73,7 +78,7 @@ def main():
                 refq = q.get("reference") or {}
                 nerr = f"{refq['normal_error']['mean_deg']:.2f}" if refq else "–"
                 vol = f"{100 * refq['volume']['rel_error']:+.2f} %" if refq else "–"
-                row = (f"| {name} | {kernel} | {q['size']['triangles']} | "
+                row = (f"| {name} | {run} | {q['size']['triangles']} | "
                        f"{q['smoothness']['bumpiness']['flat_bumpiness_median_r']:.4f} | {nerr} | {vol} | "
                        f"{p['surface_abs_dev_mean_r']:.3f} | {p['surface_depth_bias_r']:+.3f} | "
                        f"{p['outside_count']} | {ms:.0f} |")
