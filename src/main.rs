@@ -539,15 +539,18 @@ fn archive(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<()
     Ok(())
 }
 
-fn parse_level(value: &str, option: &str) -> Result<Option<u32>, Failure> {
+/// A flag's value that is `off` (or `none`) or a `T`, which the message names as `what`.
+fn parse_or_off<T: std::str::FromStr>(
+    value: &str,
+    option: &str,
+    what: &str,
+) -> Result<Option<T>, Failure> {
     match value {
         "off" | "none" => Ok(None),
-        v => v.parse().map(Some).map_err(|_| {
-            Failure::option(
-                option,
-                format!("takes a level (0, 1, 2, ...) or `off`, got {v:?}"),
-            )
-        }),
+        v => v
+            .parse()
+            .map(Some)
+            .map_err(|_| Failure::option(option, format!("takes {what} or `off`, got {v:?}"))),
     }
 }
 
@@ -581,33 +584,25 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, Failure> {
         max_stretch: args.max_stretch,
         min_neighbours: args.min_neighbours,
         centre_smoothing: args.centre_smoothing,
-        isolated_spheres: parse_level(&args.isolated_spheres, "--isolated-spheres")?,
+        isolated_spheres: parse_or_off(
+            &args.isolated_spheres,
+            "--isolated-spheres",
+            "a level (0, 1, 2, ...)",
+        )?,
         decimate: match &args.decimate {
             None => base.decimate,
             Some(text) => text.parse().map_err(|e| Failure::option("--decimate", e))?,
         },
-        decimate_error: match args.decimate_error.as_deref() {
+        decimate_error: match &args.decimate_error {
             None => base.decimate_error,
-            Some("off") => None,
-            Some(v) => Some(v.parse().map_err(|_| {
-                Failure::option(
-                    "--decimate-error",
-                    format!("takes a bound (multiples of r) or `off`, got {v:?}"),
-                )
-            })?),
+            Some(v) => parse_or_off(v, "--decimate-error", "a bound (multiples of r)")?,
         },
         subdivide: args.subdivide,
         // A `.mseq` output defers it by itself (see `job`).
         defer_subdivision: false,
-        keep_inside: match args.keep_inside.as_deref() {
+        keep_inside: match &args.keep_inside {
             None => base.keep_inside,
-            Some("off") => None,
-            Some(v) => Some(v.parse().map_err(|_| {
-                Failure::option(
-                    "--keep-inside",
-                    format!("takes a depth (multiples of r) or `off`, got {v:?}"),
-                )
-            })?),
+            Some(v) => parse_or_off(v, "--keep-inside", "a depth (multiples of r)")?,
         },
         tile_size: args.tile_size,
         memory_budget: match &args.memory_budget {
