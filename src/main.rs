@@ -713,6 +713,17 @@ fn reconstruct(
                     )
                 });
             }
+            let contained = report.reconstruction.containment.as_ref();
+            if let Some(left) = contained.map(|c| c.remaining).filter(|&n| n > 0) {
+                bar.suspend(|| {
+                    eprintln!(
+                        "warning: {}: {left} particle centres stay less than the keep-inside \
+                         depth under the surface (decimation folded it where containment \
+                         could not tell its side)",
+                        report.input.display()
+                    )
+                });
+            }
             if !args.quiet && plan.len() == 1 {
                 bar.suspend(|| eprint!("{}", report.reconstruction.table()));
             }

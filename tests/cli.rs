@@ -1370,3 +1370,57 @@ fn the_paper_flag_is_the_papers_options() {
         "{err}"
     );
 }
+
+#[path = "support/splash.rs"]
+mod splash;
+
+/// Centres containment could not bring under the surface (unbounded decimation folds a
+/// violent splash's sheets) draw a warning, exactly when the statistics count some.
+#[test]
+fn centres_left_shallow_are_warned_about() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut positions = meniscus::io::particles::read_particles(
+        &dataset("dambreak_small/ParticleData_Fluid_1.xyz"),
+        None,
+    )
+    .unwrap()
+    .positions;
+    splash::splash(&mut positions);
+    let input = dir.path().join("splash.xyz");
+    let bytes: Vec<u8> = positions
+        .iter()
+        .flat_map(|p| p.to_array())
+        .flat_map(f32::to_le_bytes)
+        .collect();
+    std::fs::write(&input, bytes).unwrap();
+    let mut warned_once = false;
+    for bound in ["0.1", "off"] {
+        let stats = dir.path().join("s.json");
+        let (ok, err) = run(&[
+            "reconstruct",
+            input.to_str().unwrap(),
+            "-r",
+            "0.012",
+            "-q",
+            "-o",
+            dir.path().join("s.ply").to_str().unwrap(),
+            "--decimate",
+            "0.9",
+            "--decimate-error",
+            bound,
+            "--stats",
+            stats.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        let json: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+        let left = json["frames"][0]["reconstruction"]["containment"]["remaining"]
+            .as_u64()
+            .unwrap();
+        let warned = err.contains("particle centres stay less than the keep-inside depth");
+        assert_eq!(warned, left > 0, "bound {bound}: {left} left, stderr {err}");
+        warned_once |= warned;
+    }
+    // Unbounded, this splash leaves some (so the warning is seen at all).
+    assert!(warned_once);
+}
