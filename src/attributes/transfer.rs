@@ -472,7 +472,15 @@ mod tests {
             ..TileOptions::default()
         };
         let cancel = CancelToken::new();
-        let plan = plan_tiles(particles, &field, &options, 0.0, false, &cancel).unwrap();
+        let plan = plan_tiles(
+            particles,
+            &field,
+            &options,
+            crate::tiles::OutputCost::NONE,
+            false,
+            &cancel,
+        )
+        .unwrap();
         assert_eq!(plan.is_tiled(), tile.is_some());
         let layout = particles.attribute_layout();
         let store = ParticleStore::build(particles.clone(), &plan, None, &cancel).unwrap();

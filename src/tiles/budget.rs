@@ -119,40 +119,79 @@ impl SceneShape {
     }
 }
 
-/// Memory the surface needs after the tiles (the post-processing's peak), bytes per
-/// marching-cubes triangle, for decimation removing `reduction` of the triangles (`None`:
-/// no decimation; an error-bounded run counts as 0.8), the containment stage when
+/// Memory the surface needs after the tiles (the post-processing's peak), per
+/// marching-cubes triangle, and the stage whose peak it is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct OutputCost {
+    /// Bytes per marching-cubes triangle.
+    pub(crate) bytes_per_triangle: f64,
+    /// What a smaller setting of would lower the peak, as the message advises it.
+    advice: &'static str,
+}
+
+impl OutputCost {
+    /// No memory after the tiles (for tests of the tiles alone).
+    #[cfg(test)]
+    pub(crate) const NONE: OutputCost = OutputCost {
+        bytes_per_triangle: 0.0,
+        advice: "",
+    };
+}
+
+/// The [`OutputCost`] of decimation removing `reduction` of the triangles (`None`: no
+/// decimation; an error-bounded run counts as 0.8), the containment stage when
 /// `containment`, and `subdivide_levels` Loop steps.
 pub(crate) fn output_bytes_per_triangle(
     reduction: Option<f32>,
     containment: bool,
     subdivide_levels: u32,
-) -> f64 {
+) -> OutputCost {
     let mut triangles = 1.0;
     // Without decimation the block surfaces (≈ 20 B per triangle) and the stitched mesh
     // (≈ 18 B) exist together.
-    let mut peak: f64 = match reduction {
-        None => triangles * 38.0,
+    let mut peak = match reduction {
+        None => (triangles * 38.0, "decimation (decimate)"),
         Some(f) => {
             triangles *= 1.0 - f.clamp(0.0, 1.0) as f64;
-            triangles * MESH_BYTES_PER_TRIANGLE
+            (
+                triangles * MESH_BYTES_PER_TRIANGLE,
+                "more decimation (decimate)",
+            )
+        }
+    };
+    let mut raise = |bytes: f64, advice| {
+        if bytes > peak.0 {
+            peak = (bytes, advice);
         }
     };
     if containment {
-        peak = peak.max(triangles * CONTAINMENT_BYTES_PER_INPUT_TRIANGLE);
+        raise(
+            triangles * CONTAINMENT_BYTES_PER_INPUT_TRIANGLE,
+            "containment off (keep_inside)",
+        );
     }
     for _ in 0..subdivide_levels {
-        peak = peak.max(triangles * SUBDIVISION_BYTES_PER_INPUT_TRIANGLE);
+        raise(
+            triangles * SUBDIVISION_BYTES_PER_INPUT_TRIANGLE,
+            "fewer subdivision steps (subdivide)",
+        );
         triangles *= 4.0;
     }
-    peak.max(triangles * MESH_BYTES_PER_TRIANGLE)
+    raise(
+        triangles * MESH_BYTES_PER_TRIANGLE,
+        "fewer subdivision steps (subdivide)",
+    );
+    OutputCost {
+        bytes_per_triangle: peak.0,
+        advice: peak.1,
+    }
 }
 
 /// Picks the tile edge in blocks (`None`: one tile) and estimates the run's peak memory.
 pub(super) fn choose_tile_blocks(
     block_counts: &HashMap<BlockKey, u64>,
     reach: i32,
-    output_bytes_per_triangle: f64,
+    output_cost: OutputCost,
     payload_width: usize,
     kernel_bytes_per_particle: u64,
     decimated_in_tiles: bool,
@@ -170,7 +209,7 @@ pub(super) fn choose_tile_blocks(
     let kept = if payload > 0 { 12 + 2 * payload } else { 0 };
     let output = BASE_BYTES
         + (particles * POST_TILES_BYTES_PER_PARTICLE).min(POST_TILES_MAX_BYTES)
-        + (triangles * output_bytes_per_triangle) as u64;
+        + (triangles * output_cost.bytes_per_triangle) as u64;
     let produced = BASE_BYTES
         + (triangles
             * if decimated_in_tiles {
@@ -222,9 +261,10 @@ pub(super) fn choose_tile_blocks(
             return Err(Error::MemoryBudget {
                 budget_mib: mib(budget),
                 message: format!(
-                    "the process and the surface of {particles} particles (≈ {:.1} M triangles before decimation) need ≈ {} MiB after the tiles (decimation, containment and subdivision): a larger budget, fewer subdivision steps or containment off (keep_inside) would fit",
+                    "the process and the surface of {particles} particles (≈ {:.1} M triangles before decimation) need ≈ {} MiB after the tiles (decimation, containment and subdivision): a larger budget or {} would fit",
                     triangles / 1e6,
-                    mib(output)
+                    mib(output),
+                    output_cost.advice
                 ),
             });
         }
@@ -366,6 +406,20 @@ mod tests {
         let spray = SceneShape::of(&lattice(6, 2, 10));
         assert_eq!(spray.surface_blocks, 216);
         assert!(spray.marching_cubes_triangles() > solid.marching_cubes_triangles());
+    }
+
+    /// The budget message advises the setting of the stage that sets the peak.
+    #[test]
+    fn the_advice_names_the_stage_with_the_peak() {
+        let advice = |r, c, l| output_bytes_per_triangle(r, c, l).advice;
+        assert!(advice(Some(0.81), true, 1).contains("subdivi"));
+        assert!(advice(Some(0.81), true, 0).contains("containment"));
+        assert!(advice(Some(0.81), false, 0).contains("decimat"));
+        assert!(advice(None, false, 0).contains("decimat"));
+        // Containment below subdivision: turning it off would not help a subdivided run.
+        let with = output_bytes_per_triangle(Some(0.81), true, 1);
+        let without = output_bytes_per_triangle(Some(0.81), false, 1);
+        assert_eq!(with.bytes_per_triangle, without.bytes_per_triangle);
     }
 
     #[test]

@@ -84,13 +84,13 @@ const COUNT_PIECE: usize = 1 << 14;
 
 /// Checks every position of `source`, counts particles per home block and plans the
 /// tiles: the memory budget of `tile_options` picks their size, counting
-/// `output_bytes_per_triangle` for the surface after the tiles, per marching-cubes triangle
-/// ([`super::output_bytes_per_triangle`]) and the payload the source carries.
+/// `output_cost` for the surface after the tiles ([`super::output_bytes_per_triangle`])
+/// and the payload the source carries.
 pub(crate) fn plan_tiles<S: ParticleSource + ?Sized>(
     source: &S,
     field_options: &FieldOptions,
     tile_options: &TileOptions,
-    output_bytes_per_triangle: f64,
+    output_cost: super::OutputCost,
     decimated_in_tiles: bool,
     cancel: &CancelToken,
 ) -> Result<TilePlan> {
@@ -138,7 +138,7 @@ pub(crate) fn plan_tiles<S: ParticleSource + ?Sized>(
     let (tile_blocks, estimated_peak_bytes) = choose_tile_blocks(
         &block_counts,
         reach,
-        output_bytes_per_triangle,
+        output_cost,
         payload_width,
         match field_options.kernel {
             crate::field::Kernel::Isotropic => 0,
