@@ -247,22 +247,10 @@ impl SurfaceIndex<'_> {
         let mut coarse: HashSet<[i32; 3]> = HashSet::new();
         for (k, (p, probe)) in probes.iter().enumerate() {
             let rad = DVec3::splat(reach(probe));
-            let (lo, hi) = (key(*p - rad), key(*p + rad));
-            for z in lo.z..=hi.z {
-                for y in lo.y..=hi.y {
-                    for x in lo.x..=hi.x {
-                        grid.entry([x, y, z]).or_default().push(k as u32);
-                    }
-                }
+            for c in cells_between(key(*p - rad), key(*p + rad)) {
+                grid.entry(c).or_default().push(k as u32);
             }
-            let (lo, hi) = (coarse_key(*p - rad), coarse_key(*p + rad));
-            for z in lo.z..=hi.z {
-                for y in lo.y..=hi.y {
-                    for x in lo.x..=hi.x {
-                        coarse.insert([x, y, z]);
-                    }
-                }
-            }
+            coarse.extend(cells_between(coarse_key(*p - rad), coarse_key(*p + rad)));
         }
         // (centre, control triangle) wherever the triangle's box is within reach.
         let mut pairs: Vec<(u32, u32)> = self
@@ -277,20 +265,12 @@ impl SurfaceIndex<'_> {
                     if a == b && !coarse.contains(&a.to_array()) {
                         continue;
                     }
-                    let (a, b) = (key(lo), key(hi));
-                    for z in a.z..=b.z {
-                        for y in a.y..=b.y {
-                            for x in a.x..=b.x {
-                                let Some(near) = grid.get(&[x, y, z]) else {
-                                    continue;
-                                };
-                                for &k in near {
-                                    let (p, probe) = &probes[k as usize];
-                                    let gap = (lo - *p).max(*p - hi).max(DVec3::ZERO);
-                                    if gap.length() <= reach(probe) {
-                                        out.push((k, t));
-                                    }
-                                }
+                    for c in cells_between(key(lo), key(hi)) {
+                        for &k in grid.get(&c).map_or(&[][..], Vec::as_slice) {
+                            let (p, probe) = &probes[k as usize];
+                            let gap = (lo - *p).max(*p - hi).max(DVec3::ZERO);
+                            if gap.length() <= reach(probe) {
+                                out.push((k, t));
                             }
                         }
                     }
@@ -431,6 +411,12 @@ impl SurfaceIndex<'_> {
 fn floor(v: DVec3) -> glam::IVec3 {
     let t = v.as_ivec3(); // towards zero
     t - glam::IVec3::from(v.cmplt(t.as_dvec3())).abs()
+}
+
+/// The cells from `lo` to `hi`, both included, x fastest.
+fn cells_between(lo: glam::IVec3, hi: glam::IVec3) -> impl Iterator<Item = [i32; 3]> {
+    (lo.z..=hi.z)
+        .flat_map(move |z| (lo.y..=hi.y).flat_map(move |y| (lo.x..=hi.x).map(move |x| [x, y, z])))
 }
 
 /// A cell's block and its index inside the block (blocks of 8³ cells: shifts and masks,

@@ -398,6 +398,17 @@ impl Found {
         self.watched.extend(other.watched);
         self.pending.extend(other.pending);
     }
+
+    /// Watches centre `i` at `p` if its `probe` lies within `r` of being too shallow.
+    fn watch(&mut self, i: u32, p: Vec3, probe: &Probe, depth: f64, r: f64) {
+        if probe.signed_distance > -(depth + r) {
+            self.watched.push(Watched {
+                particle: i,
+                position: p,
+                parent: probe.control_triangle,
+            });
+        }
+    }
 }
 
 /// Measures the centres `ps` (particle indices `is`) against `index`, in parallel,
@@ -423,12 +434,8 @@ fn measure_centres(
             found.near += 1;
             if shallow(&probe, depth, r) {
                 found.pending.push((i, p, probe));
-            } else if probe.signed_distance > -(depth + r) {
-                found.watched.push(Watched {
-                    particle: i,
-                    position: p,
-                    parent: probe.control_triangle,
-                });
+            } else {
+                found.watch(i, p, &probe, depth, r);
             }
         }
         found
@@ -462,13 +469,7 @@ fn settle(index: &SurfaceIndex, found: &mut Found, depth: f64, r: f64, aim: f64)
         .collect();
     index.confirm(&mut probes);
     for ((i, p, _), (_, probe)) in pending.into_iter().zip(probes) {
-        if probe.signed_distance > -(depth + r) {
-            found.watched.push(Watched {
-                particle: i,
-                position: p,
-                parent: probe.control_triangle,
-            });
-        }
+        found.watch(i, p, &probe, depth, r);
         if shallow(&probe, depth, r) {
             found.shallow.push(Shallow {
                 particle: i,
