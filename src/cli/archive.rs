@@ -1,0 +1,240 @@
+//! `meniscus archive`: inspect, check, extract from, fill and merge `.mseq` mesh-sequence
+//! archives.
+
+use crate::{Failure, FarmArgs};
+use clap::Subcommand;
+use meniscus::archive::{ArchiveOptions, ArchiveReader, ArchiveWriter};
+use meniscus::io::mesh::{read_mesh, MeshWriteOptions};
+use std::path::PathBuf;
+
+#[derive(Subcommand)]
+pub(crate) enum ArchiveCommand {
+    /// Summary: frames, triangles, bytes, bytes per triangle.
+    Info {
+        /// The archive.
+        file: PathBuf,
+    },
+    /// One line per frame.
+    List {
+        /// The archive.
+        file: PathBuf,
+    },
+    /// Decode every frame and check its checksum; non-zero exit when one is damaged.
+    Verify {
+        /// The archive.
+        file: PathBuf,
+    },
+    /// Write one frame, or every frame, as .glb, .gltf, .ply, .obj or .vtk.
+    Extract {
+        /// The archive.
+        file: PathBuf,
+        /// Frame number; without it every frame is written (OUTPUT needs a `{}`).
+        #[arg(long, allow_negative_numbers = true)]
+        frame: Option<i64>,
+        /// Output mesh file; `{}` stands for the frame number.
+        #[arg(short, long)]
+        output: String,
+    },
+    /// Join archives (one per farm task, say) into one, frames in increasing order,
+    /// records copied as they are: the same bytes as one run writing every frame.
+    Merge {
+        /// The archives to join (each frame in exactly one, one error bound for all).
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// The merged archive; written whole under a temporary name, then renamed.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// Pack existing mesh files (`{}` pattern; PLY, OBJ, glTF) into an archive.
+    Pack {
+        /// Mesh files, a pattern with `{}` for the frame number.
+        input: String,
+        /// The archive to create or append to.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Error bound, world units (each coordinate within it), as `archive info` prints
+        /// it; appending needs the archive's own. Required: meshes carry no particle radius.
+        #[arg(long, allow_negative_numbers = true, alias = "error-bound-world")]
+        error_bound: f64,
+        /// Error bound of the meshes' vertex attributes, in each attribute's own units.
+        #[arg(allow_negative_numbers = true, long, default_value_t = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND)]
+        attribute_error_bound: f64,
+        /// First frame (inclusive).
+        #[arg(long, allow_negative_numbers = true)]
+        start: Option<i64>,
+        /// Last frame (inclusive).
+        #[arg(long, allow_negative_numbers = true)]
+        end: Option<i64>,
+        #[command(flatten)]
+        farm: FarmArgs,
+    },
+}
+
+/// Runs one `meniscus archive` subcommand.
+pub(crate) fn archive(
+    command: ArchiveCommand,
+    cancel: &meniscus::CancelToken,
+) -> Result<(), Failure> {
+    let text = Failure::from;
+    match command {
+        ArchiveCommand::Info { file } => {
+            let r = ArchiveReader::open(&file).map_err(text)?;
+            let bytes = std::fs::metadata(&file)
+                .map_err(|e| text(meniscus::Error::io(&file, e)))?
+                .len();
+            let triangles: u64 = r.frames().iter().map(|f| f.triangles as u64).sum();
+            println!(
+                "{}: {} frames, {} triangles, {} bytes, {:.3} bytes/triangle{}",
+                file.display(),
+                r.frames().len(),
+                triangles,
+                bytes,
+                bytes as f64 / triangles.max(1) as f64,
+                if r.recovered_by_scan() {
+                    " (no index: recovered by scanning)"
+                } else {
+                    ""
+                }
+            );
+            if let (Some(first), Some(last)) = (r.frames().first(), r.frames().last()) {
+                println!(
+                    "frames {} .. {}, error bound {} (world units)",
+                    first.number,
+                    last.number,
+                    first.step / 2.0
+                );
+            }
+            for f in r.frames().iter().filter(|f| !f.attributes.is_empty()) {
+                let names: Vec<String> = f
+                    .attributes
+                    .iter()
+                    .map(|a| format!("{} ({} × {:?})", a.name, a.components, a.target))
+                    .collect();
+                println!(
+                    "frame {}: attributes {}, error bound {}",
+                    f.number,
+                    names.join(", "),
+                    f.attribute_error_bound.unwrap_or(0.0)
+                );
+            }
+        }
+        ArchiveCommand::List { file } => {
+            let r = ArchiveReader::open(&file).map_err(text)?;
+            println!(
+                "{:>8} {:>10} {:>10} {:>12}",
+                "frame", "vertices", "triangles", "bytes"
+            );
+            for f in r.frames() {
+                println!(
+                    "{:>8} {:>10} {:>10} {:>12}",
+                    f.number,
+                    f.vertices,
+                    f.triangles,
+                    f.payload_bytes + 48
+                );
+            }
+        }
+        ArchiveCommand::Verify { file } => {
+            let r = ArchiveReader::open(&file).map_err(text)?;
+            let v = r.verify();
+            for (n, why) in &v.damaged {
+                println!("frame {n}: DAMAGED: {why}");
+            }
+            for why in &v.damage {
+                println!("DAMAGED: {why}");
+            }
+            println!(
+                "{} frames good, {} damaged{}{}",
+                v.good.len(),
+                v.damaged.len(),
+                if v.recovered_by_scan {
+                    ", index missing (interrupted write): recovered by scanning"
+                } else {
+                    ""
+                },
+                if v.trailing_bytes > 0 {
+                    format!(
+                        ", {} trailing bytes of an incomplete frame",
+                        v.trailing_bytes
+                    )
+                } else {
+                    String::new()
+                }
+            );
+            if !v.is_clean() {
+                return Err(Failure::Run(format!(
+                    "{}: damaged: {} damaged frame(s), {} other problem(s)",
+                    file.display(),
+                    v.damaged.len(),
+                    v.damage.len()
+                )));
+            }
+        }
+        ArchiveCommand::Extract {
+            file,
+            frame,
+            output,
+        } => {
+            let r = ArchiveReader::open(&file).map_err(text)?;
+            let numbers = frame.map(|n| vec![n]);
+            let written = r
+                .extract(
+                    numbers.as_deref(),
+                    &output,
+                    &MeshWriteOptions::default(),
+                    cancel,
+                )
+                .map_err(text)?;
+            if frame.is_none() {
+                eprintln!("{} frame(s) written", written.len());
+            }
+        }
+        ArchiveCommand::Merge { inputs, output } => {
+            let stats = meniscus::archive::merge(&inputs, &output).map_err(text)?;
+            eprintln!(
+                "{} frame(s) from {} archive(s) merged into {} ({} bytes)",
+                stats.frames,
+                stats.inputs,
+                output.display(),
+                stats.bytes
+            );
+        }
+        ArchiveCommand::Pack {
+            input,
+            output,
+            error_bound,
+            attribute_error_bound,
+            start,
+            end,
+            farm,
+        } => {
+            let frames =
+                meniscus::sequence::choose(&input, &farm.choice(start, end)).map_err(text)?;
+            let options = ArchiveOptions {
+                attribute_error_bound,
+                ..ArchiveOptions::new(error_bound)
+            };
+            let mut w = if output.exists() {
+                // Frames it holds are refused before it is touched.
+                let numbers: Vec<i64> = frames.iter().map(|f| f.number).collect();
+                ArchiveReader::open(&output)
+                    .and_then(|r| r.check_new_frames(&numbers))
+                    .map_err(text)?;
+                ArchiveWriter::open_append(&output, &options)
+            } else {
+                ArchiveWriter::create(&output, &options)
+            }
+            .map_err(text)?;
+            // On an error or a Ctrl-C (checked between frames) the writer, dropped, still
+            // writes the index of the frames packed so far.
+            for f in &frames {
+                cancel.check().map_err(text)?;
+                let mesh = read_mesh(&f.input).map_err(text)?;
+                w.append(f.number, &mesh).map_err(text)?;
+            }
+            w.finish().map_err(text)?;
+            eprintln!("{} frame(s) packed into {}", frames.len(), output.display());
+        }
+    }
+    Ok(())
+}
