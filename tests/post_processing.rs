@@ -309,18 +309,22 @@ fn on_the_sphere_post_processing_stays_as_close_as_marching_cubes() {
 fn an_error_bound_beats_the_fixed_fraction_on_the_box() {
     // The adaptive rule (`--decimate adaptive`): no triangle target, stop when a collapse
     // would move the surface more than 0.1 r (RMS to the original planes). Flat faces then
-    // simplify much further than 80 % while edges keep their triangles.
+    // simplify much further than 80 % while edges keep their triangles. On the paper's
+    // field, whose faces are rougher: the anisotropic default's faces are as flat with
+    // either rule (0.65° fixed, 0.68° adaptive).
     let r = 0.025;
     let particles = dataset("analytic/box.xyz");
     let half = Vec3::new(0.5, 0.3, 0.2);
-    let (fixed, _) = reconstruct(&particles, &ReconstructOptions::new(r)).unwrap();
+    let mut base = ReconstructOptions::new(r);
+    base.field.kernel = meniscus::field::Kernel::Isotropic;
+    let (fixed, _) = reconstruct(&particles, &base).unwrap();
     let adaptive_options = ReconstructOptions {
         decimate: Some(DecimateOptions {
             target_reduction: None,
             max_error: Some(0.1 * r),
             ..Default::default()
         }),
-        ..ReconstructOptions::new(r)
+        ..base.clone()
     };
     let (adaptive, _) = reconstruct(&particles, &adaptive_options).unwrap();
     assert!(validate(&adaptive.fluid).is_closed_manifold());
@@ -334,7 +338,7 @@ fn an_error_bound_beats_the_fixed_fraction_on_the_box() {
     );
     assert!(adaptive.fluid.triangle_count() < fixed.fluid.triangle_count());
     println!(
-        "box: fixed 80 % {e_fixed:.2}° ({} tris), adaptive {e_adaptive:.2}° ({} tris)",
+        "box: fixed fraction {e_fixed:.2}° ({} tris), adaptive {e_adaptive:.2}° ({} tris)",
         fixed.fluid.triangle_count(),
         adaptive.fluid.triangle_count()
     );

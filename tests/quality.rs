@@ -125,20 +125,21 @@ fn anisotropic_kernels_fill_the_box() {
     let iso = box_figures(&surface("analytic/box.xyz", Kernel::Isotropic));
     let mesh = surface("analytic/box.xyz", Kernel::Anisotropic);
     let aniso = box_figures(&mesh);
-    // Measured (this test's measures): isotropic −5.9 % volume, 1.02° on the faces,
-    // waviness 0.032 r; anisotropic −1.0 %, 0.97°, 0.034 r (meshq: docs/quality.md).
+    // Measured (meshq, docs/quality.md): isotropic −6.0 % volume, 1.00° on the faces;
+    // anisotropic −0.64 %, 0.65° (0.97° and −1.0 % when the field took the whole length
+    // of v − vbar as depth, sideways parts included).
     assert!(
         iso.volume_error < -0.04,
         "isotropic {:.4}",
         iso.volume_error
     );
     assert!(
-        aniso.volume_error.abs() < 0.015,
+        aniso.volume_error.abs() < 0.01,
         "anisotropic volume error {:.4}",
         aniso.volume_error
     );
     assert!(
-        aniso.normal_error < iso.normal_error && aniso.waviness < 0.04,
+        aniso.normal_error < 0.8 && aniso.normal_error < iso.normal_error && aniso.waviness < 0.04,
         "faces: anisotropic {:.3}° {:.4} r, isotropic {:.3}°",
         aniso.normal_error,
         aniso.waviness,
@@ -153,11 +154,11 @@ fn anisotropic_kernels_round_the_sphere_better_than_spheres_do() {
     let mesh = surface("analytic/sphere.xyz", Kernel::Anisotropic);
     let aniso = sphere_figures(&mesh);
     // The particles fill a lattice staircase inside the sphere: its facets are what both
-    // kernels follow; the stretched kernels bridge more of them (measured 8.4° against
-    // 10.4°), which also adds volume: +4.2 % (the particles' own cubes are +0.8 % over the
+    // kernels follow; the stretched kernels bridge more of them (measured 7.6° against
+    // 10.3°), which also adds volume: +5.0 % (the particles' own cubes are +0.8 % over the
     // sphere, the isotropic surface −1.2 %).
     assert!(
-        aniso.normal_error < 0.9 * iso.normal_error && aniso.normal_error < 9.0,
+        aniso.normal_error < 0.8 * iso.normal_error && aniso.normal_error < 8.0,
         "normal error: anisotropic {:.2}°, isotropic {:.2}°",
         aniso.normal_error,
         iso.normal_error
@@ -169,7 +170,7 @@ fn anisotropic_kernels_round_the_sphere_better_than_spheres_do() {
         iso.waviness
     );
     assert!(
-        aniso.volume_error.abs() < 0.05,
+        aniso.volume_error.abs() < 0.055,
         "volume error {:.4}",
         aniso.volume_error
     );

@@ -5,13 +5,21 @@
 //! With `M_i` the quadratic form of particle `i`'s ellipsoid around its centre `c_i`,
 //! `s_i² = (v − c_i)ᵀ M_i (v − c_i)` and `w_i = max(0, 1 − s_i²)³`:
 //! * `vbar(v) = Σ w_i c_i / Σ w_i`,
-//! * `phi(v) = |v − vbar(v)| − ρ_s·r`, `ρ_s` = [`crate::anisotropy::AnisotropyOptions::surface_distance`].
+//! * `n(v)` the unit vector along `−∇Σ w_i = 6 Σ (1 − s_i²)² M_i (v − c_i)`, the direction
+//!   in which the particles thin out,
+//! * `phi(v) = (v − vbar(v))·n(v) − ρ_s·r`, `ρ_s` =
+//!   [`crate::anisotropy::AnisotropyOptions::surface_distance`] (`|v − vbar(v)| − ρ_s·r`
+//!   where the gradient vanishes).
 //!
 //! This is the field of Zhu and Bridson 2005 that Solenthaler et al. build on, with Yu and
 //! Turk's kernels as the weights, chosen over Yu and Turk's density field by measurement
 //! (`docs/quality.md`): the weighted mean averages the heights of the outer particles
 //! over a disc along the surface, where a sum of densities follows each particle's
-//! ellipsoid (dimpled faces, ridges along edges). The concavity factor of the isotropic
+//! ellipsoid (dimpled faces, ridges along edges). Zhu and Bridson take the whole length
+//! of `v − vbar`; near an edge of the fluid the disc is cut off and `vbar` moves along the
+//! surface, away from the edge, which counts as depth and rounds the edge over about 5 r.
+//! Only the part of `v − vbar` across the surface counts here (measured in
+//! `docs/quality.md`: the box's faces 0.97° → 0.65° from their true normals). The concavity factor of the isotropic
 //! field is not needed: the stretched kernels do not pull `vbar` into concave corners the
 //! way spheres of radius `R` do. `phi` is a distance, so coverage and the iso offset work
 //! as with the isotropic field.
@@ -40,8 +48,9 @@ struct Prepared {
     extent: [f32; 3],
 }
 
-/// Number of running sums per vertex: Σw and Σw·r (3), with `r = v − c` in cells.
-const SUMS: usize = 4;
+/// Number of running sums per vertex: Σw, Σw·r (3) and Σ(1 − s²)²·M r (3), with
+/// `r = v − c` in cells.
+const SUMS: usize = 7;
 
 /// Computes the blocks of the anisotropic field within `range` (all blocks when `None`)
 /// from `kernels`, which must include every kernel that reaches those blocks, in a
@@ -251,7 +260,13 @@ impl Evaluator<'_> {
             in_band += 1;
             let inv_w = 1.0 / w;
             let d = [1, 2, 3].map(|k| sums[k][i] as f64 * inv_w);
-            let dist_cells = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let g = [4, 5, 6].map(|k| sums[k][i] as f64);
+            let g_len = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+            let dist_cells = if g_len > 0.0 {
+                (d[0] * g[0] + d[1] * g[1] + d[2] * g[2]) / g_len
+            } else {
+                (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
+            };
             values[idx] = (dist_cells * self.h - self.surface) as f32;
         }
         in_band
@@ -265,19 +280,27 @@ impl Evaluator<'_> {
 #[inline(always)]
 fn accumulate_row(sums: &mut [[f32; ROW]; SUMS], x: &[f32; 3], b: f32, c: f32, m: &[f32; 6]) {
     let (ry, rz) = (b - x[1], c - x[2]);
-    // s² = m0 rx² + 2 (m1 ry + m2 rz) rx + (m3 ry² + 2 m4 ry rz + m5 rz²).
+    // s² = m0 rx² + 2 (m1 ry + m2 rz) rx + (m3 ry² + 2 m4 ry rz + m5 rz²);
+    // M r = (m0 rx + a_x, m1 rx + a_y, m2 rx + a_z).
+    let a_x = m[1] * ry + m[2] * rz;
+    let a_y = m[3] * ry + m[4] * rz;
+    let a_z = m[4] * ry + m[5] * rz;
     let s_yz = m[3] * ry * ry + 2.0 * m[4] * ry * rz + m[5] * rz * rz;
-    let s_x = 2.0 * (m[1] * ry + m[2] * rz);
-    let [s0, s1, s2, s3] = sums;
+    let s_x = 2.0 * a_x;
+    let [s0, s1, s2, s3, g0, g1, g2] = sums;
     for i in 0..ROW {
         let rx = i as f32 - x[0];
         let s2_ = m[0].mul_add(rx, s_x).mul_add(rx, s_yz);
         let q = (1.0 - s2_).max(0.0);
-        let w = q * q * q;
+        let q2 = q * q;
+        let w = q2 * q;
         s0[i] += w;
         s1[i] = w.mul_add(rx, s1[i]);
         s2[i] = w.mul_add(ry, s2[i]);
         s3[i] = w.mul_add(rz, s3[i]);
+        g0[i] = q2.mul_add(m[0].mul_add(rx, a_x), g0[i]);
+        g1[i] = q2.mul_add(m[1].mul_add(rx, a_y), g1[i]);
+        g2[i] = q2.mul_add(m[2].mul_add(rx, a_z), g2[i]);
     }
 }
 
