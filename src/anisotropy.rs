@@ -53,7 +53,7 @@ pub struct AnisotropyOptions {
     /// Largest shift of a centre by smoothing, multiples of `r`. Default 1.
     pub max_shift: f32,
     /// Distance `ρ_s` of the surface from the weighted mean of the centres, multiples of
-    /// `r` (the field's `phi = |v − vbar| − ρ_s r`). Default 1.08: on flat faces `vbar`
+    /// `r` (the field's `phi = (v − vbar)·n − ρ_s r`). Default 1.08: on flat faces `vbar`
     /// lies a little below the outer centres (the second layer weighs in), which the
     /// extra 0.08 r makes up (see `docs/quality.md`).
     pub surface_distance: f32,
