@@ -67,6 +67,9 @@ class ReconstructOptions(TypedDict, total=False):
     decimate_error: float | None
     """Error bound of decimation, multiples of r (no collapse moves the surface by more);
     with a fraction, whichever is reached first stops it; None: no bound. Default 0.1."""
+    smooth: int
+    """Taubin smoothing steps after decimation (0: off): removes the field's small bumps
+    without shrinking the surface. Default 2."""
     subdivide: int
     """Loop subdivision steps after decimation (0: off). Default 1."""
     defer_subdivision: bool
@@ -89,7 +92,7 @@ class ReconstructOptions(TypedDict, total=False):
 PAPER: ReconstructOptions
 """The keywords that make the defaults the pipeline of Akinci et al. 2013 exactly:
 ``{"kernel": "isotropic", "particle_coverage": 0.0, "decimate": 0.8, "decimate_error": None,
-"keep_inside": None}`` (``reconstruct(points, r, **PAPER)``; the CLI's ``--paper``)."""
+"smooth": 0, "keep_inside": None}`` (``reconstruct(points, r, **PAPER)``; the CLI's ``--paper``)."""
 
 class FormatError(ValueError):
     """A particle, mesh or archive file whose content is malformed or whose format is not supported."""
@@ -146,7 +149,7 @@ def reconstruct(
         threads: worker threads (default: all cores). The output does not depend on it.
         **options: the reconstruction settings (``ReconstructOptions``): influence_radius,
             cell_size, t_low, t_high, particle_coverage, iso_offset, isolated_spheres,
-            decimate, decimate_error, subdivide, defer_subdivision, keep_inside, tile_size,
+            decimate, decimate_error, smooth, subdivide, defer_subdivision, keep_inside, tile_size,
             memory_budget, temp_dir.
     """
 

@@ -57,6 +57,7 @@ pub(crate) mod neighbors;
 pub mod pipeline;
 pub mod sequence;
 pub mod settings;
+pub mod smoothing;
 pub mod subdivision;
 #[cfg(test)]
 mod test_rng;

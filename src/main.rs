@@ -111,6 +111,10 @@ struct ReconstructArgs {
     /// [default: 0.1]
     #[arg(long, allow_hyphen_values = true)]
     decimate_error: Option<String>,
+    /// Taubin smoothing steps after decimation (0 = off): removes the field's small bumps
+    /// without shrinking the surface [default: 2]
+    #[arg(long)]
+    smooth: Option<u32>,
     /// Loop subdivision steps after decimation (0 = off).
     #[arg(long, default_value_t = 1)]
     subdivide: u32,
@@ -136,7 +140,7 @@ struct ReconstructArgs {
     #[arg(long, value_enum)]
     kernel: Option<KernelArg>,
     /// The pipeline of Akinci et al. 2013 exactly: `--kernel isotropic
-    /// --particle-coverage 0 --decimate 0.8 --decimate-error off --keep-inside off`
+    /// --particle-coverage 0 --decimate 0.8 --decimate-error off --smooth 0 --keep-inside off`
     /// (any of those given beside it wins).
     #[arg(long)]
     paper: bool,
@@ -371,6 +375,7 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, Failure> {
             None => base.decimate_error,
             Some(v) => parse_or_off(v, "--decimate-error", "a bound (multiples of r)")?,
         },
+        smooth: args.smooth.unwrap_or(base.smooth),
         subdivide: args.subdivide,
         // A `.mseq` output defers it by itself (see `job`).
         defer_subdivision: false,

@@ -8,12 +8,13 @@
 //!    stitches the pieces exactly, or decimates each as it comes
 //!    ([`crate::decimation::TileDecimation`]);
 //! 4. quadric decimation ([`crate::decimation`]), unless the tiles did it;
-//! 5. containment: every non-isolated particle centre pushed under the surface that
+//! 5. Taubin smoothing of the decimated mesh ([`crate::smoothing`]);
+//! 6. containment: every non-isolated particle centre pushed under the surface that
 //!    subdivision will make ([`crate::containment`]);
-//! 6. Loop subdivision ([`crate::subdivision`]);
-//! 7. icospheres of radius `r` at the isolated particles ([`crate::isolated`]);
-//! 8. area-weighted vertex normals;
-//! 9. the particles' payload carried to the final vertices ([`crate::attributes`]).
+//! 7. Loop subdivision ([`crate::subdivision`]);
+//! 8. icospheres of radius `r` at the isolated particles ([`crate::isolated`]);
+//! 9. area-weighted vertex normals;
+//! 10. the particles' payload carried to the final vertices ([`crate::attributes`]).
 //!
 //! Every stage is timed; [`ReconstructionStats`] is the paper's Table 1 for one frame.
 
@@ -28,6 +29,7 @@ use crate::io::particles::ParticleSource;
 use crate::marching_cubes::MarchingCubesStats;
 use crate::mesh::{SphereInstances, Surface};
 use crate::neighbors::find_isolated;
+use crate::smoothing::{smooth, SmoothOptions, SmoothStats};
 use crate::subdivision::{subdivide, SubdivideOptions};
 use crate::tiles::{
     output_bytes_per_triangle, plan_tiles, run_tiles, ParticleStore, StitchSink, TileOptions,
@@ -66,6 +68,9 @@ pub struct ReconstructOptions {
     /// Quadric decimation, or `None` to skip it. Default: remove [`DEFAULT_DECIMATION`]
     /// of the triangles, no collapse beyond [`DEFAULT_DECIMATION_ERROR`].
     pub decimate: Option<DecimateOptions>,
+    /// Taubin smoothing after decimation, or `None` to skip it. Default: 2 steps of
+    /// λ 0.3, μ −0.31 ([`SmoothOptions::default`]).
+    pub smooth: Option<SmoothOptions>,
     /// Loop subdivision steps after decimation. Default 1 (0 skips it).
     pub subdivide: SubdivideOptions,
     /// Loop subdivision steps left to whoever decodes the surface (a `.mseq` archive
@@ -90,9 +95,9 @@ impl ReconstructOptions {
 
     /// meniscus's defaults for particle radius `r` (world units): the paper's stages, with
     /// anisotropic kernels ([`Kernel::Anisotropic`]), decimation by
-    /// [`DEFAULT_DECIMATION`] within [`DEFAULT_DECIMATION_ERROR`], the coverage balls of
-    /// [`FieldOptions::new`] and every non-isolated centre kept inside
-    /// ([`ContainmentOptions::default`]).
+    /// [`DEFAULT_DECIMATION`] within [`DEFAULT_DECIMATION_ERROR`], Taubin smoothing
+    /// ([`SmoothOptions::default`]), the coverage balls of [`FieldOptions::new`] and every
+    /// non-isolated centre kept inside ([`ContainmentOptions::default`]).
     pub fn new(particle_radius: f32) -> Self {
         let mut field = FieldOptions::new(particle_radius);
         field.kernel = Kernel::Anisotropic;
@@ -103,14 +108,16 @@ impl ReconstructOptions {
                 max_error: Some(DEFAULT_DECIMATION_ERROR * particle_radius),
                 ..Default::default()
             }),
+            smooth: Some(SmoothOptions::default()),
             containment: Some(ContainmentOptions::default()),
             ..Self::paper(particle_radius)
         }
     }
 
     /// The pipeline of Akinci et al. 2013 exactly: the Solenthaler field with isotropic
-    /// kernels and no coverage balls, decimation by 80 % without an error bound, one Loop
-    /// step, icospheres of level 2 for isolated particles, no containment.
+    /// kernels and no coverage balls, decimation by 80 % without an error bound, no
+    /// smoothing, one Loop step, icospheres of level 2 for isolated particles, no
+    /// containment.
     pub fn paper(particle_radius: f32) -> Self {
         let mut field = FieldOptions::new(particle_radius);
         field.particle_coverage = 0.0;
@@ -119,6 +126,7 @@ impl ReconstructOptions {
             isolated_sphere_level: Some(2),
             tiles: TileOptions::default(),
             decimate: Some(DecimateOptions::default()),
+            smooth: None,
             subdivide: SubdivideOptions::default(),
             deferred_subdivision: 0,
             containment: None,
@@ -154,6 +162,8 @@ pub struct ReconstructionStats {
     pub tiles: TileStats,
     /// Decimation figures, when it ran.
     pub decimation: Option<DecimateStats>,
+    /// Smoothing figures, when it ran.
+    pub smoothing: Option<SmoothStats>,
     /// Containment figures, when it ran.
     pub containment: Option<ContainmentStats>,
     /// Triangles straight out of marching cubes.
@@ -246,6 +256,9 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
     cancel: &CancelToken,
 ) -> Result<(Surface, ReconstructionStats)> {
     options.field.validate()?;
+    if let Some(smooth_options) = &options.smooth {
+        smooth_options.validate()?;
+    }
     let mut stats = ReconstructionStats {
         particles: source.particle_count(),
         ..Default::default()
@@ -262,6 +275,7 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
         &options.tiles,
         output_bytes_per_triangle(
             decimating.map(|d| d.target_reduction.unwrap_or(0.8)),
+            options.smooth.is_some(),
             options.containment.is_some(),
             options.subdivide.levels,
         ),
@@ -383,7 +397,20 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
     }
 
     cancel.check()?;
-    // 5. Containment, on the surface as subdivision will make it.
+    // 5. Smoothing.
+    if let Some(smooth_options) = &options.smooth {
+        progress("smoothing");
+        let clock = Instant::now();
+        stats.smoothing = Some(smooth(&mut fluid, smooth_options));
+        stats.push_stage(
+            "smoothing",
+            clock.elapsed().as_secs_f64(),
+            fluid.triangle_count(),
+        );
+    }
+
+    cancel.check()?;
+    // 6. Containment, on the surface as subdivision will make it.
     let levels = options.subdivide.levels;
     if let (Some(containment), Some(store)) = (&options.containment, &store) {
         progress("containment");
@@ -410,7 +437,7 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
     }
 
     cancel.check()?;
-    // 6. Subdivision.
+    // 7. Subdivision.
     progress("subdivision");
     if levels > 0 {
         let clock = Instant::now();
@@ -423,7 +450,7 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
     }
 
     cancel.check()?;
-    // 7. Spheres.
+    // 8. Spheres.
     let clock = Instant::now();
     let mut spheres = match options.isolated_sphere_level {
         Some(level) if !isolated_centers.is_empty() => SphereInstances {
@@ -440,7 +467,7 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
         fluid.triangle_count(),
     );
 
-    // 8. Normals.
+    // 9. Normals.
     let clock = Instant::now();
     fluid.compute_normals();
     stats.fluid_triangles = fluid.triangle_count();
@@ -450,7 +477,7 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
         fluid.triangle_count(),
     );
 
-    // 9. Attributes at the final vertices and the sphere centres.
+    // 10. Attributes at the final vertices and the sphere centres.
     if let Some(store) = store {
         cancel.check()?;
         progress("attributes");

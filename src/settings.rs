@@ -86,6 +86,9 @@ pub struct ReconstructSettings {
     /// with a fraction, whichever is reached first stops it. `None`: no bound. Default
     /// [`DEFAULT_DECIMATION_ERROR`] (0.1).
     pub decimate_error: Option<f32>,
+    /// Taubin smoothing steps after decimation (0: none). Default 2
+    /// ([`crate::smoothing::SmoothOptions`]).
+    pub smooth: u32,
     /// Loop subdivision steps after decimation. Default 1.
     pub subdivide: u32,
     /// Leave the Loop subdivision to whoever reads the surface (a `.mseq` archive's
@@ -125,6 +128,7 @@ impl ReconstructSettings {
             isolated_spheres: Some(2),
             decimate: Decimation::Fraction(DEFAULT_DECIMATION),
             decimate_error: Some(DEFAULT_DECIMATION_ERROR),
+            smooth: crate::smoothing::SmoothOptions::default().steps,
             subdivide: 1,
             defer_subdivision: false,
             keep_inside: Some(ContainmentOptions::default().min_depth),
@@ -136,7 +140,7 @@ impl ReconstructSettings {
 
     /// The pipeline of Akinci et al. 2013 exactly (as
     /// [`ReconstructOptions::paper`]): isotropic kernels, no coverage balls, decimation
-    /// by 0.8 without an error bound, no containment; the other settings as
+    /// by 0.8 without an error bound, no smoothing, no containment; the other settings as
     /// [`Self::new`].
     pub fn paper(particle_radius: f32) -> Self {
         ReconstructSettings {
@@ -144,6 +148,7 @@ impl ReconstructSettings {
             particle_coverage: 0.0,
             decimate: Decimation::Fraction(0.8),
             decimate_error: None,
+            smooth: 0,
             keep_inside: None,
             ..Self::new(particle_radius)
         }
@@ -172,6 +177,10 @@ impl ReconstructSettings {
             .memory_budget
             .or_else(crate::tiles::default_memory_budget);
         options.tiles.temp_dir = self.temp_dir.clone();
+        options.smooth = (self.smooth > 0).then(|| crate::smoothing::SmoothOptions {
+            steps: self.smooth,
+            ..Default::default()
+        });
         options.subdivide.levels = self.subdivide;
         if self.defer_subdivision {
             options.deferred_subdivision = self.subdivide;

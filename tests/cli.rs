@@ -1347,11 +1347,15 @@ fn the_paper_flag_is_the_papers_options() {
             "0.8",
             "--decimate-error",
             "off",
+            "--smooth",
+            "0",
             "--keep-inside",
             "off",
         ],
     );
     assert!(paper == flags, "--paper differs from its flags");
+    // Smoothing is one of them: the paper's pipeline with it differs.
+    assert!(mesh("smoothed.ply", &["--paper", "--smooth", "2"]) != paper);
     assert!(mesh("default.ply", &[]) != paper);
     let anisotropic = mesh("aniso.ply", &["--paper", "--kernel", "anisotropic"]);
     assert!(anisotropic != paper);

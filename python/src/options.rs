@@ -27,6 +27,7 @@ pub const SETTINGS: &[&str] = &[
     "isolated_spheres",
     "decimate",
     "decimate_error",
+    "smooth",
     "subdivide",
     "defer_subdivision",
     "keep_inside",
@@ -65,6 +66,9 @@ pub fn paper<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
     }
     if paper.decimate_error != defaults.decimate_error {
         keywords.set_item("decimate_error", paper.decimate_error.map(decimal))?;
+    }
+    if paper.smooth != defaults.smooth {
+        keywords.set_item("smooth", paper.smooth)?;
     }
     if paper.keep_inside != defaults.keep_inside {
         keywords.set_item("keep_inside", paper.keep_inside.map(decimal))?;
@@ -192,6 +196,9 @@ pub fn settings(particle_radius: f32, keywords: &Keywords<'_>) -> PyResult<Recon
             true => None,
             false => Some(extract(&v, "decimate_error")?),
         };
+    }
+    if let Some(v) = keywords.value("smooth")? {
+        s.smooth = v;
     }
     if let Some(v) = keywords.value("subdivide")? {
         s.subdivide = v;

@@ -51,6 +51,10 @@ pub(crate) const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 110.0;
 /// tiles' leftovers; 80 kept as margin. (Before the slabs, 2026-11-26: 2685 MiB, 154 B.)
 /// Below the subdivision's, so the stage never sets a run's estimate.
 pub(crate) const CONTAINMENT_BYTES_PER_INPUT_TRIANGLE: f64 = 80.0;
+/// Peak of Taubin smoothing per control-mesh triangle: the mesh (24 B), the vertices'
+/// neighbour lists (≈ 24 B while they are built, ≈ 14 B kept) and two f64 copies of the
+/// positions (≈ 24 B), bytes.
+pub(crate) const SMOOTHING_BYTES_PER_INPUT_TRIANGLE: f64 = 72.0;
 /// Memory of the process before any particle (code, thread stacks, allocator), bytes.
 pub(crate) const BASE_BYTES: u64 = 64 << 20;
 /// What the tiles leave in memory under the post-processing, beyond the surface (mostly
@@ -139,10 +143,11 @@ impl OutputCost {
 }
 
 /// The [`OutputCost`] of decimation removing `reduction` of the triangles (`None`: no
-/// decimation; an error-bounded run counts as 0.8), the containment stage when
-/// `containment`, and `subdivide_levels` Loop steps.
+/// decimation; an error-bounded run counts as 0.8), smoothing when `smoothing`, the
+/// containment stage when `containment`, and `subdivide_levels` Loop steps.
 pub(crate) fn output_bytes_per_triangle(
     reduction: Option<f32>,
+    smoothing: bool,
     containment: bool,
     subdivide_levels: u32,
 ) -> OutputCost {
@@ -164,6 +169,12 @@ pub(crate) fn output_bytes_per_triangle(
             peak = (bytes, advice);
         }
     };
+    if smoothing {
+        raise(
+            triangles * SMOOTHING_BYTES_PER_INPUT_TRIANGLE,
+            "no smoothing (smooth)",
+        );
+    }
     if containment {
         raise(
             triangles * CONTAINMENT_BYTES_PER_INPUT_TRIANGLE,
@@ -411,14 +422,15 @@ mod tests {
     /// The budget message advises the setting of the stage that sets the peak.
     #[test]
     fn the_advice_names_the_stage_with_the_peak() {
-        let advice = |r, c, l| output_bytes_per_triangle(r, c, l).advice;
-        assert!(advice(Some(0.81), true, 1).contains("subdivi"));
-        assert!(advice(Some(0.81), true, 0).contains("containment"));
-        assert!(advice(Some(0.81), false, 0).contains("decimat"));
-        assert!(advice(None, false, 0).contains("decimat"));
+        let advice = |r, s, c, l| output_bytes_per_triangle(r, s, c, l).advice;
+        assert!(advice(Some(0.81), true, true, 1).contains("subdivi"));
+        assert!(advice(Some(0.81), true, true, 0).contains("containment"));
+        assert!(advice(Some(0.81), true, false, 0).contains("smooth"));
+        assert!(advice(Some(0.81), false, false, 0).contains("decimat"));
+        assert!(advice(None, false, false, 0).contains("decimat"));
         // Containment below subdivision: turning it off would not help a subdivided run.
-        let with = output_bytes_per_triangle(Some(0.81), true, 1);
-        let without = output_bytes_per_triangle(Some(0.81), false, 1);
+        let with = output_bytes_per_triangle(Some(0.81), true, true, 1);
+        let without = output_bytes_per_triangle(Some(0.81), true, false, 1);
         assert_eq!(with.bytes_per_triangle, without.bytes_per_triangle);
     }
 
@@ -429,7 +441,7 @@ mod tests {
         // body runs untiled in.
         let body = lattice(24, 1, 64);
         let spray = lattice(24, 3, 64);
-        let output = output_bytes_per_triangle(Some(0.8), false, 0);
+        let output = output_bytes_per_triangle(Some(0.8), false, false, 0);
         let plan = |counts: &HashMap<BlockKey, u64>, budget: Option<u64>| {
             let options = TileOptions {
                 memory_budget_bytes: budget,
