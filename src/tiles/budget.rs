@@ -52,8 +52,8 @@ pub(crate) const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 110.0;
 /// Below the subdivision's, so the stage never sets a run's estimate.
 pub(crate) const CONTAINMENT_BYTES_PER_INPUT_TRIANGLE: f64 = 80.0;
 /// Peak of Taubin smoothing per control-mesh triangle: the mesh (24 B), the vertices'
-/// neighbour lists (≈ 24 B while they are built, ≈ 14 B kept) and two f64 copies of the
-/// positions (≈ 24 B), bytes.
+/// neighbour lists (≈ 14 B, and ≈ 14 B of vertex → triangle lists while they are built)
+/// and two f64 copies of the positions (≈ 24 B), bytes.
 pub(crate) const SMOOTHING_BYTES_PER_INPUT_TRIANGLE: f64 = 72.0;
 /// Memory of the process before any particle (code, thread stacks, allocator), bytes.
 pub(crate) const BASE_BYTES: u64 = 64 << 20;
