@@ -125,7 +125,7 @@ fn anisotropic_kernels_fill_the_box() {
     let iso = box_figures(&surface("analytic/box.xyz", Kernel::Isotropic));
     let mesh = surface("analytic/box.xyz", Kernel::Anisotropic);
     let aniso = box_figures(&mesh);
-    // Measured (meshq, docs/quality.md): isotropic −6.0 % volume, 1.00° on the faces;
+    // Measured (meshq, docs/quality.md): isotropic −5.9 % volume, 0.88° on the faces;
     // the default −0.60 %, 0.56° (0.65° without smoothing; 0.97° and −1.0 % when the
     // field took the whole length of v − vbar as depth, sideways parts included).
     assert!(
@@ -155,7 +155,7 @@ fn anisotropic_kernels_round_the_sphere_better_than_spheres_do() {
     let aniso = sphere_figures(&mesh);
     // The particles fill a lattice staircase inside the sphere: its facets are what both
     // kernels follow; the stretched kernels bridge more of them (measured 7.0° against
-    // 10.3°), which also adds volume: +5.0 % (the particles' own cubes are +0.8 % over the
+    // 9.7°), which also adds volume: +5.0 % (the particles' own cubes are +0.8 % over the
     // sphere, the isotropic surface −1.2 %).
     assert!(
         aniso.normal_error < 0.8 * iso.normal_error && aniso.normal_error < 8.0,
