@@ -93,6 +93,8 @@ def test_write_formats(frame25, tmp_path, ext):
         # Containment moves the isotropic surface of this frame (and not the default one).
         ({"kernel": "isotropic", "keep_inside": None}, ["--kernel", "isotropic", "--keep-inside", "off"]),
         ({"keep_inside": 0.5}, ["--keep-inside", "0.5"]),
+        ({"smooth": 0}, ["--smooth", "0"]),
+        ({"smooth": 3}, ["--smooth", "3"]),
         ({"tile_size": 16, "memory_budget": "1GiB", "temp_dir": "TMP"}, ["--tile-size", "16", "--memory-budget", "1GiB", "--temp-dir", "TMP"]),
     ],
 )
