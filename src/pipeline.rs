@@ -41,8 +41,8 @@ use std::time::Instant;
 /// Fraction of the triangles the default decimation removes. Above the paper's 0.8: the
 /// default anisotropic surface sits on the outer particles instead of inside them, so it
 /// is larger and marching cubes gives it about 2 % more triangles; 0.81 keeps the default
-/// output at most as large as the isotropic 0.8 surface (dam break frame 25: 126 352
-/// against 128 648 triangles; `docs/quality.md`).
+/// output at most as large as the isotropic 0.8 surface on the shipped frames
+/// (`docs/quality.md`).
 pub const DEFAULT_DECIMATION: f32 = 0.81;
 
 /// Error bound of the default decimation, multiples of the particle radius: no collapse

@@ -18,9 +18,9 @@
 //! ellipsoid (dimpled faces, ridges along edges). Zhu and Bridson take the whole length
 //! of `v − vbar`; near an edge of the fluid the disc is cut off and `vbar` moves along the
 //! surface, away from the edge, which counts as depth and rounds the edge over about 5 r.
-//! Only the part of `v − vbar` across the surface counts here (measured in
-//! `docs/quality.md`: the box's faces 0.97° → 0.65° from their true normals). The concavity factor of the isotropic
-//! field is not needed: the stretched kernels do not pull `vbar` into concave corners the
+//! Only the part of `v − vbar` across the surface counts here (flatter faces and sharper
+//! edges, measured in `docs/quality.md`). The concavity factor of the isotropic field is
+//! not needed: the stretched kernels do not pull `vbar` into concave corners the
 //! way spheres of radius `R` do. `phi` is a distance, so coverage and the iso offset work
 //! as with the isotropic field.
 //!
