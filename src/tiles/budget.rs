@@ -272,7 +272,7 @@ pub(super) fn choose_tile_blocks(
             return Err(Error::MemoryBudget {
                 budget_mib: mib(budget),
                 message: format!(
-                    "the process and the surface of {particles} particles (≈ {:.1} M triangles before decimation) need ≈ {} MiB after the tiles (decimation, containment and subdivision): a larger budget or {} would fit",
+                    "the process and the surface of {particles} particles (≈ {:.1} M triangles before decimation) need ≈ {} MiB after the tiles (post-processing): a larger budget or {} would fit",
                     triangles / 1e6,
                     mib(output),
                     output_cost.advice
