@@ -43,9 +43,16 @@ enum Command {
     Archive(ArchiveCommand),
 }
 
-/// Frame selection as render farms give it.
+/// Frame selection of a sequence: a range, or a list and a share as render farms give
+/// them.
 #[derive(Args)]
 struct FarmArgs {
+    /// First frame of a sequence (inclusive).
+    #[arg(long, allow_negative_numbers = true)]
+    start: Option<i64>,
+    /// Last frame of a sequence (inclusive).
+    #[arg(long, allow_negative_numbers = true)]
+    end: Option<i64>,
     /// Frames to take, instead of --start/--end: `1-100`, `1-100:2` (every second),
     /// `1,5,7-20`; sorted, each once. Every selected frame needs a file.
     #[arg(long, value_name = "LIST", allow_hyphen_values = true, conflicts_with_all = ["start", "end"])]
@@ -57,10 +64,10 @@ struct FarmArgs {
 }
 
 impl FarmArgs {
-    fn choice(&self, start: Option<i64>, end: Option<i64>) -> meniscus::sequence::FrameChoice {
+    fn choice(&self) -> meniscus::sequence::FrameChoice {
         meniscus::sequence::FrameChoice {
-            start,
-            end,
+            start: self.start,
+            end: self.end,
             frames: self.frames.clone(),
             shard: self.shard,
         }
@@ -174,12 +181,6 @@ struct ReconstructArgs {
     /// Input format, overriding the extension (xyz, vtk, ply, bgeo).
     #[arg(long)]
     input_format: Option<ParticleFormat>,
-    /// First frame of a sequence (inclusive).
-    #[arg(long, allow_negative_numbers = true)]
-    start: Option<i64>,
-    /// Last frame of a sequence (inclusive).
-    #[arg(long, allow_negative_numbers = true)]
-    end: Option<i64>,
     #[command(flatten)]
     farm: FarmArgs,
     /// Skip frames whose output already exists, or that the `.mseq` output holds (the
@@ -421,11 +422,7 @@ fn reconstruct(
     let error_bound = args
         .error_bound
         .unwrap_or(meniscus::archive::default_error_bound(args.particle_radius));
-    let plan = plan_frames(
-        &args.input,
-        &args.output,
-        &args.farm.choice(args.start, args.end),
-    )?;
+    let plan = plan_frames(&args.input, &args.output, &args.farm.choice())?;
     check_outputs(&plan).map_err(|e| Failure::Usage(e.to_string()))?;
     for warning in ineffective_options(args, given, &plan, &attributes) {
         eprintln!("warning: {warning}");

@@ -59,12 +59,6 @@ pub(crate) enum ArchiveCommand {
         /// Error bound of the meshes' vertex attributes, in each attribute's own units.
         #[arg(allow_negative_numbers = true, long, default_value_t = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND)]
         attribute_error_bound: f64,
-        /// First frame (inclusive).
-        #[arg(long, allow_negative_numbers = true)]
-        start: Option<i64>,
-        /// Last frame (inclusive).
-        #[arg(long, allow_negative_numbers = true)]
-        end: Option<i64>,
         #[command(flatten)]
         farm: FarmArgs,
     },
@@ -204,12 +198,9 @@ pub(crate) fn archive(
             output,
             error_bound,
             attribute_error_bound,
-            start,
-            end,
             farm,
         } => {
-            let frames =
-                meniscus::sequence::choose(&input, &farm.choice(start, end)).map_err(text)?;
+            let frames = meniscus::sequence::choose(&input, &farm.choice()).map_err(text)?;
             let options = ArchiveOptions {
                 attribute_error_bound,
                 ..ArchiveOptions::new(error_bound)
