@@ -113,6 +113,16 @@ impl<'py> Keywords<'py> {
         }
     }
 
+    /// For a setting that `None` turns off: absent → `None` (keep the default), given as
+    /// `None` → `Some(None)`, given a value → `Some(Some(value))`.
+    fn nullable<T: FromPyObject<'py>>(&self, name: &str) -> PyResult<Option<Option<T>>> {
+        match self.take(name)? {
+            None => Ok(None),
+            Some(v) if v.is_none() => Ok(Some(None)),
+            Some(v) => extract(&v, name).map(|x| Some(Some(x))),
+        }
+    }
+
     /// Refuses the keywords nobody took.
     pub fn finish(self) -> PyResult<()> {
         match self.left.keys().iter().next() {
@@ -166,20 +176,14 @@ pub fn settings(particle_radius: f32, keywords: &Keywords<'_>) -> PyResult<Recon
         };
     }
     // None turns these off (absent: the default).
-    if let Some(v) = keywords.take("isolated_spheres")? {
-        s.isolated_spheres = match v.is_none() {
-            true => None,
-            false => Some(extract(&v, "isolated_spheres")?),
-        };
+    if let Some(v) = keywords.nullable("isolated_spheres")? {
+        s.isolated_spheres = v;
     }
     if let Some(v) = keywords.value("defer_subdivision")? {
         s.defer_subdivision = v;
     }
-    if let Some(v) = keywords.take("keep_inside")? {
-        s.keep_inside = match v.is_none() {
-            true => None,
-            false => Some(extract(&v, "keep_inside")?),
-        };
+    if let Some(v) = keywords.nullable("keep_inside")? {
+        s.keep_inside = v;
     }
     if let Some(v) = keywords.take("decimate")? {
         s.decimate = if v.is_none() {
@@ -191,11 +195,8 @@ pub fn settings(particle_radius: f32, keywords: &Keywords<'_>) -> PyResult<Recon
             Decimation::Fraction(extract(&v, "decimate")?)
         };
     }
-    if let Some(v) = keywords.take("decimate_error")? {
-        s.decimate_error = match v.is_none() {
-            true => None,
-            false => Some(extract(&v, "decimate_error")?),
-        };
+    if let Some(v) = keywords.nullable("decimate_error")? {
+        s.decimate_error = v;
     }
     if let Some(v) = keywords.value("smooth")? {
         s.smooth = v;
