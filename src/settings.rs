@@ -10,6 +10,7 @@ use crate::decimation::DecimateOptions;
 use crate::error::{Error, Result};
 use crate::field::{AnisotropyOptions, Kernel};
 use crate::pipeline::{ReconstructOptions, DEFAULT_DECIMATION, DEFAULT_DECIMATION_ERROR};
+use crate::smoothing::SmoothOptions;
 use std::path::PathBuf;
 
 /// How much quadric decimation removes.
@@ -128,7 +129,7 @@ impl ReconstructSettings {
             isolated_spheres: Some(2),
             decimate: Decimation::Fraction(DEFAULT_DECIMATION),
             decimate_error: Some(DEFAULT_DECIMATION_ERROR),
-            smooth: crate::smoothing::SmoothOptions::default().steps,
+            smooth: SmoothOptions::default().steps,
             subdivide: 1,
             defer_subdivision: false,
             keep_inside: Some(ContainmentOptions::default().min_depth),
@@ -177,7 +178,7 @@ impl ReconstructSettings {
             .memory_budget
             .or_else(crate::tiles::default_memory_budget);
         options.tiles.temp_dir = self.temp_dir.clone();
-        options.smooth = (self.smooth > 0).then(|| crate::smoothing::SmoothOptions {
+        options.smooth = (self.smooth > 0).then(|| SmoothOptions {
             steps: self.smooth,
             ..Default::default()
         });

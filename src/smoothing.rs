@@ -111,9 +111,7 @@ pub fn smooth(mesh: &mut TriMesh, options: &SmoothOptions) -> SmoothStats {
         stats.mean_shift += shift;
         stats.max_shift = stats.max_shift.max(shift);
     }
-    stats.fixed_vertices = (0..current.len())
-        .filter(|&v| rings.of(v).is_none())
-        .count();
+    stats.fixed_vertices = rings.fixed.iter().filter(|&&fixed| fixed).count();
     stats.vertices = current.len() - stats.fixed_vertices;
     stats.mean_shift /= current.len() as f64;
     mesh.normals.clear();

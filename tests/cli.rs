@@ -22,6 +22,21 @@ fn run(args: &[&str]) -> (bool, String) {
     )
 }
 
+/// `meniscus reconstruct INPUT -r RADIUS -q -o OUTPUT FLAGS...`: success and stderr.
+fn reconstruct(input: &Path, radius: &str, output: &Path, flags: &[&str]) -> (bool, String) {
+    let mut args = vec![
+        "reconstruct",
+        input.to_str().unwrap(),
+        "-r",
+        radius,
+        "-q",
+        "-o",
+        output.to_str().unwrap(),
+    ];
+    args.extend_from_slice(flags);
+    run(&args)
+}
+
 /// Copies double dam break frames 1, 6 and 13 to `dir` as `f_<k>.xyz` (zero-padded to
 /// three digits when `padded`) and returns the `{}` pattern naming them.
 fn sequence_in(dir: &Path, padded: bool) -> String {
@@ -1321,17 +1336,7 @@ fn the_paper_flag_is_the_papers_options() {
     let input = dataset("double_dambreak/ParticleData_Fluid_6.xyz");
     let mesh = |name: &str, flags: &[&str]| {
         let out = dir.path().join(name);
-        let mut args = vec![
-            "reconstruct",
-            input.to_str().unwrap(),
-            "-r",
-            "0.025",
-            "-q",
-            "-o",
-            out.to_str().unwrap(),
-        ];
-        args.extend_from_slice(flags);
-        let (ok, err) = run(&args);
+        let (ok, err) = reconstruct(&input, "0.025", &out, flags);
         assert!(ok, "{flags:?}: {err}");
         std::fs::read(out).unwrap()
     };
@@ -1400,21 +1405,19 @@ fn centres_left_shallow_are_warned_about() {
     let mut warned_once = false;
     for bound in ["0.1", "off"] {
         let stats = dir.path().join("s.json");
-        let (ok, err) = run(&[
-            "reconstruct",
-            input.to_str().unwrap(),
-            "-r",
+        let (ok, err) = reconstruct(
+            &input,
             "0.012",
-            "-q",
-            "-o",
-            dir.path().join("s.ply").to_str().unwrap(),
-            "--decimate",
-            "0.9",
-            "--decimate-error",
-            bound,
-            "--stats",
-            stats.to_str().unwrap(),
-        ]);
+            &dir.path().join("s.ply"),
+            &[
+                "--decimate",
+                "0.9",
+                "--decimate-error",
+                bound,
+                "--stats",
+                stats.to_str().unwrap(),
+            ],
+        );
         assert!(ok, "{err}");
         let json: serde_json::Value =
             serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
