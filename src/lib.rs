@@ -39,7 +39,6 @@
 #![deny(missing_docs)]
 
 mod allocator;
-pub mod anisotropy;
 pub mod archive;
 pub mod attributes;
 pub mod cancel;

@@ -4,8 +4,8 @@
 use super::{Attribute, AttributeLayout};
 use crate::cancel::CancelToken;
 use crate::error::Result;
-use crate::field::{home_block, HALF_BLOCK_EDGE};
 use crate::grid::BlockKey;
+use crate::grid::{home_block, HALF_BLOCK_EDGE};
 use crate::tiles::store::{LoadedParticles, ParticleStore};
 use crate::tiles::TilePlan;
 use glam::Vec3;

@@ -13,7 +13,7 @@
 
 use super::{decimate_band, decimate_locked, place_survivors, DecimateOptions, DecimateStats};
 use crate::error::Result;
-use crate::field::BlockRange;
+use crate::grid::BlockRange;
 use crate::marching_cubes::{stitch_range, BlockSurface, VertexKey};
 use crate::mesh::TriMesh;
 use crate::tiles::TileSink;

@@ -20,7 +20,7 @@
 
 mod table;
 
-use crate::field::BlockRange;
+use crate::grid::BlockRange;
 use crate::grid::{local_index, BlockKey, BlockValues, SparseField, BLOCK_EDGE};
 use crate::mesh::TriMesh;
 use glam::{DVec3, Vec3};

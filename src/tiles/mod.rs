@@ -59,14 +59,10 @@ pub(crate) mod plan;
 pub(crate) mod spill;
 pub(crate) mod store;
 
-use crate::anisotropy::kernels_sorted;
 use crate::cancel::CancelToken;
 use crate::error::Result;
-use crate::field::{
-    apply_coverage, apply_iso_offset, block_of_half, compute_blocks, BlockRange, FieldOptions,
-    FieldStats, Kernel, HALF_BLOCK_EDGE,
-};
-use crate::grid::BlockKey;
+use crate::field::{compute_tile, FieldOptions, FieldStats, TileParticles};
+use crate::grid::{block_of_half, BlockKey, BlockRange, HALF_BLOCK_EDGE};
 use crate::io::particles::ParticleSource;
 use crate::marching_cubes::{march_blocks, stitch, BlockSurface, MarchingCubesStats};
 use crate::mesh::TriMesh;
@@ -229,46 +225,32 @@ pub(crate) fn run_tiles<S: ParticleSource>(
             }
             None => vec![false; local.len()],
         };
-        let mut field_particles = Vec::new();
+        let in_field: Vec<bool> = (0..loaded.len())
+            .map(|k| in_zone1[k] && !lonely[k])
+            .collect();
         for (k, &(h, gi, p)) in loaded.iter().enumerate() {
-            if lonely[k] {
-                if own.contains(block_of_half(h)) {
-                    isolated.push((gi, p));
-                }
-            } else if in_zone1[k] {
-                field_particles.push(p);
+            if lonely[k] && own.contains(block_of_half(h)) {
+                isolated.push((gi, p));
             }
         }
-        // Anisotropic kernels of the field particles, from all their neighbours (zone 2
-        // holds every particle within R of zone 1).
+        let halves: Vec<BlockKey> = loaded.iter().map(|r| r.0).collect();
         stats.neighbour_seconds += clock.elapsed().as_secs_f64();
-        let clock = Instant::now();
-        let kernels = (field_options.kernel == Kernel::Anisotropic).then(|| {
-            let halves: Vec<BlockKey> = loaded.iter().map(|r| r.0).collect();
-            let wanted: Vec<bool> = (0..loaded.len())
-                .map(|k| in_zone1[k] && !lonely[k])
-                .collect();
-            kernels_sorted(&local, &halves, field_options, &wanted)
-        });
-        drop(local);
-        stats.kernel_seconds += clock.elapsed().as_secs_f64();
-        let clock = Instant::now();
-        let (mut field, fs) = match &kernels {
-            None => compute_blocks(&field_particles, field_options, Some(field_range)),
-            Some(kernels) => {
-                crate::field::anisotropic::compute_blocks(kernels, field_options, Some(field_range))
-            }
+        // The field of the particles that enter it; the anisotropic kernels from all their
+        // neighbours (zone 2 holds every particle within R of zone 1).
+        let particles = TileParticles {
+            positions: local,
+            halves,
+            in_field,
         };
-        drop(kernels);
-        field_stats.uncovered_particles +=
-            apply_coverage(&mut field, &field_particles, field_options, Some(own));
-        apply_iso_offset(&mut field, field_options);
+        let tile_field = compute_tile(particles, field_options, Some(field_range), Some(own));
+        stats.kernel_seconds += tile_field.kernel_seconds;
+        stats.field_seconds += tile_field.field_seconds;
+        let (field, fs) = (tile_field.field, tile_field.stats);
         stats.max_tile_field_bytes = stats.max_tile_field_bytes.max(fs.block_bytes);
+        field_stats.uncovered_particles += fs.uncovered_particles;
         field_stats.blocks += fs.blocks;
         field_stats.vertices_in_band += fs.vertices_in_band;
         field_stats.block_bytes = field_stats.block_bytes.max(fs.block_bytes);
-        drop(field_particles);
-        stats.field_seconds += clock.elapsed().as_secs_f64();
         let clock = Instant::now();
         let surfaces = march_blocks(&field, Some(sink.march_range(own)));
         drop(field);
@@ -288,7 +270,7 @@ pub(crate) fn run_tiles<S: ParticleSource>(
 mod tests {
     use super::store::load_in_canonical_order;
     use super::*;
-    use crate::field::home_half_block;
+    use crate::grid::home_half_block;
     #[test]
     fn particles_load_by_home_half_block_then_input_index_in_any_record_order() {
         let mut rng = crate::test_rng::TestRng::new(11);

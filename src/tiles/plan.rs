@@ -6,8 +6,9 @@ use super::budget::choose_tile_blocks;
 use super::TileOptions;
 use crate::cancel::CancelToken;
 use crate::error::{Error, Result};
-use crate::field::{block_reach, check_positions_from, home_block, BlockRange, FieldOptions};
+use crate::field::{block_reach, FieldOptions};
 use crate::grid::BlockKey;
+use crate::grid::{check_positions, home_block, BlockRange};
 use crate::io::particles::ParticleSource;
 use hashbrown::{HashMap, HashSet};
 use rayon::prelude::*;
@@ -108,7 +109,12 @@ pub(crate) fn plan_tiles<S: ParticleSource + ?Sized>(
 
     let mut block_counts: HashMap<BlockKey, u64> = HashMap::new();
     source.visit_chunks(&mut |chunk| {
-        check_positions_from(chunk.first, chunk.positions, field_options)?;
+        check_positions(
+            chunk.first,
+            chunk.positions,
+            field_options.cell_size_world(),
+            field_options.particle_radius,
+        )?;
         // Counted in parallel pieces (runs of equal home blocks, then one map per piece),
         // the maps added up after: counts do not depend on the order of the additions.
         let counts = chunk

@@ -7,7 +7,7 @@ use super::plan::{cell_of, TilePlan, SPILL_CELL_BLOCKS};
 use super::spill::SpillFile;
 use crate::cancel::CancelToken;
 use crate::error::Result;
-use crate::field::{block_of_half, home_block, home_half_block, BlockRange};
+use crate::grid::{block_of_half, home_block, home_half_block, BlockRange};
 use crate::grid::{BlockKey, BLOCK_EDGE};
 use crate::io::particles::ParticleSource;
 use glam::Vec3;

@@ -28,8 +28,8 @@
 //! same order as the whole scene, so the kernels do not depend on the tiling or the
 //! thread count.
 
-use crate::field::{home_half_block, FieldOptions, HALF_BLOCK_EDGE};
-use crate::grid::BlockKey;
+use crate::field::FieldOptions;
+use crate::grid::{home_half_block, BlockKey, HALF_BLOCK_EDGE};
 use glam::{DMat3, DVec3, Vec3};
 use rayon::prelude::*;
 
@@ -199,7 +199,7 @@ pub fn compute_kernels(
     field: &FieldOptions,
 ) -> crate::Result<(Vec<ParticleKernel>, AnisotropyStats)> {
     field.validate()?;
-    crate::field::check_positions(positions, field)?;
+    crate::grid::check_positions(0, positions, field.cell_size_world(), field.particle_radius)?;
     let inv_h = 1.0 / field.cell_size_world();
     let halves: Vec<BlockKey> = positions
         .par_iter()
