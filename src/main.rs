@@ -9,7 +9,6 @@ use clap::parser::ValueSource;
 use clap::{ArgMatches, Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use meniscus::attributes::AttributeSelection;
-use meniscus::field::AnisotropyOptions;
 use meniscus::io::mesh::MeshWriteOptions;
 use meniscus::io::particles::ParticleFormat;
 use meniscus::job::{
@@ -85,66 +84,47 @@ struct ReconstructArgs {
     #[arg(allow_negative_numbers = true, short = 'r', long)]
     particle_radius: f32,
     /// Influence radius R, multiples of r.
-    #[arg(allow_negative_numbers = true, long, default_value_t = 4.0)]
+    #[arg(allow_negative_numbers = true, long, default_value_t = defaults().influence_radius)]
     influence_radius: f32,
     /// Marching-cubes cell size h, multiples of r.
     #[arg(
         allow_negative_numbers = true,
         short = 'c',
         long,
-        default_value_t = 1.0
+        default_value_t = defaults().cell_size
     )]
     cell_size: f32,
     /// Lower eigenvalue threshold t_low of the Solenthaler concavity factor (isotropic
     /// kernel).
-    #[arg(long, default_value_t = 0.4)]
+    #[arg(long, default_value_t = defaults().t_low)]
     t_low: f32,
     /// Upper eigenvalue threshold t_high of the Solenthaler concavity factor (isotropic
     /// kernel).
-    #[arg(long, default_value_t = 3.5)]
+    #[arg(long, default_value_t = defaults().t_high)]
     t_high: f32,
     /// Icosphere subdivision level for isolated particles (no neighbour within R), or
     /// `off` to leave them in the field.
-    #[arg(long, default_value = "2")]
+    #[arg(long, default_value_t = off_or(defaults().isolated_spheres))]
     isolated_spheres: String,
-    /// Quadric decimation: fraction of triangles to remove (0.8 = the paper's), `adaptive`
-    /// (stop on the error bound only: flat regions simplify, curved ones keep their
-    /// triangles), or `off` [default: 0.81, which holds the anisotropic surface to the
-    /// paper's triangle count]
-    #[arg(long)]
+    #[arg(long, help = with_defaults(DECIMATE_HELP, |s| s.decimate))]
     decimate: Option<String>,
-    /// Error bound of decimation, multiples of r (RMS distance of a collapse to the
-    /// original planes), or `off`; with a fraction, whichever is reached first stops it
-    /// [default: 0.1]
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true, help = with_defaults(DECIMATE_ERROR_HELP, |s| off_or(s.decimate_error)))]
     decimate_error: Option<String>,
-    /// Taubin smoothing steps after decimation (0 = off): removes the field's small bumps
-    /// without shrinking the surface [default: 2]
-    #[arg(long)]
+    #[arg(long, help = with_defaults(SMOOTH_HELP, |s| s.smooth))]
     smooth: Option<u32>,
     /// Loop subdivision steps after decimation (0 = off).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = defaults().subdivide)]
     subdivide: u32,
-    /// Least depth of every non-isolated particle centre under the final surface,
-    /// multiples of r (0 to 1): where decimation or subdivision left one shallower or
-    /// outside, the surface over it is pushed out; `off` leaves the surface as they made
-    /// it [default: 0.25]
-    #[arg(long)]
+    #[arg(long, help = with_defaults(KEEP_INSIDE_HELP, |s| off_or(s.keep_inside)))]
     keep_inside: Option<String>,
-    /// Coverage radius c, multiples of r: particles the paper's surface would leave
-    /// outside are enclosed in a ball of c·r (0 = off, the pure Solenthaler field)
-    /// [default: 0.9]
-    #[arg(allow_negative_numbers = true, long)]
+    #[arg(allow_negative_numbers = true, long, help = with_defaults(COVERAGE_HELP, |s| s.particle_coverage))]
     particle_coverage: Option<f32>,
     /// Iso-surface offset, multiples of r: extract where phi = offset·r, moving the surface
     /// outwards by about that much (0 = the paper's surface; 0.133 removes its inward
     /// bias on the shipped frames, at some flat-region smoothness).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = defaults().iso_offset, allow_negative_numbers = true)]
     iso_offset: f32,
-    /// Particle kernel: `anisotropic` (Yu & Turk 2013 kernels stretched along the local
-    /// surface: smoother, and on the particles instead of inside them) or `isotropic` (the
-    /// paper's Solenthaler field) [default: anisotropic]
-    #[arg(long, value_enum)]
+    #[arg(long, value_enum, help = with_defaults(KERNEL_HELP, |s| kernel_name(s.kernel)))]
     kernel: Option<KernelArg>,
     /// The pipeline of Akinci et al. 2013 exactly: `--kernel isotropic
     /// --particle-coverage 0 --decimate 0.8 --decimate-error off --smooth 0 --keep-inside off`
@@ -152,16 +132,16 @@ struct ReconstructArgs {
     #[arg(long)]
     paper: bool,
     /// Anisotropic kernels: radius h_a of an unstretched kernel, multiples of r.
-    #[arg(long, default_value_t = AnisotropyOptions::default().kernel_radius)]
+    #[arg(long, default_value_t = defaults().kernel_radius)]
     kernel_radius: f32,
     /// Anisotropic kernels: largest ratio of the longest to the shortest axis (k_r).
-    #[arg(long, default_value_t = AnisotropyOptions::default().max_stretch)]
+    #[arg(long, default_value_t = defaults().max_stretch)]
     max_stretch: f32,
     /// Anisotropic kernels: fewest neighbours within R for a stretched kernel (N_ε).
-    #[arg(long, default_value_t = AnisotropyOptions::default().min_neighbours)]
+    #[arg(long, default_value_t = defaults().min_neighbours)]
     min_neighbours: u32,
     /// Anisotropic kernels: centre smoothing λ in [0, 1] (0 = the particle positions).
-    #[arg(long, default_value_t = AnisotropyOptions::default().centre_smoothing)]
+    #[arg(long, default_value_t = defaults().centre_smoothing)]
     centre_smoothing: f32,
     /// Tile edge in marching-cubes cells (rounded up to 8-cell blocks); default: one tile
     /// if the scene fits the memory budget, else the largest tile that does. The
@@ -225,6 +205,46 @@ struct ReconstructArgs {
     #[arg(short, long)]
     quiet: bool,
 }
+
+/// The settings' defaults, for particles of radius 1: every default of `reconstruct`'s
+/// flags comes from them ([`ReconstructSettings::new`], which reads the library's).
+fn defaults() -> ReconstructSettings {
+    ReconstructSettings::new(1.0)
+}
+
+/// `off` for `None`, else the value.
+fn off_or<T: std::fmt::Display>(value: Option<T>) -> String {
+    value.map_or_else(|| "off".to_string(), |v| v.to_string())
+}
+
+/// A kernel as `--kernel` names it.
+fn kernel_name(kernel: meniscus::field::Kernel) -> &'static str {
+    match kernel {
+        meniscus::field::Kernel::Isotropic => "isotropic",
+        _ => "anisotropic",
+    }
+}
+
+/// A flag's help with its default and, where `--paper` changes it, the paper's value.
+fn with_defaults<T: std::fmt::Display>(
+    help: &str,
+    value: impl Fn(&ReconstructSettings) -> T,
+) -> String {
+    let (default, paper) = (value(&defaults()), value(&ReconstructSettings::paper(1.0)));
+    let paper = paper.to_string();
+    if paper == default.to_string() {
+        format!("{help} [default: {default}]")
+    } else {
+        format!("{help} [default: {default}; --paper: {paper}]")
+    }
+}
+
+const DECIMATE_HELP: &str = "Quadric decimation: fraction of triangles to remove (0.8 = the paper's), `adaptive` (stop on the error bound only: flat regions simplify, curved ones keep their triangles), or `off`; the default holds the anisotropic surface to the paper's triangle count";
+const DECIMATE_ERROR_HELP: &str = "Error bound of decimation, multiples of r (RMS distance of a collapse to the original planes), or `off`; with a fraction, whichever is reached first stops it";
+const SMOOTH_HELP: &str = "Taubin smoothing steps after decimation (0 = off): removes the field's small bumps without shrinking the surface";
+const KEEP_INSIDE_HELP: &str = "Least depth of every non-isolated particle centre under the final surface, multiples of r (0 to 1): where decimation or subdivision left one shallower or outside, the surface over it is pushed out; `off` leaves the surface as they made it";
+const COVERAGE_HELP: &str = "Coverage radius c, multiples of r: particles the paper's surface would leave outside are enclosed in a ball of c·r (0 = off, the pure Solenthaler field)";
+const KERNEL_HELP: &str = "Particle kernel: `anisotropic` (Yu & Turk 2013 kernels stretched along the local surface: smoother, and on the particles instead of inside them) or `isotropic` (the paper's Solenthaler field)";
 
 /// Why a command failed: what it prints and its exit code.
 enum Failure {

@@ -264,7 +264,7 @@ fn every_frame_round_trips_within_the_bound() {
         // What the archive must give back: the Loop step of the control mesh, which is
         // exactly what the full pipeline makes.
         let mut expected = control.clone();
-        subdivide(&mut expected.fluid, &SubdivideOptions { levels: 1 });
+        subdivide(&mut expected.fluid, &SubdivideOptions::default());
         if *n == 25 {
             let p = particles("dambreak_small/ParticleData_Fluid_25.xyz");
             let full = reconstruct(&p, &full_pipeline).unwrap().0;
@@ -316,7 +316,7 @@ fn plain_meshes_round_trip_within_the_bound() {
         .take(3)
         .map(|(n, s)| {
             let mut m = s.merged();
-            subdivide(&mut m, &SubdivideOptions { levels: 1 });
+            subdivide(&mut m, &SubdivideOptions::default());
             (n, m)
         })
         .collect();

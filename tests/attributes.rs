@@ -171,10 +171,8 @@ fn attributes_do_not_depend_on_tiling_or_thread_count() {
     assert_eq!(particles.attributes[0].name, "velocity");
     // Marching cubes and one Loop step: the mesh is the same for every tiling, so the
     // attributes must be too, bit for bit.
-    let raw = ReconstructOptions {
-        subdivide: meniscus::subdivision::SubdivideOptions { levels: 1 },
-        ..ReconstructOptions::raw(0.012)
-    };
+    let mut raw = ReconstructOptions::raw(0.012);
+    raw.subdivide.levels = 1;
     let (whole, _) = run(particles.clone(), &raw, 2);
     let velocity = &whole.fluid.attributes[0];
     assert_eq!(velocity.len(), whole.fluid.vertex_count());
@@ -183,13 +181,8 @@ fn attributes_do_not_depend_on_tiling_or_thread_count() {
         "a moving fluid"
     );
     for tile in [32, 64] {
-        let tiled = ReconstructOptions {
-            tiles: TileOptions {
-                tile_size_cells: Some(tile),
-                ..TileOptions::default()
-            },
-            ..raw.clone()
-        };
+        let mut tiled = raw.clone();
+        tiled.tiles = TileOptions::tile_size(tile);
         let (pieces, stats) = run(particles.clone(), &tiled, 2);
         assert!(stats.tiles.tiles > 1);
         assert_eq!(
@@ -225,10 +218,8 @@ fn separate_bodies_keep_their_own_values() {
             values: vec![3.0, 7.0],
         }],
     };
-    let options = ReconstructOptions {
-        isolated_sphere_level: None,
-        ..ReconstructOptions::raw(0.025)
-    };
+    let mut options = ReconstructOptions::raw(0.025);
+    options.isolated_sphere_level = None;
     let (surface, _) = run(particles, &options, 2);
     let ids = &surface.fluid.attributes[0];
     assert!(surface.fluid.vertex_count() > 10);

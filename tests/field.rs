@@ -129,10 +129,8 @@ fn check_against_oracle(coverage: f32) {
     let r = 0.05f64;
     let mut rng = Lcg(2024);
     let pts = blob(r, &mut rng);
-    let options = FieldOptions {
-        particle_coverage: coverage,
-        ..FieldOptions::new(r as f32)
-    };
+    let mut options = FieldOptions::new(r as f32);
+    options.particle_coverage = coverage;
     // Uncovered particles: the oracle field, trilinearly interpolated from the particle's
     // cell corners, is above −r/4.
     let c = coverage as f64 * r;
@@ -262,16 +260,18 @@ fn bad_options_are_rejected_with_the_option_name() {
         (FieldOptions::new(-1.0), "invalid particle_radius"),
         (FieldOptions::new(f32::NAN), "invalid particle_radius"),
         (
-            FieldOptions {
-                cell_size: 0.0,
-                ..FieldOptions::new(0.1)
+            {
+                let mut o = FieldOptions::new(0.1);
+                o.cell_size = 0.0;
+                o
             },
             "invalid cell_size",
         ),
         (
-            FieldOptions {
-                influence_radius: -2.0,
-                ..FieldOptions::new(0.1)
+            {
+                let mut o = FieldOptions::new(0.1);
+                o.influence_radius = -2.0;
+                o
             },
             "invalid influence_radius",
         ),
@@ -304,12 +304,10 @@ fn field_matches_direct_sum_for_other_cell_sizes_and_radii() {
     // (cell size, influence radius) in multiples of r: R/h = 8 cells (two half-blocks of
     // reach), 3.85 (one) and 4.29 (two, not a whole number).
     for (cell_size, influence_radius) in [(0.5f32, 4.0f32), (1.3, 5.0), (0.7, 3.0)] {
-        let options = FieldOptions {
-            cell_size,
-            influence_radius,
-            particle_coverage: 0.0,
-            ..FieldOptions::new(r as f32)
-        };
+        let mut options = FieldOptions::new(r as f32);
+        options.cell_size = cell_size;
+        options.influence_radius = influence_radius;
+        options.particle_coverage = 0.0;
         let (field, _) = compute_field(&pts, &options).unwrap();
         let h = options.cell_size_world();
         let keys = field.sorted_keys();

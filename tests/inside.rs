@@ -113,7 +113,7 @@ fn deferred_subdivision_is_measured_as_decoded() {
     let (surface, stats) = reconstruct(&positions, &o).unwrap();
     assert!(stats.containment.unwrap().too_shallow > 0);
     let mut decoded = surface.fluid.clone();
-    subdivide(&mut decoded, &SubdivideOptions { levels: 1 });
+    subdivide(&mut decoded, &SubdivideOptions::levels(1));
     assert_eq!(outside(&decoded, &positions, r), 0);
 }
 
@@ -124,15 +124,9 @@ fn deferred_subdivision_is_measured_as_decoded() {
 fn a_deeper_setting_moves_more_and_threads_do_not_matter() {
     let (positions, r) = splash_of("datasets/dambreak_small/ParticleData_Fluid_25.xyz", 0.012);
     let mut shallow = options(r, Kernel::Isotropic, None);
-    shallow.containment = Some(ContainmentOptions {
-        min_depth: 0.1,
-        ..Default::default()
-    });
+    shallow.containment = Some(ContainmentOptions::depth(0.1));
     let mut deep = shallow.clone();
-    deep.containment = Some(ContainmentOptions {
-        min_depth: 0.5,
-        ..Default::default()
-    });
+    deep.containment = Some(ContainmentOptions::depth(0.5));
     let (_, a) = reconstruct(&positions, &shallow).unwrap();
     let (one, b) = rayon::ThreadPoolBuilder::new()
         .num_threads(1)

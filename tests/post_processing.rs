@@ -109,28 +109,14 @@ fn collapses_that_would_pinch_or_fold_are_refused() {
         normals: vec![],
         attributes: Vec::new(),
     };
-    let stats = decimate(
-        &mut tet,
-        &DecimateOptions {
-            target_reduction: Some(0.9),
-            max_error: None,
-            ..Default::default()
-        },
-    );
+    let stats = decimate(&mut tet, &DecimateOptions::fraction(0.9));
     assert_eq!(stats.collapses, 0);
     assert_eq!(tet.triangle_count(), 4);
     assert!(stats.refused_topology > 0);
     // Simplifying a sphere as far as it goes: the collapses that would make it a
     // tetrahedron's worth of doubled triangles are refused, and it stays a closed manifold.
     let mut sphere = icosphere(2, 1.0);
-    let stats = decimate(
-        &mut sphere,
-        &DecimateOptions {
-            target_reduction: Some(0.999),
-            max_error: None,
-            ..Default::default()
-        },
-    );
+    let stats = decimate(&mut sphere, &DecimateOptions::fraction(0.999));
     let report = validate(&sphere);
     assert!(report.is_closed_manifold(), "{report:?}");
     assert!(sphere.triangle_count() >= 4, "{stats:?}");
@@ -190,7 +176,7 @@ fn subdivision_after_decimation_stays_closed() {
     let mut m = noisy_sphere(4, 0.02);
     decimate(&mut m, &DecimateOptions::default());
     let t = m.triangle_count();
-    subdivide(&mut m, &SubdivideOptions { levels: 2 });
+    subdivide(&mut m, &SubdivideOptions::levels(2));
     assert_eq!(m.triangle_count(), 16 * t);
     assert!(validate(&m).is_closed_manifold());
 }
@@ -318,14 +304,8 @@ fn an_error_bound_beats_the_fixed_fraction_on_the_box() {
     let mut base = ReconstructOptions::new(r);
     base.field.kernel = meniscus::field::Kernel::Isotropic;
     let (fixed, _) = reconstruct(&particles, &base).unwrap();
-    let adaptive_options = ReconstructOptions {
-        decimate: Some(DecimateOptions {
-            target_reduction: None,
-            max_error: Some(0.1 * r),
-            ..Default::default()
-        }),
-        ..base.clone()
-    };
+    let mut adaptive_options = base.clone();
+    adaptive_options.decimate = Some(DecimateOptions::error_bound(0.1 * r));
     let (adaptive, _) = reconstruct(&particles, &adaptive_options).unwrap();
     assert!(validate(&adaptive.fluid).is_closed_manifold());
     let (e_fixed, e_adaptive) = (
@@ -384,14 +364,8 @@ fn decimating_by_regions_keeps_the_surface_closed_deterministic_and_on_target() 
     )
     .unwrap();
     let raw = raw.fluid;
-    let whole_options = DecimateOptions {
-        region_triangles: 0,
-        ..Default::default()
-    };
-    let region_options = DecimateOptions {
-        region_triangles: 8 * 1024,
-        ..Default::default()
-    };
+    let whole_options = DecimateOptions::default().with_region_triangles(0);
+    let region_options = DecimateOptions::default().with_region_triangles(8 * 1024);
     let run = |threads: usize, options: &DecimateOptions| {
         rayon::ThreadPoolBuilder::new()
             .num_threads(threads)

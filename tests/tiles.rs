@@ -30,14 +30,10 @@ struct Run {
 }
 
 fn run(positions: &[Vec3], options: &FieldOptions, tile: Option<u32>, threads: usize) -> Run {
-    let options = ReconstructOptions {
-        field: options.clone(),
-        tiles: TileOptions {
-            tile_size_cells: tile,
-            ..TileOptions::default()
-        },
-        ..ReconstructOptions::raw(options.particle_radius)
-    };
+    let mut field = options.clone();
+    let mut options = ReconstructOptions::raw(field.particle_radius);
+    std::mem::swap(&mut options.field, &mut field);
+    options.tiles = tile.map_or_else(TileOptions::default, TileOptions::tile_size);
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
@@ -122,10 +118,8 @@ fn anisotropic_tiled_runs_equal_the_untiled_run_for_any_thread_count() {
         ("analytic/sheet.xyz", 0.025, [8, 16]),
     ] {
         let positions = xyz(rel);
-        let options = FieldOptions {
-            kernel: Kernel::Anisotropic,
-            ..FieldOptions::new(r)
-        };
+        let mut options = FieldOptions::new(r);
+        options.kernel = Kernel::Anisotropic;
         let whole = run(&positions, &options, None, 2);
         assert!(whole.surface.fluid.triangles.len() > 1000, "{rel}");
         assert_same(
@@ -152,11 +146,9 @@ fn anisotropic_tiled_runs_equal_the_untiled_run_for_any_thread_count() {
 fn tiles_smaller_than_the_influence_radius_and_any_thread_count() {
     // R = 8r at h = r/2 is 16 cells = 2 blocks, so one-block tiles are half of R.
     let positions = xyz("analytic/sheet.xyz");
-    let options = FieldOptions {
-        cell_size: 0.5,
-        influence_radius: 8.0,
-        ..FieldOptions::new(0.025)
-    };
+    let mut options = FieldOptions::new(0.025);
+    options.cell_size = 0.5;
+    options.influence_radius = 8.0;
     let whole = run(&positions, &options, None, 1);
     assert!(whole.stats.tiles.tiles == 1);
     let small = run(&positions, &options, Some(8), 3);

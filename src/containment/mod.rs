@@ -69,6 +69,7 @@ use surface::{LoopSurface, Slots};
 
 /// Options of [`contain`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[non_exhaustive]
 pub struct ContainmentOptions {
     /// Least depth of a particle centre under the output surface, multiples of the particle
     /// radius r. Default 0.25.
@@ -84,12 +85,42 @@ pub struct ContainmentOptions {
     pub chunk_triangles: Option<usize>,
 }
 
+/// Peak working set of the containment stage, bytes per decimated (control) triangle,
+/// everything after the tiles included: the control mesh, its vertex → triangle lists
+/// and normals, the slab tables, one slab's one-step Loop surface and cell hash, the
+/// centres watched. Measured on the 32M scene under a 2 GiB budget: 1315 MiB at the stage
+/// (17.2 M control triangles, 17 slabs), 70 bytes per triangle over the process and the
+/// tiles' leftovers; 80 kept as margin. (Before the slabs, 2026-11-26: 2685 MiB, 154 B.)
+/// Below the subdivision's, so the stage never sets a run's estimate.
+pub(crate) const BYTES_PER_INPUT_TRIANGLE: f64 = 80.0;
+
 /// Working set of a slab, bytes per control triangle in it: its triangle and vertex
 /// lists, the one-step surface's points (3.5 per triangle), their cell hash and what
 /// building it takes.
 const SLAB_BYTES_PER_TRIANGLE: u64 = 96;
 
 impl ContainmentOptions {
+    /// Every centre at least `min_depth` (multiples of `r`) deep, the other options
+    /// default.
+    pub fn depth(min_depth: f32) -> Self {
+        ContainmentOptions {
+            min_depth,
+            ..Default::default()
+        }
+    }
+
+    /// Checks the depth: in `[0, 1]`, multiples of `r`.
+    pub fn validate(&self) -> crate::Result<()> {
+        let d = self.min_depth;
+        if !(d.is_finite() && (0.0..=1.0).contains(&d)) {
+            return Err(crate::Error::InvalidOption {
+                option: "containment.min_depth",
+                message: format!("takes a depth in [0, 1] (multiples of r), got {d}"),
+            });
+        }
+        Ok(())
+    }
+
     /// Control triangles per slab under a memory budget of `budget` bytes (`None`: no
     /// limit): [`Self::chunk_triangles`] when given, else as many as an eighth of the
     /// budget holds, at least 2¹⁸.

@@ -90,6 +90,7 @@ use tri_list::TriList;
 
 /// Options of [`decimate`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[non_exhaustive]
 pub struct DecimateOptions {
     /// Fraction of the triangles to remove, in `[0, 1)`, or `None` to stop on the error
     /// bound only. Default `Some(0.8)` (the paper's).
@@ -110,6 +111,61 @@ fn default_region_triangles() -> usize {
 }
 
 impl DecimateOptions {
+    /// Checks the target: a fraction in `[0, 1)` and an error bound `> 0` (world units),
+    /// at least one of them.
+    pub fn validate(&self) -> crate::Result<()> {
+        let bad = |option: &'static str, message: String| {
+            Err(crate::Error::InvalidOption { option, message })
+        };
+        match (self.target_reduction, self.max_error) {
+            (Some(f), _) if !(0.0..1.0).contains(&f) => bad(
+                "decimate.target_reduction",
+                format!("takes a fraction in [0, 1), got {f}"),
+            ),
+            (_, Some(e)) if !(e.is_finite() && e > 0.0) => bad(
+                "decimate.max_error",
+                format!("must be > 0 (world units), got {e}"),
+            ),
+            (None, None) => bad(
+                "decimate",
+                "needs a fraction to remove or an error bound, or no decimation".into(),
+            ),
+            _ => Ok(()),
+        }
+    }
+
+    /// Removing the fraction `target_reduction` of the triangles, without an error bound.
+    pub fn fraction(target_reduction: f32) -> Self {
+        DecimateOptions {
+            target_reduction: Some(target_reduction),
+            max_error: None,
+            region_triangles: default_region_triangles(),
+        }
+    }
+
+    /// Collapsing while no collapse moves the surface by more than `max_error` (world
+    /// units), whatever the number of triangles.
+    pub fn error_bound(max_error: f32) -> Self {
+        DecimateOptions {
+            target_reduction: None,
+            max_error: Some(max_error),
+            region_triangles: default_region_triangles(),
+        }
+    }
+
+    /// The same options with the error bound `max_error` (world units, `None`: none).
+    pub fn with_max_error(self, max_error: Option<f32>) -> Self {
+        DecimateOptions { max_error, ..self }
+    }
+
+    /// The same options with regions of `region_triangles` (0: never split).
+    pub fn with_region_triangles(self, region_triangles: usize) -> Self {
+        DecimateOptions {
+            region_triangles,
+            ..self
+        }
+    }
+
     /// Triangles to keep out of `triangles`: the fraction's share, rounded up, or 0 when
     /// only the error bound stops the decimation.
     pub fn target_triangles(&self, triangles: usize) -> usize {

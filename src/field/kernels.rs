@@ -36,6 +36,7 @@ use rayon::prelude::*;
 /// Parameters of the anisotropic kernels; lengths in multiples of the particle radius
 /// `r`. The covariance neighbourhood is the field's influence radius `R`.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[non_exhaustive]
 pub struct AnisotropyOptions {
     /// Radius `h_a` of the kernel of a particle with an isotropic neighbourhood, multiples
     /// of `r`. Default 3.5.

@@ -46,6 +46,7 @@ pub use kernels::{compute_kernels, AnisotropyOptions, AnisotropyStats, ParticleK
 
 /// Parameters of the field. Lengths other than the particle radius are multiples of `r`.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[non_exhaustive]
 pub struct FieldOptions {
     /// Particle radius `r`, world units (half the rest spacing). Required, > 0.
     pub particle_radius: f32,

@@ -35,26 +35,6 @@ pub(crate) const PARTICLES_PER_SURFACE_BLOCK: f64 = 50.0;
 /// Marching-cubes triangles per populated block on the fluid's surface (one with an
 /// unpopulated block among its 26 neighbours): 134 in the 4M scene, 129 in its splash.
 pub(crate) const MC_TRIANGLES_PER_SURFACE_BLOCK: f64 = 140.0;
-/// Peak working set of one Loop step, bytes per input triangle (the input's triangles,
-/// side → edge indices, the output mesh; measured 104 on 32M particles, 134 on 4M where
-/// heap left over from the tiles counts more). 110 put the 32M scene's whole-run estimate
-/// (1906 MiB) within 1 % of its measured peaks (1863–1922 MiB over three sessions) and
-/// under a 2 GiB budget; 120 refused that run. Since the step frees the input positions
-/// before writing the triangles (2026-11-24) that run peaks at 1762 MiB: the estimate is
-/// now 8 % high, kept as margin.
-pub(crate) const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 110.0;
-/// Peak working set of the containment stage, bytes per decimated (control) triangle,
-/// everything after the tiles included: the control mesh, its vertex → triangle lists
-/// and normals, the slab tables, one slab's one-step Loop surface and cell hash, the
-/// centres watched. Measured on the 32M scene under a 2 GiB budget: 1315 MiB at the stage
-/// (17.2 M control triangles, 17 slabs), 70 bytes per triangle over the process and the
-/// tiles' leftovers; 80 kept as margin. (Before the slabs, 2026-11-26: 2685 MiB, 154 B.)
-/// Below the subdivision's, so the stage never sets a run's estimate.
-pub(crate) const CONTAINMENT_BYTES_PER_INPUT_TRIANGLE: f64 = 80.0;
-/// Peak of Taubin smoothing per control-mesh triangle: the mesh (24 B), the vertices'
-/// neighbour lists (≈ 14 B, and ≈ 14 B of vertex → triangle lists while they are built)
-/// and two f64 copies of the positions (≈ 24 B), bytes.
-pub(crate) const SMOOTHING_BYTES_PER_INPUT_TRIANGLE: f64 = 72.0;
 /// Memory of the process before any particle (code, thread stacks, allocator), bytes.
 pub(crate) const BASE_BYTES: u64 = 64 << 20;
 /// What the tiles leave in memory under the post-processing, beyond the surface (mostly
@@ -72,9 +52,6 @@ pub(crate) const ATTRIBUTE_TILE_BYTES_PER_PARTICLE: u64 = 76;
 /// kernel of every loaded particle (64), then for the field particles the kernels kept
 /// (64), the prepared copy (64) and the sort by centre (16).
 pub(crate) const ANISOTROPIC_BYTES_PER_PARTICLE: u64 = 208;
-/// Bytes per triangle of a finished mesh with normals (12 for indices, half a vertex of
-/// 24 for position and normal).
-pub(crate) const MESH_BYTES_PER_TRIANGLE: f64 = 24.0;
 
 /// What the counting pass knows of a frame's surface before any field value.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -124,13 +101,14 @@ impl SceneShape {
 }
 
 /// Memory the surface needs after the tiles (the post-processing's peak), per
-/// marching-cubes triangle, and the stage whose peak it is.
+/// marching-cubes triangle, and the stage whose peak it is (the pipeline adds up its
+/// stages' own figures: [`crate::pipeline::ReconstructOptions`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct OutputCost {
     /// Bytes per marching-cubes triangle.
     pub(crate) bytes_per_triangle: f64,
-    /// What a smaller setting of would lower the peak, as the message advises it.
-    advice: &'static str,
+    /// What would lower the peak, as the message advises it ("fewer subdivision steps").
+    pub(crate) advice: &'static str,
 }
 
 impl OutputCost {
@@ -140,62 +118,6 @@ impl OutputCost {
         bytes_per_triangle: 0.0,
         advice: "",
     };
-}
-
-/// The [`OutputCost`] of decimation removing `reduction` of the triangles (`None`: no
-/// decimation; an error-bounded run counts as 0.8), smoothing when `smoothing`, the
-/// containment stage when `containment`, and `subdivide_levels` Loop steps.
-pub(crate) fn output_bytes_per_triangle(
-    reduction: Option<f32>,
-    smoothing: bool,
-    containment: bool,
-    subdivide_levels: u32,
-) -> OutputCost {
-    let mut triangles = 1.0;
-    // Without decimation the block surfaces (≈ 20 B per triangle) and the stitched mesh
-    // (≈ 18 B) exist together.
-    let mut peak = match reduction {
-        None => (triangles * 38.0, "decimation (decimate)"),
-        Some(f) => {
-            triangles *= 1.0 - f.clamp(0.0, 1.0) as f64;
-            (
-                triangles * MESH_BYTES_PER_TRIANGLE,
-                "more decimation (decimate)",
-            )
-        }
-    };
-    let mut raise = |bytes: f64, advice| {
-        if bytes > peak.0 {
-            peak = (bytes, advice);
-        }
-    };
-    if smoothing {
-        raise(
-            triangles * SMOOTHING_BYTES_PER_INPUT_TRIANGLE,
-            "no smoothing (smooth)",
-        );
-    }
-    if containment {
-        raise(
-            triangles * CONTAINMENT_BYTES_PER_INPUT_TRIANGLE,
-            "containment off (keep_inside)",
-        );
-    }
-    for _ in 0..subdivide_levels {
-        raise(
-            triangles * SUBDIVISION_BYTES_PER_INPUT_TRIANGLE,
-            "fewer subdivision steps (subdivide)",
-        );
-        triangles *= 4.0;
-    }
-    raise(
-        triangles * MESH_BYTES_PER_TRIANGLE,
-        "fewer subdivision steps (subdivide)",
-    );
-    OutputCost {
-        bytes_per_triangle: peak.0,
-        advice: peak.1,
-    }
 }
 
 /// Picks the tile edge in blocks (`None`: one tile) and estimates the run's peak memory.
@@ -224,7 +146,7 @@ pub(super) fn choose_tile_blocks(
     let produced = BASE_BYTES
         + (triangles
             * if decimated_in_tiles {
-                0.2 * MESH_BYTES_PER_TRIANGLE
+                0.2 * crate::mesh::MESH_BYTES_PER_TRIANGLE
             } else {
                 20.0
             }) as u64;
@@ -419,21 +341,6 @@ mod tests {
         assert!(spray.marching_cubes_triangles() > solid.marching_cubes_triangles());
     }
 
-    /// The budget message advises the setting of the stage that sets the peak.
-    #[test]
-    fn the_advice_names_the_stage_with_the_peak() {
-        let advice = |r, s, c, l| output_bytes_per_triangle(r, s, c, l).advice;
-        assert!(advice(Some(0.81), true, true, 1).contains("subdivi"));
-        assert!(advice(Some(0.81), true, true, 0).contains("containment"));
-        assert!(advice(Some(0.81), true, false, 0).contains("smooth"));
-        assert!(advice(Some(0.81), false, false, 0).contains("decimat"));
-        assert!(advice(None, false, false, 0).contains("decimat"));
-        // Containment below subdivision: turning it off would not help a subdivided run.
-        let with = output_bytes_per_triangle(Some(0.81), true, true, 1);
-        let without = output_bytes_per_triangle(Some(0.81), true, false, 1);
-        assert_eq!(with.bytes_per_triangle, without.bytes_per_triangle);
-    }
-
     #[test]
     fn a_scene_with_more_surface_per_particle_is_planned_with_more_memory() {
         // The same particles as one solid body and as spray: the spray has every block on
@@ -441,7 +348,11 @@ mod tests {
         // body runs untiled in.
         let body = lattice(24, 1, 64);
         let spray = lattice(24, 3, 64);
-        let output = output_bytes_per_triangle(Some(0.8), false, false, 0);
+        // Decimation by 0.8, nothing after it: the decimated mesh.
+        let output = OutputCost {
+            bytes_per_triangle: 0.2 * crate::mesh::MESH_BYTES_PER_TRIANGLE,
+            advice: "more decimation",
+        };
         let plan = |counts: &HashMap<BlockKey, u64>, budget: Option<u64>| {
             let options = TileOptions {
                 memory_budget_bytes: budget,

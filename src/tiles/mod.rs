@@ -67,8 +67,8 @@ use crate::io::particles::ParticleSource;
 use crate::marching_cubes::{march_blocks, stitch, BlockSurface, MarchingCubesStats};
 use crate::mesh::TriMesh;
 use crate::neighbors::find_isolated_sorted;
+pub(crate) use budget::OutputCost;
 pub use budget::{default_memory_budget, parse_memory_size};
-pub(crate) use budget::{output_bytes_per_triangle, OutputCost};
 use glam::Vec3;
 pub(crate) use plan::{plan_tiles, TilePlan};
 use std::path::PathBuf;
@@ -77,6 +77,7 @@ pub(crate) use store::ParticleStore;
 
 /// How the lattice is cut.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[non_exhaustive]
 pub struct TileOptions {
     /// Tile edge in marching-cubes cells, rounded up to whole 8-cell blocks. `None`: chosen
     /// from the memory budget, or one tile when there is no budget. Default `None`.
@@ -89,6 +90,24 @@ pub struct TileOptions {
     /// directory. Default `None`.
     #[serde(default)]
     pub temp_dir: Option<PathBuf>,
+}
+
+impl TileOptions {
+    /// Tiles of `cells` marching-cubes cells per edge (rounded up to whole blocks).
+    pub fn tile_size(cells: u32) -> Self {
+        TileOptions {
+            tile_size_cells: Some(cells),
+            ..Default::default()
+        }
+    }
+
+    /// Tiles chosen under a memory budget of `bytes`.
+    pub fn memory_budget(bytes: u64) -> Self {
+        TileOptions {
+            memory_budget_bytes: Some(bytes),
+            ..Default::default()
+        }
+    }
 }
 
 /// What the tiled run did.
@@ -129,6 +148,30 @@ pub struct TileStats {
     pub stitch_seconds: f64,
     /// Seconds spent decimating tiles and the seam band (0 unless decimated in tiles).
     pub decimation_seconds: f64,
+}
+
+impl TileStats {
+    /// The tiles' time as the stages of the paper's Table 1: neighbours (the passes over
+    /// the input, loading the tiles' particles, isolation, and whatever `elapsed` seconds
+    /// hold beyond the timed parts), kernels (with anisotropic ones), field, and marching
+    /// cubes with the stitching; decimation in tiles is its own stage.
+    pub(crate) fn stage_seconds(&self, elapsed: f64, kernels: bool) -> Vec<(&'static str, f64)> {
+        let timed = self.kernel_seconds
+            + self.field_seconds
+            + self.marching_seconds
+            + self.stitch_seconds
+            + self.decimation_seconds;
+        let mut stages = vec![("neighbours", elapsed - timed)];
+        if kernels {
+            stages.push(("kernels", self.kernel_seconds));
+        }
+        stages.push(("field", self.field_seconds));
+        stages.push((
+            "marching cubes",
+            self.marching_seconds + self.stitch_seconds,
+        ));
+        stages
+    }
 }
 
 /// Where the tile loop hands each tile's marching-cubes output.
