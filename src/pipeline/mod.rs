@@ -20,7 +20,7 @@
 
 use crate::attributes::transfer;
 use crate::cancel::CancelToken;
-use crate::containment::contain_centres;
+use crate::containment::{contain_centres, ContainmentInput};
 use crate::decimation::{decimate, DecimateStats, TileDecimation};
 use crate::error::Result;
 use crate::io::particles::ParticleSource;
@@ -102,18 +102,14 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
     // 6. Containment, on the surface as subdivision will make it.
     if let (Some(containment), Some(store)) = (&options.containment, &store) {
         run.stage("containment", &mut fluid, |fluid, stats| {
-            let levels = options.subdivide.levels + options.deferred_subdivision;
-            let budget = options.tiles.memory_budget_bytes;
-            let contained = contain_centres(
-                fluid,
-                levels,
-                store,
-                &isolated,
-                options.field.particle_radius,
-                containment,
-                containment.slab_triangles(budget),
-                cancel,
-            )?;
+            let input = ContainmentInput {
+                levels: options.subdivide.levels + options.deferred_subdivision,
+                centres: store,
+                isolated: &isolated,
+                particle_radius: options.field.particle_radius,
+                slab_triangles: containment.slab_triangles(options.tiles.memory_budget_bytes),
+            };
+            let contained = contain_centres(fluid, &input, containment, cancel)?;
             // The slabs' tables and lists leave holes in the heap that subdivision's large
             // arrays cannot fill.
             crate::allocator::release_freed_memory();
