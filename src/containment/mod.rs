@@ -191,18 +191,6 @@ impl Centres for [Vec3] {
     }
 }
 
-impl<S: crate::io::particles::ParticleSource> Centres for crate::tiles::ParticleStore<S> {
-    fn visit_between(
-        &self,
-        axis: usize,
-        lo: f32,
-        hi: f32,
-        visit: &mut VisitChunk<'_>,
-    ) -> Result<()> {
-        self.for_each_stored_between(axis, lo, hi, visit)
-    }
-}
-
 /// Moves the vertices of `control` (a closed surface, world units) so that every centre
 /// of `centres` that lies near it ends at least `options.min_depth · particle_radius`
 /// under the surface `control` becomes after `levels` Loop subdivision steps (measured

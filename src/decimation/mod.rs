@@ -74,7 +74,6 @@ mod collapse;
 mod pieces;
 mod placement;
 mod quadric;
-mod tiles;
 mod tri_list;
 
 use crate::mesh::TriMesh;
@@ -85,7 +84,6 @@ pub(crate) use pieces::place_survivors;
 use placement::place_candidates;
 use quadric::{Plane, Quadric};
 use rayon::prelude::*;
-pub(crate) use tiles::TileDecimation;
 use tri_list::TriList;
 
 /// Options of [`decimate`].

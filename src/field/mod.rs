@@ -129,6 +129,15 @@ impl FieldOptions {
         self.influence_radius as f64 * self.particle_radius as f64
     }
 
+    /// Bytes per particle the kernels add to a tile or an untiled run (0 for the
+    /// isotropic kernel, which needs nothing beyond the positions).
+    pub(crate) fn kernel_bytes_per_particle(&self) -> u64 {
+        match self.kernel {
+            Kernel::Isotropic => 0,
+            Kernel::Anisotropic => kernels::BYTES_PER_PARTICLE,
+        }
+    }
+
     /// Value stored for vertices with no particle in range (positive: outside).
     pub fn outside_value(&self) -> f32 {
         (self.influence_radius_world()) as f32

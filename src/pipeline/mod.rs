@@ -6,7 +6,7 @@
 //! 3. tiles: isolated particles split off, the Solenthaler field ([`crate::field`]) and
 //!    marching cubes ([`crate::marching_cubes`]), tile by tile, into a sink that
 //!    stitches the pieces exactly, or decimates each as it comes
-//!    ([`crate::decimation::TileDecimation`]);
+//!    ([`crate::tiles::TileDecimation`]);
 //! 4. quadric decimation ([`crate::decimation`]), unless the tiles did it;
 //! 5. Taubin smoothing of the decimated mesh ([`crate::smoothing`]);
 //! 6. containment: every non-isolated particle centre pushed under the surface that
@@ -21,7 +21,7 @@
 use crate::attributes::transfer;
 use crate::cancel::CancelToken;
 use crate::containment::{contain_centres, ContainmentInput};
-use crate::decimation::{decimate, DecimateStats, TileDecimation};
+use crate::decimation::{decimate, DecimateStats};
 use crate::error::Result;
 use crate::io::particles::ParticleSource;
 use crate::mesh::{SphereInstances, Surface, TriMesh};
@@ -29,7 +29,7 @@ use crate::neighbors::find_isolated;
 use crate::smoothing::smooth;
 use crate::subdivision::subdivide;
 use crate::tiles::{
-    plan_tiles, run_tiles, ParticleStore, StitchSink, TilePlan, TileSink, TileStats,
+    plan_tiles, run_tiles, ParticleStore, StitchSink, TileDecimation, TilePlan, TileSink, TileStats,
 };
 use glam::Vec3;
 use std::time::Instant;

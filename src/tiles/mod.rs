@@ -36,7 +36,7 @@
 //!   tile's block surfaces to a [`TileSink`]. Tiles run one after another, each parallel
 //!   inside.
 //! * sinks: [`StitchSink`] stitches the block surfaces into one mesh;
-//!   [`crate::decimation::TileDecimation`] decimates each tile's piece with its border
+//!   [`TileDecimation`] decimates each tile's piece with its border
 //!   locked (the locked-seam contract is written down there).
 //!
 //! **Memory budget.** [`TileOptions::memory_budget_bytes`] picks the tile size (the largest
@@ -49,12 +49,13 @@
 //! fewer fresh pages.
 //!
 //! **Decimation in tiles.** With decimation requested and more than one tile, the
-//! pipeline runs the tiles into [`crate::decimation::TileDecimation`]: the raw surface is
+//! pipeline runs the tiles into [`TileDecimation`]: the raw surface is
 //! then never whole in memory, memory follows the output. The result is deterministic
 //! and independent of the thread count, but depends on the tile size; without decimation
 //! the stitched marching-cubes mesh is bit-identical for every tiling.
 
 pub mod budget;
+mod decimating;
 pub(crate) mod plan;
 pub(crate) mod spill;
 pub(crate) mod store;
@@ -69,6 +70,7 @@ use crate::mesh::TriMesh;
 use crate::neighbors::find_isolated_sorted;
 pub(crate) use budget::OutputCost;
 pub use budget::{default_memory_budget, parse_memory_size};
+pub(crate) use decimating::TileDecimation;
 use glam::Vec3;
 pub(crate) use plan::{plan_tiles, TilePlan};
 use std::path::PathBuf;

@@ -286,3 +286,15 @@ pub(crate) fn load_in_canonical_order(
         .filter(|run| !run.is_sorted_by_key(|r| r.1))
         .for_each(|run| run.sort_unstable_by_key(|r| r.1));
 }
+/// The stored particles are the centres containment measures, read back cell by cell.
+impl<S: ParticleSource> crate::containment::Centres for ParticleStore<S> {
+    fn visit_between(
+        &self,
+        axis: usize,
+        lo: f32,
+        hi: f32,
+        visit: &mut crate::containment::VisitChunk<'_>,
+    ) -> Result<()> {
+        self.for_each_stored_between(axis, lo, hi, visit)
+    }
+}
