@@ -12,8 +12,8 @@ use meniscus::attributes::AttributeSelection;
 use meniscus::io::mesh::MeshWriteOptions;
 use meniscus::io::particles::ParticleFormat;
 use meniscus::job::{
-    check_outputs, output_kind, peak_rss_bytes, plan_frames, run_frames, FrameReport, FrameStatus,
-    JobOptions, OutputKind,
+    check_outputs, output_profile, peak_rss_bytes, plan_frames, run_frames, FrameReport,
+    FrameStatus, JobOptions,
 };
 use meniscus::pipeline::ReconstructOptions;
 use meniscus::settings::{Decimation, ReconstructSettings};
@@ -423,15 +423,7 @@ fn reconstruct(
     cancel: &meniscus::CancelToken,
 ) -> Result<(), Failure> {
     // Options first, then the frames: usage errors (exit 2) before any file is read.
-    if args.threads == Some(0) {
-        return Err(Failure::option("--threads", "must be at least 1, got 0"));
-    }
-    if !(args.fps.is_finite() && args.fps > 0.0) {
-        return Err(Failure::option(
-            "--fps",
-            format!("must be > 0 (frames per second), got {}", args.fps),
-        ));
-    }
+    check_run_options(args)?;
     let options = options_from(args)?;
     let attributes = match &args.attributes {
         Some(list) => list
@@ -439,9 +431,6 @@ fn reconstruct(
             .map_err(|e| Failure::option("--attributes", e))?,
         None => AttributeSelection::default(),
     };
-    let error_bound = args
-        .error_bound
-        .unwrap_or(meniscus::archive::default_error_bound(args.particle_radius));
     let plan = plan_frames(&args.input, &args.output, &args.farm.choice())?;
     check_outputs(&plan).map_err(|e| Failure::Usage(e.to_string()))?;
     for warning in ineffective_options(args, given, &plan, &attributes) {
@@ -453,40 +442,93 @@ fn reconstruct(
             .build_global()
             .map_err(|e| Failure::Run(e.to_string()))?;
     }
-    let job = JobOptions {
+    let job = job_options(args, attributes, cancel);
+    let clock = Instant::now();
+    let reports = run_with_progress(args, &plan, &options, &job).map_err(|e| match e {
+        meniscus::Error::FramesExist { .. } => Failure::Run(format!(
+            "{e}\nhint: --skip-existing skips the frames the archive holds and appends the others"
+        )),
+        e => e.into(),
+    })?;
+    let total = clock.elapsed().as_secs_f64();
+    if !args.quiet {
+        summarize(&reports, total);
+    }
+    if let Some(path) = &args.stats {
+        write_stats(path, &options, &reports, total)?;
+    }
+    check_failed(&reports)
+}
+
+/// The options of a run that the library does not check: `--threads`, `--fps`.
+fn check_run_options(args: &ReconstructArgs) -> Result<(), Failure> {
+    if args.threads == Some(0) {
+        return Err(Failure::option("--threads", "must be at least 1, got 0"));
+    }
+    if !(args.fps.is_finite() && args.fps > 0.0) {
+        return Err(Failure::option(
+            "--fps",
+            format!("must be > 0 (frames per second), got {}", args.fps),
+        ));
+    }
+    Ok(())
+}
+
+/// What the run does with its files.
+fn job_options(
+    args: &ReconstructArgs,
+    attributes: AttributeSelection,
+    cancel: &meniscus::CancelToken,
+) -> JobOptions {
+    JobOptions {
         input_format: args.input_format,
         write: MeshWriteOptions {
             normals: !args.no_normals,
             ..MeshWriteOptions::default()
         },
         skip_existing: args.skip_existing,
-        archive_error_bound: error_bound,
+        archive_error_bound: args
+            .error_bound
+            .unwrap_or(meniscus::archive::default_error_bound(args.particle_radius)),
         archive_attribute_error_bound: args.attribute_error_bound,
         fps: args.fps,
         attributes,
         cancel: cancel.clone(),
         keep_going: args.keep_going,
-    };
-    let bar = if args.quiet {
-        ProgressBar::hidden()
-    } else {
-        let bar =
-            ProgressBar::with_draw_target(Some(plan.len() as u64), ProgressDrawTarget::stderr());
-        bar.set_style(
-            ProgressStyle::with_template(
-                "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} frames  {msg}",
-            )
-            .expect("valid template"),
-        );
-        bar.enable_steady_tick(std::time::Duration::from_millis(120));
-        bar
-    };
-    let clock = Instant::now();
+    }
+}
+
+/// The progress bar of `frames` frames on stderr (hidden with `--quiet`).
+fn progress_bar(args: &ReconstructArgs, frames: usize) -> ProgressBar {
+    if args.quiet {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::with_draw_target(Some(frames as u64), ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} frames  {msg}",
+        )
+        .expect("valid template"),
+    );
+    bar.enable_steady_tick(std::time::Duration::from_millis(120));
+    bar
+}
+
+/// Runs the frames of `plan` behind a progress bar, printing what each finished frame
+/// calls for: its `--json-progress` line, its error (with `--keep-going`), warnings, and
+/// the stage table of a single frame.
+fn run_with_progress(
+    args: &ReconstructArgs,
+    plan: &[(meniscus::sequence::Frame, PathBuf)],
+    options: &ReconstructOptions,
+    job: &JobOptions,
+) -> meniscus::Result<Vec<FrameReport>> {
+    let bar = progress_bar(args, plan.len());
     let mut warned = false;
     let result = run_frames(
-        &plan,
-        &options,
-        &job,
+        plan,
+        options,
+        job,
         &mut |_, frame| bar.set_prefix(frame.input.display().to_string()),
         &mut |stage| bar.set_message(stage.to_string()),
         &mut |report: &FrameReport| {
@@ -526,41 +568,44 @@ fn reconstruct(
         },
     );
     bar.finish_and_clear();
-    let reports = result.map_err(|e| match e {
-        meniscus::Error::FramesExist { .. } => Failure::Run(format!(
-            "{e}\nhint: --skip-existing skips the frames the archive holds and appends the others"
-        )),
-        e => e.into(),
-    })?;
-    let total = clock.elapsed().as_secs_f64();
-    if !args.quiet {
-        summarize(&reports, total);
-    }
+    result
+}
+
+/// Writes the `--stats` JSON: the options, every frame's report, the run's time and peak
+/// memory.
+fn write_stats(
+    path: &std::path::Path,
+    options: &ReconstructOptions,
+    reports: &[FrameReport],
+    total: f64,
+) -> Result<(), Failure> {
+    let json = serde_json::json!({
+        "options": options,
+        "frames": reports,
+        "total_seconds": total,
+        "peak_rss_bytes": peak_rss_bytes(),
+    });
+    let text = serde_json::to_string_pretty(&json).map_err(|e| Failure::Run(e.to_string()))?;
+    std::fs::write(path, text).map_err(|e| Failure::from(meniscus::Error::io(path, e)))
+}
+
+/// Fails the run when any frame failed (with `--keep-going`), naming them.
+fn check_failed(reports: &[FrameReport]) -> Result<(), Failure> {
     let failed: Vec<&FrameReport> = reports
         .iter()
         .filter(|r| r.status == FrameStatus::Failed)
         .collect();
-    if let Some(path) = &args.stats {
-        let json = serde_json::json!({
-            "options": options,
-            "frames": reports,
-            "total_seconds": total,
-            "peak_rss_bytes": peak_rss_bytes(),
-        });
-        let text = serde_json::to_string_pretty(&json).map_err(|e| Failure::Run(e.to_string()))?;
-        std::fs::write(path, text).map_err(|e| Failure::from(meniscus::Error::io(path, e)))?;
+    if failed.is_empty() {
+        return Ok(());
     }
-    if !failed.is_empty() {
-        let numbers: Vec<String> = failed.iter().map(|r| r.frame.to_string()).collect();
-        return Err(Failure::Run(format!(
-            "{} of {} frames failed (frame{} {}); the others were written",
-            failed.len(),
-            reports.len(),
-            if failed.len() == 1 { "" } else { "s" },
-            numbers.join(", ")
-        )));
-    }
-    Ok(())
+    let numbers: Vec<String> = failed.iter().map(|r| r.frame.to_string()).collect();
+    Err(Failure::Run(format!(
+        "{} of {} frames failed (frame{} {}); the others were written",
+        failed.len(),
+        reports.len(),
+        if failed.len() == 1 { "" } else { "s" },
+        numbers.join(", ")
+    )))
 }
 
 /// Options the user gave that the chosen output makes pointless, each with the reason;
@@ -572,7 +617,7 @@ fn ineffective_options(
     attributes: &AttributeSelection,
 ) -> Vec<String> {
     let given = |id: &str| given.value_source(id) == Some(ValueSource::CommandLine);
-    let kind = output_kind(plan);
+    let profile = output_profile(plan);
     let output = &args.output;
     let mut warnings = Vec::new();
     // Raw .xyz holds no attributes (a list of names is an error when it is read).
@@ -586,7 +631,7 @@ fn ineffective_options(
     if raw_positions && *attributes == AttributeSelection::All {
         warnings.push("--attributes all has no effect: raw .xyz input holds positions only".into());
     }
-    if kind != OutputKind::Archive {
+    if !profile.quantized {
         for (id, option) in [
             ("error_bound", "--error-bound"),
             ("attribute_error_bound", "--attribute-error-bound"),
@@ -597,50 +642,47 @@ fn ineffective_options(
                 ));
             }
         }
-    } else {
-        if given("attribute_error_bound") {
-            if *attributes == AttributeSelection::None {
-                warnings.push(
-                    "--attribute-error-bound has no effect: --attributes none carries no attributes"
-                        .into(),
-                );
-            } else if raw_positions {
-                warnings.push(
-                    "--attribute-error-bound has no effect: raw .xyz input holds positions only"
-                        .into(),
-                );
-            }
+    } else if given("attribute_error_bound") {
+        if *attributes == AttributeSelection::None {
+            warnings.push(
+                "--attribute-error-bound has no effect: --attributes none carries no attributes"
+                    .into(),
+            );
+        } else if raw_positions {
+            warnings.push(
+                "--attribute-error-bound has no effect: raw .xyz input holds positions only".into(),
+            );
         }
-        if given("no_normals") {
+    }
+    if given("no_normals") && !profile.normals {
+        warnings.push(format!(
+            "--no-normals has no effect: {output:?} stores no normals (they are computed when frames are extracted)"
+        ));
+    }
+    // An error bound of world units given as multiples of r (as it once was).
+    if let (true, Some(bound)) = (profile.quantized, args.error_bound) {
+        let r = args.particle_radius as f64;
+        if bound > 0.1 * r {
             warnings.push(format!(
-                "--no-normals has no effect: {output:?} stores no normals (they are computed when frames are extracted)"
+                "--error-bound is in world units: {bound} is {:.3} × the particle radius (default {} = {} r)",
+                bound / r,
+                meniscus::archive::default_error_bound(args.particle_radius),
+                meniscus::archive::DEFAULT_ERROR_BOUND_RADII
             ));
-        }
-        // An error bound of world units given as multiples of r (as it once was).
-        if let Some(bound) = args.error_bound {
-            let r = args.particle_radius as f64;
-            if bound > 0.1 * r {
-                warnings.push(format!(
-                    "--error-bound is in world units: {bound} is {:.3} × the particle radius (default {} = {} r)",
-                    bound / r,
-                    meniscus::archive::default_error_bound(args.particle_radius),
-                    meniscus::archive::DEFAULT_ERROR_BOUND_RADII
-                ));
-            }
         }
     }
     if given("fps") {
-        match kind {
-            OutputKind::AnimatedGltf if plan.len() == 1 => warnings.push(format!(
+        match profile.animated {
+            true if plan.len() == 1 => warnings.push(format!(
                 "--fps has no effect: {output:?} holds a single frame, which does not play"
             )),
-            OutputKind::AnimatedGltf => {}
-            _ => warnings.push(format!(
+            true => {}
+            false => warnings.push(format!(
                 "--fps has no effect: only a {{}} sequence written into one .glb/.gltf is animated, and {output:?} is not one"
             )),
         }
     }
-    if given("skip_existing") && kind == OutputKind::AnimatedGltf {
+    if given("skip_existing") && profile.written_whole {
         warnings.push(format!(
             "--skip-existing has no effect: {output:?} holds the whole sequence and is written whole"
         ));
