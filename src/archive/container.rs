@@ -4,8 +4,9 @@
 //!
 //! Two views say where the records end: the index's offset ([`read_index`]: the index
 //! is written right after the last record) and a walk of the records themselves
-//! ([`scan_records`], whose last complete [`Span::Record`] ends there). An intact archive
-//! has both agree; the reader compares them to name damage.
+//! ([`scan_records`], whose last complete [`Span::Record`] ends there in an intact
+//! archive). The reader checks the index's entries against the records the walk finds
+//! before the index, and walks the whole file when there is no valid index.
 
 use crate::error::Error;
 use std::path::Path;
