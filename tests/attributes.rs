@@ -2,6 +2,8 @@
 //! at every final vertex, the same for any tiling and thread count, with clear errors for
 //! bad attributes.
 
+mod support;
+
 use glam::{DVec3, Mat3, Vec3};
 use meniscus::attributes::{select_attributes, Attribute, AttributeSelection};
 use meniscus::io::particles::{read_particles, write_particles, ParticleFormat, Particles};
@@ -9,18 +11,10 @@ use meniscus::mesh::Surface;
 use meniscus::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
 use meniscus::tiles::TileOptions;
 use meniscus::CancelToken;
-use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn dataset(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("datasets")
-        .join(rel)
-}
-
-fn positions(rel: &str) -> Vec<Vec3> {
-    read_particles(&dataset(rel), None).unwrap().positions
-}
+use std::path::Path;
+use support::{
+    dataset, dir_with_temp, in_pool, interrupt_once_spilled, meniscus, names_in, positions,
+};
 
 /// Particles at `positions` with a vector `velocity = f(x)` and a scalar `density`.
 fn with_fields(
@@ -49,11 +43,9 @@ fn run(
     options: &ReconstructOptions,
     threads: usize,
 ) -> (Surface, ReconstructionStats) {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap()
-        .install(|| reconstruct_source(particles, options, &|_| {}, &CancelToken::new()).unwrap())
+    in_pool(threads, || {
+        reconstruct_source(particles, options, &|_| {}, &CancelToken::new()).unwrap()
+    })
 }
 
 fn bits(values: &[f32]) -> Vec<u32> {
@@ -229,10 +221,6 @@ fn separate_bodies_keep_their_own_values() {
     }
 }
 
-fn meniscus() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_meniscus"))
-}
-
 /// Runs the CLI expecting a failure of a file or its content (exit 1); returns stderr
 /// after checking that no output exists.
 fn fails(args: &[&str], input: &Path, out: &Path) -> String {
@@ -307,13 +295,6 @@ fn bad_attributes_are_clear_errors_naming_the_file_and_attribute() {
     assert!(err.to_string().contains("\"velocity\""), "{err}");
 }
 
-fn entries(dir: &Path) -> Vec<String> {
-    std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect()
-}
-
 #[test]
 fn an_obj_output_warns_once_that_it_drops_the_attributes() {
     let dir = tempfile::tempdir().unwrap();
@@ -334,9 +315,7 @@ fn an_obj_output_warns_once_that_it_drops_the_attributes() {
 
 #[test]
 fn spilled_runs_with_attributes_leave_no_temporary_file_on_success_error_or_ctrl_c() {
-    let dir = tempfile::tempdir().unwrap();
-    let temp = dir.path().join("temp");
-    std::fs::create_dir(&temp).unwrap();
+    let (dir, temp) = dir_with_temp();
     let vtk = dataset("dambreak_small/ParticleData_Fluid_25.vtk");
     let tiled = |out: &Path, tile: &str| {
         let mut cmd = meniscus();
@@ -354,34 +333,23 @@ fn spilled_runs_with_attributes_leave_no_temporary_file_on_success_error_or_ctrl
     let bytes = std::fs::read(&out).unwrap();
     let header = String::from_utf8_lossy(&bytes[..400]);
     assert!(header.contains("property float velocity_x"), "{header}");
-    assert!(entries(&temp).is_empty(), "{:?}", entries(&temp));
+    assert!(names_in(&temp).is_empty(), "{:?}", names_in(&temp));
     // An error after the spill (the output is a directory).
     let blocked = dir.path().join("blocked.ply");
     std::fs::create_dir(&blocked).unwrap();
     let result = tiled(&blocked, "64").output().unwrap();
     assert_eq!(result.status.code(), Some(1));
-    assert!(entries(&temp).is_empty(), "{:?}", entries(&temp));
+    assert!(names_in(&temp).is_empty(), "{:?}", names_in(&temp));
     // Ctrl-C during one-block tiles.
     let out = dir.path().join("c.ply");
     let mut child = tiled(&out, "8")
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let clock = std::time::Instant::now();
-    while entries(&temp).is_empty() {
-        assert!(clock.elapsed().as_secs() < 60, "no spill file appeared");
-        assert!(child.try_wait().unwrap().is_none(), "the run ended early");
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    std::thread::sleep(std::time::Duration::from_millis(100));
-    let status = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    interrupt_once_spilled(&mut child, &temp);
     let result = child.wait_with_output().unwrap();
     assert_eq!(result.status.code(), Some(130));
     assert!(String::from_utf8_lossy(&result.stderr).contains("interrupted"));
     assert!(!out.exists());
-    assert!(entries(&temp).is_empty(), "{:?}", entries(&temp));
+    assert!(names_in(&temp).is_empty(), "{:?}", names_in(&temp));
 }

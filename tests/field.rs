@@ -3,20 +3,12 @@
 //! eigenvalues found by bisection on the characteristic polynomial — none of it shares code
 //! with the library's closed forms.
 
+mod support;
+
 use glam::Vec3;
 use meniscus::field::{compute_field, FieldOptions};
 use meniscus::grid::split_coordinate;
-
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((self.0 >> 11) as f64) / ((1u64 << 53) as f64)
-    }
-}
+use support::{in_pool, Lcg};
 
 /// A jittered blob of particles (spacing 2r) with a few loose ones around it.
 fn blob(r: f64, rng: &mut Lcg) -> Vec<Vec3> {
@@ -28,13 +20,13 @@ fn blob(r: f64, rng: &mut Lcg) -> Vec<Vec3> {
                 if (p[0] / 14.0).powi(2) + (p[1] / 10.0).powi(2) + (p[2] / 12.0).powi(2) > r * r {
                     continue;
                 }
-                let q = p.map(|c| c + (rng.next() - 0.5) * 0.6 * r + 1.7);
+                let q = p.map(|c| c + (rng.next_f64() - 0.5) * 0.6 * r + 1.7);
                 pts.push(Vec3::new(q[0] as f32, q[1] as f32, q[2] as f32));
             }
         }
     }
     for _ in 0..20 {
-        let q = [0, 1, 2].map(|_| 1.7 + (rng.next() - 0.5) * 40.0 * r);
+        let q = [0, 1, 2].map(|_| 1.7 + (rng.next_f64() - 0.5) * 40.0 * r);
         pts.push(Vec3::new(q[0] as f32, q[1] as f32, q[2] as f32));
     }
     pts
@@ -177,8 +169,8 @@ fn check_against_oracle(coverage: f32) {
     while checked < 300 {
         tries += 1;
         assert!(tries < 100_000);
-        let key = keys[(rng.next() * keys.len() as f64) as usize];
-        let local = [0, 1, 2].map(|_| (rng.next() * 8.0) as i32);
+        let key = keys[(rng.next_f64() * keys.len() as f64) as usize];
+        let local = [0, 1, 2].map(|_| (rng.next_f64() * 8.0) as i32);
         let g = [0, 1, 2].map(|a| key[a] * 8 + local[a]);
         assert_eq!(split_coordinate(g[0]).0, key[0]);
         let value = field.value(g[0], g[1], g[2]) as f64;
@@ -230,13 +222,7 @@ fn field_does_not_depend_on_thread_count() {
     let mut rng = Lcg(7);
     let pts = blob(0.05, &mut rng);
     let options = FieldOptions::new(0.05);
-    let run = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| compute_field(&pts, &options).unwrap().0)
-    };
+    let run = |threads: usize| in_pool(threads, || compute_field(&pts, &options).unwrap().0);
     let one = run(1);
     let two = run(3);
     assert_eq!(one.block_count(), two.block_count());
@@ -315,8 +301,8 @@ fn field_matches_direct_sum_for_other_cell_sizes_and_radii() {
         while checked < 120 {
             tries += 1;
             assert!(tries < 100_000);
-            let key = keys[(rng.next() * keys.len() as f64) as usize];
-            let g = [0, 1, 2].map(|a| key[a] * 8 + (rng.next() * 8.0) as i32);
+            let key = keys[(rng.next_f64() * keys.len() as f64) as usize];
+            let g = [0, 1, 2].map(|a| key[a] * 8 + (rng.next_f64() * 8.0) as i32);
             let value = field.value(g[0], g[1], g[2]) as f64;
             let v = g.map(|c| c as f64 * h);
             match oracle_phi(v, &pts, r, influence_radius as f64 * r) {

@@ -2,8 +2,7 @@
 //! the shipped frames (sheets one particle thick, filaments, spray): decimation and Loop
 //! subdivision leave some outside, the containment stage brings them back in.
 
-#[path = "support/splash.rs"]
-mod splash;
+mod support;
 
 use glam::Vec3;
 use meniscus::containment::ContainmentOptions;
@@ -13,6 +12,7 @@ use meniscus::mesh::{validate, InsideTest, TriMesh};
 use meniscus::pipeline::{reconstruct, split_isolated, ReconstructOptions};
 use meniscus::subdivision::{subdivide, SubdivideOptions};
 use std::path::Path;
+use support::{in_pool, splash};
 
 /// A splash of a shipped frame and its particle radius.
 fn splash_of(path: &str, radius: f32) -> (Vec<Vec3>, f32) {
@@ -128,11 +128,7 @@ fn a_deeper_setting_moves_more_and_threads_do_not_matter() {
     let mut deep = shallow.clone();
     deep.containment = Some(ContainmentOptions::depth(0.5));
     let (_, a) = reconstruct(&positions, &shallow).unwrap();
-    let (one, b) = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .unwrap()
-        .install(|| reconstruct(&positions, &deep).unwrap());
+    let (one, b) = in_pool(1, || reconstruct(&positions, &deep).unwrap());
     let (two, _) = reconstruct(&positions, &deep).unwrap();
     let (a, b) = (a.containment.unwrap(), b.containment.unwrap());
     assert!(b.too_shallow > a.too_shallow, "{a:?} {b:?}");

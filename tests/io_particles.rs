@@ -1,6 +1,8 @@
 //! Particle readers: shipped files, cross-format agreement, round trips through the
 //! writers, hand-made fixtures, and every kind of bad input.
 
+mod support;
+
 use glam::Vec3;
 use meniscus::io::particles::{
     read_particles, stream_bgeo_positions, stream_ply_positions, stream_vtk_positions,
@@ -8,12 +10,7 @@ use meniscus::io::particles::{
 };
 use meniscus::Error;
 use std::path::{Path, PathBuf};
-
-fn data(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("datasets")
-        .join(rel)
-}
+use support::{dataset as data, names_in, Rng};
 
 /// splashsurf's example files live in the shared data folder beside the checkout.
 fn shared(rel: &str) -> Option<PathBuf> {
@@ -510,15 +507,6 @@ fn names(list: &[&str]) -> AttributeSelection {
     AttributeSelection::Names(list.iter().map(|n| n.to_string()).collect())
 }
 
-fn entries(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    v.sort();
-    v
-}
-
 /// `count` particles with a 3-component velocity, a scalar density and a 2-component
 /// `uv`, all distinct per particle.
 fn payload_sample(count: usize) -> Particles {
@@ -646,7 +634,7 @@ fn check_streamed(
         SpooledParticles::from_file(path, format, selection, Some(temp), &CancelToken::new())
             .unwrap()
             .unwrap_or_else(|| panic!("{label}: not streamed"));
-    let files = entries(temp);
+    let files = names_in(temp);
     let expect_files = if parsed.attributes.is_empty() { 1 } else { 2 };
     assert_eq!(files.len(), expect_files, "{label}: {files:?}");
     let (positions, payload, layout) = drain(&spooled);
@@ -669,9 +657,9 @@ fn check_streamed(
     assert_eq!(differ, None, "{label}: payload differs");
     drop(spooled);
     assert!(
-        entries(temp).is_empty(),
+        names_in(temp).is_empty(),
         "{label}: left {:?}",
-        entries(temp)
+        names_in(temp)
     );
 }
 
@@ -774,7 +762,7 @@ fn a_bad_selection_fails_before_any_temporary_file_and_like_the_parser() {
             .unwrap_or_else(|| panic!("{}: {selection:?} accepted", path.display()));
             assert!(matches!(streamed, Error::Attribute { .. }), "{streamed}");
             assert_eq!(streamed.to_string(), parsed.to_string());
-            assert!(entries(&temp).is_empty(), "left {:?}", entries(&temp));
+            assert!(names_in(&temp).is_empty(), "left {:?}", names_in(&temp));
         }
     }
     // The listing names what the input has.
@@ -854,7 +842,7 @@ fn a_non_finite_attribute_value_is_a_clear_error_and_leaves_no_file() {
             if attribute != "velocity" || selection == AttributeSelection::Velocity {
                 assert_eq!(err.to_string(), parsed.to_string());
             }
-            assert!(entries(&temp).is_empty(), "left {:?}", entries(&temp));
+            assert!(names_in(&temp).is_empty(), "left {:?}", names_in(&temp));
         }
         // Positions only: the attributes are not read, so not checked.
         let fine = SpooledParticles::from_file(
@@ -869,7 +857,7 @@ fn a_non_finite_attribute_value_is_a_clear_error_and_leaves_no_file() {
         assert_eq!(fine.particle_count(), 80_000);
         assert!(fine.attribute_layout().is_empty());
         drop(fine);
-        assert!(entries(&temp).is_empty());
+        assert!(names_in(&temp).is_empty());
     }
 }
 
@@ -900,7 +888,7 @@ fn a_cancelled_stream_removes_its_files() {
         .err()
         .unwrap();
         assert!(matches!(err, Error::Interrupted), "{err}");
-        assert!(entries(&temp).is_empty(), "left {:?}", entries(&temp));
+        assert!(names_in(&temp).is_empty(), "left {:?}", names_in(&temp));
     }
 }
 
@@ -1034,60 +1022,23 @@ fn text_renamed_xyz_is_an_error() {
     assert_eq!(p.positions.len(), 2);
 }
 
-/// A deterministic generator (xorshift), so that every run mutates the same way.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
-
 /// A mutated copy of `base`: flipped bytes, a truncation, or a number in the text
 /// replaced by a huge one.
 fn mutate(rng: &mut Rng, base: &[u8]) -> Vec<u8> {
-    let mut b = base.to_vec();
-    match rng.below(4) {
-        0 => {
-            for _ in 0..1 + rng.below(4) {
-                let i = rng.below(b.len());
-                b[i] ^= 1 << rng.below(8);
-            }
+    let huge = [
+        "18446744073709551615",
+        "4294967295",
+        "999999999999",
+        "6148914691236517206",
+        "2147483647",
+    ];
+    support::mutate(rng, base, &huge, |rng, b| {
+        if b.len() >= 8 {
+            // Binary header fields: a big-endian i32 of 2^31 − 1.
+            let i = rng.below(b.len() - 4);
+            b[i..i + 4].copy_from_slice(&i32::MAX.to_be_bytes());
         }
-        1 => b.truncate(rng.below(b.len())),
-        2 => {
-            let i = rng.below(b.len());
-            b[i] = rng.next() as u8;
-        }
-        _ => {
-            // Overwrite a run of ASCII digits with a huge number.
-            let digits: Vec<usize> = (0..b.len()).filter(|&i| b[i].is_ascii_digit()).collect();
-            if !digits.is_empty() {
-                let start = digits[rng.below(digits.len())];
-                let end = (start..b.len())
-                    .find(|&i| !b[i].is_ascii_digit())
-                    .unwrap_or(b.len());
-                let huge = [
-                    "18446744073709551615",
-                    "4294967295",
-                    "999999999999",
-                    "6148914691236517206",
-                    "2147483647",
-                ][rng.below(5)];
-                b.splice(start..end, huge.bytes());
-            } else if b.len() >= 8 {
-                // Binary header fields: a big-endian i32 of 2^31 − 1.
-                let i = rng.below(b.len() - 4);
-                b[i..i + 4].copy_from_slice(&i32::MAX.to_be_bytes());
-            }
-        }
-    }
-    b
+    })
 }
 
 #[test]
@@ -1133,18 +1084,9 @@ fn mutated_particle_files_are_read_or_rejected_never_panic() {
         let bytes = mutate(&mut rng, base);
         let path = dir.path().join(name);
         std::fs::write(&path, &bytes).unwrap();
-        let result = std::panic::catch_unwind(|| read_particles(&path, None));
-        match result {
-            Ok(Ok(_)) => {}
-            Ok(Err(e)) => assert!(e.to_string().contains(name), "{name}: {e}"),
-            Err(_) => {
-                let keep = std::env::temp_dir().join(format!("meniscus-crash-{round}-{name}"));
-                std::fs::write(&keep, &bytes).unwrap();
-                panic!(
-                    "round {round}: reading a mutated {name} panicked (kept as {})",
-                    keep.display()
-                );
-            }
+        let result = support::without_panic(round, name, &bytes, || read_particles(&path, None));
+        if let Err(e) = result {
+            assert!(e.to_string().contains(name), "{name}: {e}");
         }
     }
 }

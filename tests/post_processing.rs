@@ -2,37 +2,23 @@
 //! refused collapses, boundaries kept, the paper's flat-region claim on the analytic box,
 //! droplets as one blob plus one sphere per isolated particle.
 
+mod support;
+
 use glam::Vec3;
 use meniscus::decimation::{decimate, DecimateOptions};
-use meniscus::io::particles::read_particles;
 use meniscus::isolated::icosphere;
 use meniscus::mesh::{triangle_components, validate, TriMesh};
 use meniscus::pipeline::{reconstruct, ReconstructOptions};
 use meniscus::subdivision::{subdivide, SubdivideOptions};
-use std::path::PathBuf;
-
-fn dataset(rel: &str) -> Vec<Vec3> {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("datasets")
-        .join(rel);
-    read_particles(&path, None).unwrap().positions
-}
+use support::{in_pool, positions, shipped_frames};
 
 #[test]
 fn full_pipeline_keeps_every_frame_a_closed_manifold_and_reports_its_ratio() {
-    let frames: Vec<(String, f32)> = [1, 9, 17, 25, 31, 45]
-        .iter()
-        .map(|k| (format!("dambreak_small/ParticleData_Fluid_{k}.xyz"), 0.012))
-        .chain(
-            [1, 6, 9, 13, 20]
-                .iter()
-                .map(|k| (format!("double_dambreak/ParticleData_Fluid_{k}.xyz"), 0.025)),
-        )
-        .collect();
+    let frames = shipped_frames();
     for (rel, r) in frames {
         let options = ReconstructOptions::new(r);
         let fraction = options.decimate.as_ref().unwrap().target_reduction.unwrap() as f64;
-        let (surface, stats) = reconstruct(&dataset(&rel), &options).unwrap();
+        let (surface, stats) = reconstruct(&positions(&rel), &options).unwrap();
         let report = validate(&surface.fluid);
         assert!(report.is_closed_manifold(), "{rel}: {report:?}");
         assert!(surface.fluid.signed_volume() > 0.0, "{rel}");
@@ -216,7 +202,7 @@ fn flat_normal_error(mesh: &TriMesh, half: Vec3, r: f32) -> f64 {
 #[test]
 fn on_the_box_the_pipeline_beats_finer_marching_cubes_with_fewer_triangles() {
     let r = 0.025;
-    let particles = dataset("analytic/box.xyz");
+    let particles = positions("analytic/box.xyz");
     let half = Vec3::new(0.5, 0.3, 0.2);
     let (full, _) = reconstruct(&particles, &ReconstructOptions::new(r)).unwrap();
     let mut fine_options = ReconstructOptions::raw(r);
@@ -241,7 +227,7 @@ fn on_the_box_the_pipeline_beats_finer_marching_cubes_with_fewer_triangles() {
 #[test]
 fn droplets_are_one_blob_and_500_spheres_of_radius_r() {
     let r = 0.025;
-    let particles = dataset("analytic/droplets.xyz");
+    let particles = positions("analytic/droplets.xyz");
     let (surface, stats) = reconstruct(&particles, &ReconstructOptions::new(r)).unwrap();
     assert_eq!(stats.isolated_particles, 500);
     assert_eq!(triangle_components(&surface.fluid).1, 1);
@@ -261,7 +247,7 @@ fn droplets_are_one_blob_and_500_spheres_of_radius_r() {
 #[test]
 fn on_the_sphere_post_processing_stays_as_close_as_marching_cubes() {
     let r = 0.025f32;
-    let particles = dataset("analytic/sphere.xyz");
+    let particles = positions("analytic/sphere.xyz");
     let deviation = |mesh: &TriMesh| {
         let d: Vec<f32> = mesh
             .positions
@@ -299,7 +285,7 @@ fn an_error_bound_beats_the_fixed_fraction_on_the_box() {
     // field, whose faces are rougher: the anisotropic default's faces are as flat with
     // either rule (0.65° fixed, 0.68° adaptive).
     let r = 0.025;
-    let particles = dataset("analytic/box.xyz");
+    let particles = positions("analytic/box.xyz");
     let half = Vec3::new(0.5, 0.3, 0.2);
     let mut base = ReconstructOptions::new(r);
     base.field.kernel = meniscus::field::Kernel::Isotropic;
@@ -359,7 +345,7 @@ fn decimating_by_regions_keeps_the_surface_closed_deterministic_and_on_target() 
     // the band around the seams is decimated last.
     let r = 0.012;
     let (raw, _) = reconstruct(
-        &dataset("dambreak_small/ParticleData_Fluid_25.xyz"),
+        &positions("dambreak_small/ParticleData_Fluid_25.xyz"),
         &ReconstructOptions::raw(r),
     )
     .unwrap();
@@ -367,15 +353,11 @@ fn decimating_by_regions_keeps_the_surface_closed_deterministic_and_on_target() 
     let whole_options = DecimateOptions::default().with_region_triangles(0);
     let region_options = DecimateOptions::default().with_region_triangles(8 * 1024);
     let run = |threads: usize, options: &DecimateOptions| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| {
-                let mut mesh = raw.clone();
-                let stats = decimate(&mut mesh, options);
-                (mesh, stats)
-            })
+        in_pool(threads, || {
+            let mut mesh = raw.clone();
+            let stats = decimate(&mut mesh, options);
+            (mesh, stats)
+        })
     };
     let (by_regions, stats) = run(2, &region_options);
     assert!(stats.regions >= 6, "{stats:?}");

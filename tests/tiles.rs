@@ -2,26 +2,14 @@
 //! several tile sizes (including tiles smaller than the influence radius) and thread
 //! counts.
 
+mod support;
+
 use glam::Vec3;
 use meniscus::field::{FieldOptions, Kernel};
 use meniscus::mesh::Surface;
 use meniscus::pipeline::{reconstruct, ReconstructOptions, ReconstructionStats};
 use meniscus::tiles::TileOptions;
-use std::path::PathBuf;
-
-fn xyz(rel: &str) -> Vec<Vec3> {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("datasets")
-        .join(rel);
-    let bytes = std::fs::read(&path).unwrap();
-    bytes
-        .chunks_exact(12)
-        .map(|c| {
-            let f = |k: usize| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap());
-            Vec3::new(f(0), f(1), f(2))
-        })
-        .collect()
-}
+use support::{in_pool, shipped_frames, xyz};
 
 /// Field, marching cubes and isolated particles only (no post-processing), tiled or not.
 struct Run {
@@ -34,14 +22,10 @@ fn run(positions: &[Vec3], options: &FieldOptions, tile: Option<u32>, threads: u
     let mut options = ReconstructOptions::raw(field.particle_radius);
     std::mem::swap(&mut options.field, &mut field);
     options.tiles = tile.map_or_else(TileOptions::default, TileOptions::tile_size);
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap()
-        .install(|| {
-            let (surface, stats) = reconstruct(positions, &options).unwrap();
-            Run { surface, stats }
-        })
+    in_pool(threads, || {
+        let (surface, stats) = reconstruct(positions, &options).unwrap();
+        Run { surface, stats }
+    })
 }
 
 fn assert_same(a: &Run, b: &Run, what: &str) {
@@ -72,14 +56,8 @@ fn assert_same(a: &Run, b: &Run, what: &str) {
 
 #[test]
 fn tiled_runs_equal_the_untiled_run_on_every_frame() {
-    let frames: Vec<(String, f32)> = [1, 9, 17, 25, 31, 45]
-        .iter()
-        .map(|k| (format!("dambreak_small/ParticleData_Fluid_{k}.xyz"), 0.012))
-        .chain(
-            [1, 6, 9, 13, 20]
-                .iter()
-                .map(|k| (format!("double_dambreak/ParticleData_Fluid_{k}.xyz"), 0.025)),
-        )
+    let frames: Vec<(String, f32)> = shipped_frames()
+        .into_iter()
         .chain(
             ["sphere", "box", "droplets", "sheet"]
                 .iter()
