@@ -452,7 +452,7 @@ fn reconstruct(
     })?;
     let total = clock.elapsed().as_secs_f64();
     if !args.quiet {
-        summarize(&reports, total);
+        summarize(&reports, total, &args.output);
     }
     if let Some(path) = &args.stats {
         write_stats(path, &options, &reports, total)?;
@@ -703,7 +703,9 @@ fn ineffective_options(
     warnings
 }
 
-fn summarize(reports: &[FrameReport], total: f64) {
+/// The run's summary line: frames, time, triangles, where they went (`output` as given
+/// to `-o`) and peak memory.
+fn summarize(reports: &[FrameReport], total: f64, output: &str) {
     let count = |s| reports.iter().filter(|r| r.status == s).count();
     let (done, skipped, failed) = (
         count(FrameStatus::Done),
@@ -712,7 +714,7 @@ fn summarize(reports: &[FrameReport], total: f64) {
     );
     let triangles: usize = reports.iter().map(|r| r.triangles()).sum();
     eprintln!(
-        "{} frame(s) reconstructed{}{} in {:.2} s, {} triangles written, peak memory {}",
+        "{} frame(s) reconstructed{}{} in {:.2} s, {} triangles written to {}, peak memory {}",
         done,
         if skipped > 0 {
             format!(", {skipped} skipped")
@@ -726,6 +728,7 @@ fn summarize(reports: &[FrameReport], total: f64) {
         },
         total,
         triangles,
+        output,
         peak_rss_bytes()
             .map(|b| format!("{:.1} MiB", b as f64 / (1 << 20) as f64))
             .unwrap_or_else(|| "unknown".into()),
