@@ -4,7 +4,7 @@
 //! ([`FrameReport`]). The CLI is a thin layer over [`run_frames`].
 
 use crate::archive::{ArchiveFrame, ArchiveOptions, ArchiveReader, ArchiveWriter};
-use crate::attributes::{select_attributes, AttributeSelection};
+use crate::attributes::AttributeSelection;
 use crate::cancel::CancelToken;
 use crate::error::{Error, Result};
 use crate::io::mesh::{write_sequence_gltf, write_surface, MeshFormat, MeshWriteOptions};
@@ -31,9 +31,7 @@ fn parsed(input: &Path, format: ParticleFormat, selection: &AttributeSelection) 
             path: input.to_path_buf(),
         });
     }
-    Ok(Input::Parsed(select_attributes(
-        input, particles, selection,
-    )?))
+    Ok(Input::Parsed(particles.select(input, selection)?))
 }
 
 /// What to do with the files of a job.
@@ -202,11 +200,7 @@ pub fn reconstruct_file(
         ParticleFormat::Xyz => {
             if let AttributeSelection::Names(names) = &job.attributes {
                 // Raw positions hold no attributes: the same error as any missing name.
-                select_attributes(
-                    input,
-                    Particles::default(),
-                    &AttributeSelection::Names(names.clone()),
-                )?;
+                Particles::default().select(input, &AttributeSelection::Names(names.clone()))?;
             }
             Input::Mapped(MappedXyz::open(input)?)
         }

@@ -500,9 +500,9 @@ fn ply_streams_its_vertices_like_it_reads_whole() {
 }
 
 // ---------------------------------------------------------------------------------------
-// Streaming with payload: `SpooledParticles` against `read_particles` + `select_attributes`.
+// Streaming with payload: `SpooledParticles` against `read_particles` + `Particles::select`.
 
-use meniscus::attributes::{select_attributes, AttributeLayout, AttributeSelection};
+use meniscus::attributes::{AttributeLayout, AttributeSelection};
 use meniscus::io::particles::{ParticleSource, SpooledParticles};
 use meniscus::CancelToken;
 
@@ -640,8 +640,10 @@ fn check_streamed(
     temp: &Path,
 ) {
     let label = format!("{} {selection:?}", path.display());
-    let parsed =
-        select_attributes(path, read_particles(path, Some(format)).unwrap(), selection).unwrap();
+    let parsed = read_particles(path, Some(format))
+        .unwrap()
+        .select(path, selection)
+        .unwrap();
     let spooled =
         SpooledParticles::from_file(path, format, selection, Some(temp), &CancelToken::new())
             .unwrap()
@@ -757,12 +759,10 @@ fn a_bad_selection_fails_before_any_temporary_file_and_like_the_parser() {
             names(&["velocity", "nope"]),
             names(&["velocity", "Velocity"]),
         ] {
-            let parsed = select_attributes(
-                &path,
-                read_particles(&path, Some(format)).unwrap(),
-                &selection,
-            )
-            .unwrap_err();
+            let parsed = read_particles(&path, Some(format))
+                .unwrap()
+                .select(&path, &selection)
+                .unwrap_err();
             let streamed = SpooledParticles::from_file(
                 &path,
                 format,
@@ -828,12 +828,10 @@ fn a_non_finite_attribute_value_is_a_clear_error_and_leaves_no_file() {
             )
             .err()
             .unwrap_or_else(|| panic!("{}: accepted", path.display()));
-            let parsed = select_attributes(
-                path,
-                read_particles(path, Some(format)).unwrap(),
-                &selection,
-            )
-            .unwrap_err();
+            let parsed = read_particles(path, Some(format))
+                .unwrap()
+                .select(path, &selection)
+                .unwrap_err();
             match &err {
                 Error::Attribute {
                     path: p,

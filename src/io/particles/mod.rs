@@ -28,6 +28,7 @@ use glam::Vec3;
 use std::path::Path;
 
 pub use crate::attributes::Attribute;
+use crate::attributes::{check_attribute, AttributeSelection};
 
 /// The particles of one frame: positions in world units plus optional attributes.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -36,6 +37,28 @@ pub struct Particles {
     pub positions: Vec<Vec3>,
     /// Other point attributes found in the file, in file order.
     pub attributes: Vec<Attribute>,
+}
+
+impl Particles {
+    /// Keeps the attributes that `selection` asks for, in its order, after checking each:
+    /// `components × particles` values, all finite. `path` names the input in errors. A
+    /// name the input lacks (or selected twice) is an [`Error::Attribute`] listing the
+    /// names it has; the streaming readers select by the same rule.
+    pub fn select(mut self, path: &Path, selection: &AttributeSelection) -> Result<Particles> {
+        let available: Vec<&str> = self.attributes.iter().map(|a| a.name.as_str()).collect();
+        let wanted = selection.resolve(path, &available)?;
+        let count = self.positions.len();
+        let mut columns: Vec<Option<Attribute>> = std::mem::take(&mut self.attributes)
+            .into_iter()
+            .map(Some)
+            .collect();
+        for k in wanted {
+            let a = columns[k].take().expect("each selected once");
+            check_attribute(path, &a, count)?;
+            self.attributes.push(a);
+        }
+        Ok(self)
+    }
 }
 
 /// Particle file formats.

@@ -7,7 +7,7 @@
 //! spill file).
 
 use super::{Attribute, Particles};
-use crate::attributes::{payload_width, resolve_selection, AttributeLayout, AttributeSelection};
+use crate::attributes::{payload_width, AttributeLayout, AttributeSelection};
 use crate::cancel::CancelToken;
 use crate::error::{Error, Result};
 use glam::Vec3;
@@ -104,7 +104,7 @@ impl ParticleSource for ParticleSlices<'_> {
 }
 
 /// Positions with every attribute of the [`Particles`] as payload (select first with
-/// [`crate::attributes::select_attributes`] to carry fewer).
+/// [`Particles::select`] to carry fewer).
 impl ParticleSource for Particles {
     fn particle_count(&self) -> usize {
         self.positions.len()
@@ -512,7 +512,7 @@ impl SpooledParticles {
     /// for, into temporary files in `temp_dir` (`None`: the system's temporary directory).
     /// The selection is resolved against the file's attribute names before any file is
     /// created, by the rules and with the errors of
-    /// [`crate::attributes::select_attributes`]; every value is checked finite. Gzip or
+    /// [`Particles::select`]; every value is checked finite. Gzip or
     /// plain BGEO always streams; PLY, binary or ASCII, when its first element is `vertex`
     /// ([`crate::io::particles::stream_ply_positions`]); VTK, binary or ASCII, positions
     /// only when its points come first ([`crate::io::particles::stream_vtk_positions`]),
@@ -551,7 +551,7 @@ impl SpooledParticles {
         let layout: std::cell::RefCell<Vec<AttributeLayout>> = Default::default();
         let select = &mut |count: usize, declared: &[AttributeLayout]| -> Result<Vec<usize>> {
             let names: Vec<&str> = declared.iter().map(|a| a.name.as_str()).collect();
-            let chosen = resolve_selection(path, &names, selection)?;
+            let chosen = selection.resolve(path, &names)?;
             let chosen_layout: Vec<AttributeLayout> =
                 chosen.iter().map(|&k| declared[k].clone()).collect();
             let width = payload_width(&chosen_layout);
@@ -611,7 +611,7 @@ impl SpooledParticles {
         };
         let declared = scan.attributes();
         let names: Vec<&str> = declared.iter().map(|a| a.name.as_str()).collect();
-        let chosen = resolve_selection(path, &names, selection)?;
+        let chosen = selection.resolve(path, &names)?;
         let layout: Vec<AttributeLayout> = chosen.iter().map(|&k| declared[k].clone()).collect();
         let mut spool = Spool::new(path, dir, cancel, scan.count(), payload_width(&layout))?;
         scan.stream_points(path, &mut |chunk, _| spool.positions(chunk))?;
