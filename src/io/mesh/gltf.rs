@@ -299,7 +299,7 @@ pub(super) struct Document<'a> {
     payloads: Vec<Payload<'a>>,
     /// Length of the whole buffer (a multiple of 4).
     bin_len: usize,
-    pub vertices: usize,
+    pub(super) vertices: usize,
 }
 
 #[derive(Default)]
@@ -630,7 +630,7 @@ impl Document<'_> {
         w.write_all(&[0u8; 3][..self.bin_len - at])
     }
 
-    pub fn write_glb(&self, w: &mut impl Write) -> std::io::Result<()> {
+    pub(super) fn write_glb(&self, w: &mut impl Write) -> std::io::Result<()> {
         let mut json = serde_json::to_vec(&self.json).map_err(std::io::Error::other)?;
         while json.len() % 4 != 0 {
             json.push(b' ');
@@ -656,7 +656,7 @@ impl Document<'_> {
         Ok(())
     }
 
-    pub fn write_gltf(&self, w: &mut impl Write) -> std::io::Result<()> {
+    pub(super) fn write_gltf(&self, w: &mut impl Write) -> std::io::Result<()> {
         if self.bin_len == 0 {
             serde_json::to_writer(&mut *w, &self.json).map_err(std::io::Error::other)?;
             return w.write_all(b"\n");
