@@ -5,7 +5,7 @@
 mod support;
 
 use glam::{DVec3, Mat3, Vec3};
-use meniscus::attributes::{select_attributes, Attribute, AttributeSelection};
+use meniscus::attributes::{Attribute, AttributeSelection};
 use meniscus::io::particles::{read_particles, write_particles, ParticleFormat, Particles};
 use meniscus::mesh::Surface;
 use meniscus::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
@@ -154,12 +154,10 @@ fn a_linear_velocity_field_is_the_field_at_the_weighted_mean_position() {
 
 #[test]
 fn attributes_do_not_depend_on_tiling_or_thread_count() {
-    let particles = select_attributes(
-        Path::new("frame 25"),
-        read_particles(&dataset("dambreak_small/ParticleData_Fluid_25.vtk"), None).unwrap(),
-        &AttributeSelection::All,
-    )
-    .unwrap();
+    let particles = read_particles(&dataset("dambreak_small/ParticleData_Fluid_25.vtk"), None)
+        .unwrap()
+        .select(Path::new("frame 25"), &AttributeSelection::All)
+        .unwrap();
     assert_eq!(particles.attributes[0].name, "velocity");
     // Marching cubes and one Loop step: the mesh is the same for every tiling, so the
     // attributes must be too, bit for bit.
@@ -291,7 +289,9 @@ fn bad_attributes_are_clear_errors_naming_the_file_and_attribute() {
     // An attribute of the wrong length, through the library.
     let mut short = read_particles(&vtk, None).unwrap();
     short.attributes[0].values.pop();
-    let err = select_attributes(&vtk, short, &AttributeSelection::Velocity).unwrap_err();
+    let err = short
+        .select(&vtk, &AttributeSelection::Velocity)
+        .unwrap_err();
     assert!(err.to_string().contains("\"velocity\""), "{err}");
 }
 

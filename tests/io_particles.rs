@@ -5,8 +5,7 @@ mod support;
 
 use glam::Vec3;
 use meniscus::io::particles::{
-    read_particles, stream_bgeo_positions, stream_ply_positions, stream_vtk_positions,
-    write_particles, Attribute, ParticleFormat, Particles,
+    read_particles, stream_positions, write_particles, Attribute, ParticleFormat, Particles,
 };
 use meniscus::Error;
 use std::path::{Path, PathBuf};
@@ -305,13 +304,13 @@ fn bgeo_streams_in_chunks_like_it_reads_whole() {
         let path = write(dir.path(), name, bytes);
         let mut streamed = Vec::new();
         let mut chunks = 0;
-        let count = stream_bgeo_positions(&path, &mut |chunk| {
+        let count = stream_positions(&path, None, &mut |chunk| {
             chunks += 1;
             streamed.extend_from_slice(chunk);
             Ok(())
         })
         .unwrap();
-        assert_eq!(count, positions.len());
+        assert_eq!(count, Some(positions.len()));
         assert_eq!(chunks, 3, "{name}");
         assert_eq!(bits(&streamed), bits(&positions), "{name}");
         let whole = read_particles(&path, None).unwrap();
@@ -323,7 +322,7 @@ fn bgeo_streams_in_chunks_like_it_reads_whole() {
     // The shipped frame streams to the positions the whole-file reader gives.
     let shipped = data("dambreak_small/ParticleData_Fluid_25.bgeo");
     let mut streamed = Vec::new();
-    stream_bgeo_positions(&shipped, &mut |chunk| {
+    stream_positions(&shipped, None, &mut |chunk| {
         streamed.extend_from_slice(chunk);
         Ok(())
     })
@@ -334,7 +333,7 @@ fn bgeo_streams_in_chunks_like_it_reads_whole() {
     );
     // Cut in the particle data: a clear error naming the stream position.
     let cut = write(dir.path(), "cut.bgeo.gz", &gz[..gz.len() / 2]);
-    let err = stream_bgeo_positions(&cut, &mut |_| Ok(()))
+    let err = stream_positions(&cut, None, &mut |_| Ok(()))
         .unwrap_err()
         .to_string();
     assert!(
@@ -343,13 +342,10 @@ fn bgeo_streams_in_chunks_like_it_reads_whole() {
     );
 }
 
-/// A streaming reader's count and positions, gathered from its chunks.
-type StreamFn =
-    fn(&Path, &mut dyn FnMut(&[Vec3]) -> meniscus::Result<()>) -> meniscus::Result<Option<usize>>;
-
-fn streamed(stream: StreamFn, path: &Path) -> (Option<usize>, Vec<Vec3>) {
+/// The streaming reader's count and positions, gathered from its chunks.
+fn streamed(path: &Path) -> (Option<usize>, Vec<Vec3>) {
     let mut out = Vec::new();
-    let n = stream(path, &mut |chunk| {
+    let n = stream_positions(path, None, &mut |chunk| {
         out.extend_from_slice(chunk);
         Ok(())
     })
@@ -362,7 +358,6 @@ fn streamed(stream: StreamFn, path: &Path) -> (Option<usize>, Vec<Vec3>) {
 /// error; an ASCII file (`ascii`, its last record on line `last_record_line`) streams like
 /// it reads whole, and a cut or a bad number in it is an error naming the line.
 fn check_big_cut_and_ascii(
-    stream: StreamFn,
     dir: &Path,
     ext: &str,
     bytes: &[u8],
@@ -371,7 +366,7 @@ fn check_big_cut_and_ascii(
     last_record_line: usize,
 ) {
     let big = write(dir, &format!("big.{ext}"), bytes);
-    let (n, got) = streamed(stream, &big);
+    let (n, got) = streamed(&big);
     assert_eq!(n, Some(positions.len()));
     assert_eq!(bits(&got), bits(positions));
     assert_eq!(
@@ -379,7 +374,9 @@ fn check_big_cut_and_ascii(
         bits(positions)
     );
     let cut = write(dir, &format!("cut.{ext}"), &bytes[..bytes.len() / 2]);
-    let err = stream(&cut, &mut |_| Ok(())).unwrap_err().to_string();
+    let err = stream_positions(&cut, None, &mut |_| Ok(()))
+        .unwrap_err()
+        .to_string();
     assert!(
         err.contains(&format!("cut.{ext}")) && err.contains("truncated"),
         "{err}"
@@ -388,7 +385,7 @@ fn check_big_cut_and_ascii(
     let text = write(dir, &format!("a.{ext}"), ascii.as_bytes());
     let whole = read_particles(&text, None).unwrap().positions;
     assert!(whole.len() > 2);
-    let (n, got) = streamed(stream, &text);
+    let (n, got) = streamed(&text);
     assert_eq!(n, Some(whole.len()));
     assert_eq!(bits(&got), bits(&whole));
     let lines = last_record_line;
@@ -398,7 +395,9 @@ fn check_big_cut_and_ascii(
         &format!("acut.{ext}"),
         &ascii.as_bytes()[..before_last],
     );
-    let err = stream(&cut, &mut |_| Ok(())).unwrap_err().to_string();
+    let err = stream_positions(&cut, None, &mut |_| Ok(()))
+        .unwrap_err()
+        .to_string();
     assert!(
         err.contains("truncated") && err.contains(&format!("line {lines}")),
         "{err}"
@@ -406,7 +405,9 @@ fn check_big_cut_and_ascii(
     let mut bad = ascii.as_bytes()[..before_last].to_vec();
     bad.extend_from_slice(b"1 2 oops 4 5 6\n");
     let bad = write(dir, &format!("abad.{ext}"), &bad);
-    let err = stream(&bad, &mut |_| Ok(())).unwrap_err().to_string();
+    let err = stream_positions(&bad, None, &mut |_| Ok(()))
+        .unwrap_err()
+        .to_string();
     assert!(
         err.contains("\"oops\"") && err.contains(&format!("line {lines}")),
         "{err}"
@@ -415,7 +416,6 @@ fn check_big_cut_and_ascii(
 
 #[test]
 fn vtk_streams_its_points_like_it_reads_whole() {
-    let collect = |path: &Path| streamed(stream_vtk_positions, path);
     // Shipped frames (SPlisHSPlasH layout, float points) and the written sample (with
     // point data after the points).
     let dir = tempfile::tempdir().unwrap();
@@ -427,10 +427,10 @@ fn vtk_streams_its_points_like_it_reads_whole() {
         data("analytic/droplets.vtk"),
         written,
     ] {
-        let (n, streamed) = collect(&path);
+        let (n, got) = streamed(&path);
         let whole = read_particles(&path, None).unwrap().positions;
         assert_eq!(n, Some(whole.len()), "{}", path.display());
-        assert_eq!(bits(&streamed), bits(&whole), "{}", path.display());
+        assert_eq!(bits(&got), bits(&whole), "{}", path.display());
     }
     // More than one chunk, double precision.
     let positions: Vec<Vec3> = (0..100_000)
@@ -444,7 +444,6 @@ fn vtk_streams_its_points_like_it_reads_whole() {
         }
     }
     check_big_cut_and_ascii(
-        stream_vtk_positions,
         dir.path(),
         "vtk",
         &doubles,
@@ -457,14 +456,13 @@ fn vtk_streams_its_points_like_it_reads_whole() {
 
 #[test]
 fn ply_streams_its_vertices_like_it_reads_whole() {
-    let collect = |path: &Path| streamed(stream_ply_positions, path);
     let dir = tempfile::tempdir().unwrap();
     // The written sample (velocity and density interleaved with the positions).
     let written = dir.path().join("sample.ply");
     write_particles(&written, &sample(), ParticleFormat::Ply).unwrap();
-    let (n, streamed) = collect(&written);
+    let (n, got) = streamed(&written);
     assert_eq!(n, Some(50));
-    assert_eq!(bits(&streamed), bits(&sample().positions));
+    assert_eq!(bits(&got), bits(&sample().positions));
     // Big-endian doubles behind another property, over two chunks, a face element after.
     let positions: Vec<Vec3> = (0..70_000)
         .map(|i| Vec3::new(i as f32 * 0.5, (i % 11) as f32, -(i as f32) * 0.01))
@@ -485,7 +483,6 @@ fn ply_streams_its_vertices_like_it_reads_whole() {
         bytes.extend_from_slice(&i.to_be_bytes());
     }
     check_big_cut_and_ascii(
-        stream_ply_positions,
         dir.path(),
         "ply",
         &bytes,
@@ -497,9 +494,9 @@ fn ply_streams_its_vertices_like_it_reads_whole() {
 }
 
 // ---------------------------------------------------------------------------------------
-// Streaming with payload: `SpooledParticles` against `read_particles` + `select_attributes`.
+// Streaming with payload: `SpooledParticles` against `read_particles` + `Particles::select`.
 
-use meniscus::attributes::{select_attributes, AttributeLayout, AttributeSelection};
+use meniscus::attributes::{AttributeLayout, AttributeSelection};
 use meniscus::io::particles::{ParticleSource, SpooledParticles};
 use meniscus::CancelToken;
 
@@ -628,8 +625,10 @@ fn check_streamed(
     temp: &Path,
 ) {
     let label = format!("{} {selection:?}", path.display());
-    let parsed =
-        select_attributes(path, read_particles(path, Some(format)).unwrap(), selection).unwrap();
+    let parsed = read_particles(path, Some(format))
+        .unwrap()
+        .select(path, selection)
+        .unwrap();
     let spooled =
         SpooledParticles::from_file(path, format, selection, Some(temp), &CancelToken::new())
             .unwrap()
@@ -745,12 +744,10 @@ fn a_bad_selection_fails_before_any_temporary_file_and_like_the_parser() {
             names(&["velocity", "nope"]),
             names(&["velocity", "Velocity"]),
         ] {
-            let parsed = select_attributes(
-                &path,
-                read_particles(&path, Some(format)).unwrap(),
-                &selection,
-            )
-            .unwrap_err();
+            let parsed = read_particles(&path, Some(format))
+                .unwrap()
+                .select(&path, &selection)
+                .unwrap_err();
             let streamed = SpooledParticles::from_file(
                 &path,
                 format,
@@ -816,12 +813,10 @@ fn a_non_finite_attribute_value_is_a_clear_error_and_leaves_no_file() {
             )
             .err()
             .unwrap_or_else(|| panic!("{}: accepted", path.display()));
-            let parsed = select_attributes(
-                path,
-                read_particles(path, Some(format)).unwrap(),
-                &selection,
-            )
-            .unwrap_err();
+            let parsed = read_particles(path, Some(format))
+                .unwrap()
+                .select(path, &selection)
+                .unwrap_err();
             match &err {
                 Error::Attribute {
                     path: p,
@@ -1113,7 +1108,7 @@ fn a_gzip_bgeo_holding_more_points_than_its_header_announces_fails_fast() {
         );
     };
     check(read_particles(&path, None).expect_err("undercounting header"));
-    check(stream_bgeo_positions(&path, &mut |_| Ok(())).expect_err("undercounting header"));
+    check(stream_positions(&path, None, &mut |_| Ok(())).expect_err("undercounting header"));
     for selection in [AttributeSelection::None, AttributeSelection::All] {
         let spooled = SpooledParticles::from_file(
             &path,

@@ -425,12 +425,10 @@ fn a_tiled_run_streaming_attributes_writes_the_file_of_the_parsed_path() {
             .unwrap();
     let (from_stream, stats) = reconstruct_source(streamed, &options, &|_| {}, &cancel).unwrap();
     assert!(stats.tiles.tiles > 1);
-    let parsed = meniscus::attributes::select_attributes(
-        &vtk,
-        meniscus::io::particles::read_particles(&vtk, None).unwrap(),
-        &velocity,
-    )
-    .unwrap();
+    let parsed = meniscus::io::particles::read_particles(&vtk, None)
+        .unwrap()
+        .select(&vtk, &velocity)
+        .unwrap();
     let (from_parse, _) = reconstruct_source(parsed, &options, &|_| {}, &cancel).unwrap();
     assert_eq!(from_stream.fluid.attributes.len(), 1);
     assert_eq!(from_stream.fluid.attributes[0].name, "velocity");

@@ -4,7 +4,7 @@
 use super::report::{FrameReport, FrameStatus};
 use super::sink::FrameSink;
 use super::JobOptions;
-use crate::attributes::{select_attributes, AttributeSelection};
+use crate::attributes::AttributeSelection;
 use crate::cancel::CancelToken;
 use crate::error::{Error, Result};
 use crate::io::particles::SpooledParticles;
@@ -30,9 +30,7 @@ fn parsed(input: &Path, format: ParticleFormat, selection: &AttributeSelection) 
             path: input.to_path_buf(),
         });
     }
-    Ok(Input::Parsed(select_attributes(
-        input, particles, selection,
-    )?))
+    Ok(Input::Parsed(particles.select(input, selection)?))
 }
 
 /// Opens the particle file `input`. Raw .xyz is mapped window by window; BGEO, PLY
@@ -57,11 +55,7 @@ fn read_input(input: &Path, options: &ReconstructOptions, job: &JobOptions) -> R
     if format == ParticleFormat::Xyz {
         if let AttributeSelection::Names(names) = &job.attributes {
             // Raw positions hold no attributes: the same error as any missing name.
-            select_attributes(
-                input,
-                Particles::default(),
-                &AttributeSelection::Names(names.clone()),
-            )?;
+            Particles::default().select(input, &AttributeSelection::Names(names.clone()))?;
         }
         return Ok(Input::Mapped(MappedXyz::open(input)?));
     }

@@ -50,7 +50,7 @@ pub fn reconstruct(
 
 /// [`reconstruct`] from any [`ParticleSource`], carrying its payload (the attributes it
 /// holds, e.g. [`crate::io::particles::Particles`] after
-/// [`crate::attributes::select_attributes`]) to the surface. `progress` is told what the
+/// [`crate::io::particles::Particles::select`]) to the surface. `progress` is told what the
 /// run is doing ("tile 3/8", "decimation", ...); `cancel` stops it between tiles and
 /// stages with [`crate::Error::Interrupted`]. A tiled run reads the source twice and
 /// drops it before the first tile, so a mapped `.xyz` file or an owned `Vec` is never
