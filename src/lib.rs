@@ -61,6 +61,7 @@ pub mod subdivision;
 #[cfg(test)]
 mod test_rng;
 pub mod tiles;
+mod transfer;
 
 pub use allocator::tune_allocator;
 pub use cancel::CancelToken;

@@ -6,30 +6,7 @@
 //! readers (`io`), the tiles and the writers share. Selecting the attributes of read
 //! particles is [`crate::io::particles::Particles::select`].
 //!
-//! **The transfer stage** (`transfer.rs`). **Input:** the particles' selected attributes
-//! (the payload the tile engine carries beside the positions) and the final surface.
-//! **Output:** one value per surface vertex, the normalized kernel-weighted mean of the
-//! particles within the influence radius `R` of the vertex, with the field's kernel
-//! `k(s) = max(0, (1 − s²)³)`, `s = |x − x_i| / R`:
-//!
-//! ```text
-//! a(x) = Σ_i k(|x − x_i| / R) · a_i  /  Σ_i k(|x − x_i| / R)
-//! ```
-//!
-//! evaluated at the **final** vertex positions (after decimation and subdivision), so the
-//! value is a function of the position alone: the particles within `R` are summed in the
-//! engine's canonical order (home half-block, input index) in f64, the same in every
-//! tiling and for every thread count, bit for bit. A vertex with no particle within `R`
-//! takes the value of its nearest particle (the lowest input index on a tie). An isolated
-//! particle's sphere takes its particle's value.
-//!
-//! A constant attribute is reproduced exactly (to f32 rounding); a linear one,
-//! `a(x) = A·x + b`, comes out as `A·x̄ + b` with `x̄` the kernel-weighted mean position,
-//! which lies within `R` of the vertex: the error is at most `‖A‖·R`.
-
-mod transfer;
-
-pub(crate) use transfer::transfer;
+//! The stage that carries the attributes to the surface is [`crate::transfer`].
 
 use crate::error::{Error, Result};
 use std::path::Path;

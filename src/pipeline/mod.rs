@@ -18,7 +18,6 @@
 //!
 //! Every stage is timed; [`ReconstructionStats`] is the paper's Table 1 for one frame.
 
-use crate::attributes::transfer;
 use crate::cancel::CancelToken;
 use crate::containment::{contain_centres, ContainmentInput};
 use crate::decimation::{decimate, DecimateStats};
@@ -31,6 +30,7 @@ use crate::subdivision::subdivide;
 use crate::tiles::{
     plan_tiles, run_tiles, ParticleStore, StitchSink, TileDecimation, TilePlan, TileSink, TileStats,
 };
+use crate::transfer::transfer;
 use glam::Vec3;
 use std::time::Instant;
 
