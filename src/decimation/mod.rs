@@ -283,148 +283,43 @@ pub(crate) fn decimate_locked_walk(
     if before == 0 {
         return (stats, (0..mesh.vertex_count() as u32).collect());
     }
-    let (lo, hi) = bounds(&mesh.positions);
-    let centre = (lo + hi) * 0.5;
-    let scale = ((hi - lo).max_element() * 0.5).max(f64::MIN_POSITIVE);
-    mesh.normals = Vec::new();
-    let mut s = State::new(
-        std::mem::take(&mut mesh.positions),
-        std::mem::take(&mut mesh.triangles),
-        centre,
-        scale,
-    );
-    stats.refused_boundary = s
-        .locked
-        .iter()
-        .enumerate()
-        .filter(|&(v, &l)| l && !extra_locked.get(v).is_some_and(|&e| e))
-        .count();
-    for (locked, &extra) in s.locked.iter_mut().zip(extra_locked) {
-        *locked |= extra;
-    }
-    let nv = s.pos.len();
-
-    let max_cost_error = max_error.map(|e| e as f64 / scale);
-    let mut alive_tris = before;
+    let (mut s, frame) = State::from_mesh(mesh, extra_locked, &mut stats);
+    let mut progress = Progress {
+        stats,
+        alive_tris: before,
+        target,
+        max_cost_error: max_error.map(|e| e as f64 / frame.scale),
+        scale: frame.scale,
+    };
     let mut pass = 0u32;
     let mut stalled = false;
     // Multiple of the pass goal that sets the cost limit; grows when passes stall.
     let mut limit_factor = 2usize;
-    while alive_tris > target {
+    while progress.alive_tris > target {
         pass += 1;
-        // Candidates: every live interior edge once (as the directed side u → v, u < v),
-        // costed in parallel, in mesh order, per chunk.
-        let mut chunks: Vec<Vec<Candidate>> = s
-            .tris
-            .par_chunks(CHUNK_TRIANGLES)
-            .zip(s.tri_alive.par_chunks(CHUNK_TRIANGLES))
-            .map(|(tris, alive)| {
-                let mut out = Vec::with_capacity(tris.len() * 3 / 2);
-                for (tri, _) in tris.iter().zip(alive).filter(|(_, a)| **a) {
-                    for k in 0..3 {
-                        let (u, v) = (tri[k], tri[(k + 1) % 3]);
-                        if u < v && !s.locked[u as usize] && !s.locked[v as usize] {
-                            out.push(Candidate {
-                                cost: 0.0,
-                                target: DVec3::ZERO,
-                                u,
-                                v,
-                            });
-                        }
-                    }
-                }
-                place_candidates(&s.pos, &s.quadric, &mut out);
-                out
-            })
-            .collect();
-        let candidate_count: usize = chunks.iter().map(Vec::len).sum();
+        let mut chunks = s.candidates();
         // Collapse every edge cheaper than the cost of the (2·goal)-th cheapest candidate,
         // walking the edges in mesh order (spatially coherent, so the walk stays in cache),
         // each vertex at most once per pass; several passes approximate the greedy order
         // of a heap. A pass that collapses nothing lifts the limit once.
-        let goal = (alive_tris - target).div_ceil(2).max(1);
-        let cost_limit = if stalled || candidate_count == 0 {
+        let goal = (progress.alive_tris - target).div_ceil(2).max(1);
+        let cost_limit = if stalled {
             f64::INFINITY
         } else {
-            let mut costs: Vec<f32> = chunks
-                .iter()
-                .flat_map(|c| c.iter().map(|c| c.cost as f32))
-                .collect();
-            // Twice the goal: with each vertex moved at most once per pass, about half of
-            // the edges below the limit can collapse. Measured on frame 25 and the box:
-            // as good as half the goal (greedier) in 9 passes instead of 18; four times
-            // the goal takes 3 passes but raises the box's flat normal error by 25 %.
-            let k = (limit_factor * goal).min(costs.len() - 1);
-            // The limit in f32 (half the memory), rounded up to keep every f64 cost equal
-            // to it below it.
-            costs.select_nth_unstable_by(k, f32::total_cmp).1.next_up() as f64
+            cost_limit(&chunks, limit_factor * goal)
         };
-
-        // Parallel walk inside chunks, then the sequential walk over what is left.
         let mut done = 0;
-        if walk == Walk::Chunked && chunks.len() > 1 && alive_tris > target + 2 {
-            s.assign_owners();
-            let below: Vec<usize> = chunks
-                .par_iter()
-                .map(|c| c.iter().filter(|c| c.cost <= cost_limit).count())
-                .collect();
-            let below_total: usize = below.iter().sum::<usize>().max(1);
-            // Each collapse removes at most two triangles, and the chunks' shares add up
-            // to at most the goal, so the parallel walk cannot overshoot the target.
-            let budget = goal.min((alive_tris - target) / 2);
-            let view = View::new(&mut s);
-            let tallies: Vec<WalkTally> = chunks
-                .par_iter_mut()
-                .zip(below)
-                .enumerate()
-                .map(|(chunk, (candidates, below))| {
-                    let share = (budget as u128 * below as u128 / below_total as u128) as usize;
-                    // SAFETY: the chunk takes only collapses whose closed one-rings it owns
-                    // (see `walk_chunk`), and ownership is fixed during the walk, so no
-                    // two chunks touch the same vertex, triangle or vertex list.
-                    unsafe {
-                        view.walk_chunk(
-                            chunk as u32,
-                            candidates,
-                            cost_limit,
-                            share,
-                            pass,
-                            max_cost_error,
-                        )
-                    }
-                })
-                .collect();
-            for t in tallies {
-                done += t.collapses;
-                alive_tris -= t.removed_triangles;
-                stats.collapses += t.collapses;
-                stats.refused_topology += t.refused_topology;
-                stats.refused_geometry += t.refused_geometry;
-                stats.max_error = stats.max_error.max((t.max_error * scale) as f32);
-            }
+        if walk == Walk::Chunked && chunks.len() > 1 && progress.alive_tris > target + 2 {
+            done += parallel_walk(&mut s, &mut chunks, cost_limit, goal, pass, &mut progress);
         }
-        let view = View::new(&mut s);
-        'walk: for candidates in &chunks {
-            for c in candidates {
-                if done >= goal || alive_tris <= target {
-                    break 'walk;
-                }
-                if c.u == u32::MAX || c.cost > cost_limit {
-                    continue;
-                }
-                let mut tally = WalkTally::default();
-                // SAFETY: one thread; `view` is the only access to the state.
-                let collapsed = unsafe { view.try_collapse(c, pass, max_cost_error, &mut tally) };
-                stats.refused_topology += tally.refused_topology;
-                stats.refused_geometry += tally.refused_geometry;
-                if collapsed {
-                    alive_tris -= tally.removed_triangles;
-                    done += 1;
-                    stats.collapses += 1;
-                    stats.max_error = stats.max_error.max((tally.max_error * scale) as f32);
-                }
-            }
-        }
+        done += sequential_walk(
+            &mut s,
+            &chunks,
+            cost_limit,
+            goal - done.min(goal),
+            pass,
+            &mut progress,
+        );
         drop(chunks);
         if done == 0 {
             if stalled {
@@ -440,32 +335,143 @@ pub(crate) fn decimate_locked_walk(
             limit_factor = limit_factor.saturating_mul(4);
         }
     }
+    let mut stats = progress.stats;
     stats.passes = pass;
-
-    // Compact: surviving triangles in order, vertices in order of first use.
-    let mut remap = vec![u32::MAX; nv];
-    let mut positions = Vec::new();
-    let mut triangles = Vec::with_capacity(alive_tris);
-    for (t, tri) in s.tris.iter().enumerate() {
-        if !s.tri_alive[t] {
-            continue;
-        }
-        triangles.push(tri.map(|v| {
-            if remap[v as usize] == u32::MAX {
-                remap[v as usize] = positions.len() as u32;
-                positions.push((s.pos[v as usize] * scale + centre).as_vec3());
-            }
-            remap[v as usize]
-        }));
-    }
-    *mesh = TriMesh {
-        positions,
-        triangles,
-        normals: Vec::new(),
-        attributes: Vec::new(),
-    };
+    let remap = s.compact_into(mesh, frame);
     stats.triangles_after = mesh.triangle_count();
     (stats, remap)
+}
+
+/// The unit-box frame of the decimation state: `unit = (world − centre) / scale`.
+#[derive(Clone, Copy)]
+struct Frame {
+    centre: DVec3,
+    scale: f64,
+}
+
+/// The running figures of [`decimate_locked_walk`].
+struct Progress {
+    stats: DecimateStats,
+    alive_tris: usize,
+    target: usize,
+    /// The error bound in unit-box units.
+    max_cost_error: Option<f64>,
+    scale: f64,
+}
+
+impl Progress {
+    /// Counts a walk's collapses and refusals.
+    fn record(&mut self, tally: &WalkTally) {
+        self.alive_tris -= tally.removed_triangles;
+        self.stats.collapses += tally.collapses;
+        self.stats.refused_topology += tally.refused_topology;
+        self.stats.refused_geometry += tally.refused_geometry;
+        self.stats.max_error = self
+            .stats
+            .max_error
+            .max((tally.max_error * self.scale) as f32);
+    }
+}
+
+/// The cost of the `k`-th cheapest candidate (the last when there are fewer), rounded up
+/// to the next `f32`; infinite when there is no candidate.
+fn cost_limit(chunks: &[Vec<Candidate>], k: usize) -> f64 {
+    let mut costs: Vec<f32> = chunks
+        .iter()
+        .flat_map(|c| c.iter().map(|c| c.cost as f32))
+        .collect();
+    if costs.is_empty() {
+        return f64::INFINITY;
+    }
+    // Twice the goal: with each vertex moved at most once per pass, about half of the
+    // edges below the limit can collapse. Measured on frame 25 and the box: as good as
+    // half the goal (greedier) in 9 passes instead of 18; four times the goal takes 3
+    // passes but raises the box's flat normal error by 25 %.
+    let k = k.min(costs.len() - 1);
+    // The limit in f32 (half the memory), rounded up to keep every f64 cost equal to it
+    // below it.
+    costs.select_nth_unstable_by(k, f32::total_cmp).1.next_up() as f64
+}
+
+/// The parallel walk: each chunk takes the collapses whose closed one-rings it owns, up to
+/// its share of the pass's goal (in proportion to its candidates below the limit); the
+/// candidates it decided are marked. Returns the collapses made.
+fn parallel_walk(
+    s: &mut State,
+    chunks: &mut [Vec<Candidate>],
+    cost_limit: f64,
+    goal: usize,
+    pass: u32,
+    progress: &mut Progress,
+) -> usize {
+    s.assign_owners();
+    let below: Vec<usize> = chunks
+        .par_iter()
+        .map(|c| c.iter().filter(|c| c.cost <= cost_limit).count())
+        .collect();
+    let below_total: usize = below.iter().sum::<usize>().max(1);
+    // Each collapse removes at most two triangles, and the chunks' shares add up to at
+    // most the goal, so the parallel walk cannot overshoot the target.
+    let budget = goal.min((progress.alive_tris - progress.target) / 2);
+    let max_cost_error = progress.max_cost_error;
+    let view = View::new(s);
+    let tallies: Vec<WalkTally> = chunks
+        .par_iter_mut()
+        .zip(below)
+        .enumerate()
+        .map(|(chunk, (candidates, below))| {
+            let share = (budget as u128 * below as u128 / below_total as u128) as usize;
+            // SAFETY: the chunk takes only collapses whose closed one-rings it owns (see
+            // `walk_chunk`), and ownership is fixed during the walk, so no two chunks
+            // touch the same vertex, triangle or vertex list.
+            unsafe {
+                view.walk_chunk(
+                    chunk as u32,
+                    candidates,
+                    cost_limit,
+                    share,
+                    pass,
+                    max_cost_error,
+                )
+            }
+        })
+        .collect();
+    tallies
+        .iter()
+        .map(|t| {
+            progress.record(t);
+            t.collapses
+        })
+        .sum()
+}
+
+/// The sequential walk over all candidates in mesh order, skipping those the parallel walk
+/// decided, until `goal` more collapses are made or the target is reached. Returns the
+/// collapses made.
+fn sequential_walk(
+    s: &mut State,
+    chunks: &[Vec<Candidate>],
+    cost_limit: f64,
+    goal: usize,
+    pass: u32,
+    progress: &mut Progress,
+) -> usize {
+    let view = View::new(s);
+    let mut done = 0;
+    for c in chunks.iter().flatten() {
+        if done >= goal || progress.alive_tris <= progress.target {
+            break;
+        }
+        if c.u == u32::MAX || c.cost > cost_limit {
+            continue;
+        }
+        let mut tally = WalkTally::default();
+        // SAFETY: one thread; `view` is the only access to the state.
+        let collapsed = unsafe { view.try_collapse(c, pass, progress.max_cost_error, &mut tally) };
+        progress.record(&tally);
+        done += collapsed as usize;
+    }
+    done
 }
 
 /// The decimation state, in unit-box coordinates.
@@ -487,6 +493,90 @@ struct State {
 }
 
 impl State {
+    /// The state of `mesh` (whose positions, triangles and normals it takes), in its
+    /// unit-box frame, with the `extra_locked` vertices locked too; counts the vertices
+    /// locked by boundaries and non-manifold edges in `stats.refused_boundary`.
+    fn from_mesh(
+        mesh: &mut TriMesh,
+        extra_locked: &[bool],
+        stats: &mut DecimateStats,
+    ) -> (State, Frame) {
+        let (lo, hi) = bounds(&mesh.positions);
+        let frame = Frame {
+            centre: (lo + hi) * 0.5,
+            scale: ((hi - lo).max_element() * 0.5).max(f64::MIN_POSITIVE),
+        };
+        mesh.normals = Vec::new();
+        let mut s = State::new(
+            std::mem::take(&mut mesh.positions),
+            std::mem::take(&mut mesh.triangles),
+            frame.centre,
+            frame.scale,
+        );
+        stats.refused_boundary = s
+            .locked
+            .iter()
+            .enumerate()
+            .filter(|&(v, &l)| l && !extra_locked.get(v).is_some_and(|&e| e))
+            .count();
+        for (locked, &extra) in s.locked.iter_mut().zip(extra_locked) {
+            *locked |= extra;
+        }
+        (s, frame)
+    }
+
+    /// The candidates of a pass: every live interior edge once (as the directed side
+    /// u → v, u < v), costed in parallel, in mesh order, per chunk.
+    fn candidates(&self) -> Vec<Vec<Candidate>> {
+        self.tris
+            .par_chunks(CHUNK_TRIANGLES)
+            .zip(self.tri_alive.par_chunks(CHUNK_TRIANGLES))
+            .map(|(tris, alive)| {
+                let mut out = Vec::with_capacity(tris.len() * 3 / 2);
+                for (tri, _) in tris.iter().zip(alive).filter(|(_, a)| **a) {
+                    for k in 0..3 {
+                        let (u, v) = (tri[k], tri[(k + 1) % 3]);
+                        if u < v && !self.locked[u as usize] && !self.locked[v as usize] {
+                            out.push(Candidate {
+                                cost: 0.0,
+                                target: DVec3::ZERO,
+                                u,
+                                v,
+                            });
+                        }
+                    }
+                }
+                place_candidates(&self.pos, &self.quadric, &mut out);
+                out
+            })
+            .collect()
+    }
+
+    /// Writes the surviving triangles back to `mesh` in order, their vertices in order of
+    /// first use and in world units; returns the new index of every vertex (`u32::MAX`
+    /// when it was removed).
+    fn compact_into(self, mesh: &mut TriMesh, frame: Frame) -> Vec<u32> {
+        let mut remap = vec![u32::MAX; self.pos.len()];
+        let mut positions = Vec::new();
+        let mut triangles = Vec::with_capacity(self.tri_alive.iter().filter(|a| **a).count());
+        for (tri, _) in self.tris.iter().zip(&self.tri_alive).filter(|(_, a)| **a) {
+            triangles.push(tri.map(|v| {
+                if remap[v as usize] == u32::MAX {
+                    remap[v as usize] = positions.len() as u32;
+                    positions.push((self.pos[v as usize] * frame.scale + frame.centre).as_vec3());
+                }
+                remap[v as usize]
+            }));
+        }
+        *mesh = TriMesh {
+            positions,
+            triangles,
+            normals: Vec::new(),
+            attributes: Vec::new(),
+        };
+        remap
+    }
+
     /// Builds the state in parallel; `positions` are world units, rescaled by
     /// `(p - centre) / scale`.
     fn new(positions: Vec<Vec3>, tris: Vec<[u32; 3]>, centre: DVec3, scale: f64) -> State {

@@ -57,173 +57,230 @@ pub(super) fn decimate_by_regions(
     options: &DecimateOptions,
     target: usize,
 ) -> DecimateStats {
-    let before = mesh.triangle_count();
-    let nv = mesh.vertex_count();
-    // Regions: runs of `region_triangles / 2` vertices in Morton order of position (a
-    // closed surface has about two triangles per vertex), so each is a compact piece.
-    let region_vertices = (options.region_triangles / 2).max(1);
-    let region_of = morton_regions(&mesh.positions, region_vertices);
-    let regions = nv.div_ceil(region_vertices);
-    // Triangles with all three vertices in one region are that region's; the others are
-    // seam triangles, and their vertices stay locked until the seam band is decimated.
-    // Triangles are kept as indices (4 bytes each), grouped by region in mesh order, and
-    // renumbered when their region is taken out.
-    const SEAM: u32 = u32::MAX;
-    let triangle_region: Vec<u32> = mesh
-        .triangles
-        .par_iter()
-        .map(|tri| {
-            let r = region_of[tri[0] as usize];
-            if tri.iter().all(|&v| region_of[v as usize] == r) {
-                r
-            } else {
-                SEAM
-            }
-        })
-        .collect();
-    drop(region_of);
-    let mut region_start = vec![0usize; regions + 1];
-    let mut seam_tris = Vec::new();
-    let mut on_seam = vec![false; nv];
-    for (t, &r) in triangle_region.iter().enumerate() {
-        if r == SEAM {
-            seam_tris.push(t as u32);
-            for &v in &mesh.triangles[t] {
-                on_seam[v as usize] = true;
-            }
-        } else {
-            region_start[r as usize + 1] += 1;
-        }
-    }
-    for r in 0..regions {
-        region_start[r + 1] += region_start[r];
-    }
-    let mut grouped = vec![0u32; region_start[regions]];
-    let mut fill = region_start.clone();
-    for (t, &r) in triangle_region.iter().enumerate() {
-        if r != SEAM {
-            grouped[fill[r as usize]] = t as u32;
-            fill[r as usize] += 1;
-        }
-    }
-    drop(fill);
-    drop(triangle_region);
+    let split = Regions::split(mesh, (options.region_triangles / 2).max(1));
+    let mut stats = DecimateStats {
+        triangles_before: mesh.triangle_count(),
+        regions: split.count,
+        ..Default::default()
+    };
     // A region's vertices are numbered in order of first use by its triangles (what
     // [`TriMesh::submesh`] does), inside its own task: a vertex belongs to one region
     // only, so the tasks write disjoint entries of `local_of`.
-    let local_of: Vec<AtomicU32> = (0..nv).map(|_| AtomicU32::new(u32::MAX)).collect();
-
-    let mut stats = DecimateStats {
-        triangles_before: before,
-        regions,
-        ..Default::default()
-    };
+    let local_of: Vec<AtomicU32> = (0..mesh.vertex_count())
+        .map(|_| AtomicU32::new(u32::MAX))
+        .collect();
     // Regions are decimated in parallel, one per task (each costs its candidates in
     // parallel too, but walks its collapses sequentially: `Walk::Sequential`), and placed
     // in region order, so the output does not depend on the thread count.
-    let decimated: Vec<(Piece, DecimateStats, Vec<u32>)> = (0..regions)
+    let decimated: Vec<(Piece, DecimateStats, Vec<u32>)> = (0..split.count)
         .into_par_iter()
-        .map(|r| &grouped[region_start[r]..region_start[r + 1]])
+        .map(|r| split.triangles_of(r))
         .filter(|tris| !tris.is_empty())
-        .map(|tris| {
-            let mut global_of: Vec<u32> = Vec::new();
-            let triangles = tris
-                .iter()
-                .map(|&t| {
-                    mesh.triangles[t as usize].map(|v| {
-                        let slot = &local_of[v as usize];
-                        match slot.load(Ordering::Relaxed) {
-                            u32::MAX => {
-                                let local = global_of.len() as u32;
-                                slot.store(local, Ordering::Relaxed);
-                                global_of.push(v);
-                                local
-                            }
-                            local => local,
-                        }
-                    })
-                })
-                .collect();
-            let mut piece = Piece {
-                mesh: TriMesh {
-                    positions: global_of
-                        .iter()
-                        .map(|&g| mesh.positions[g as usize])
-                        .collect(),
-                    triangles,
-                    normals: Vec::new(),
-                    attributes: Vec::new(),
-                },
-                global_of,
-            };
-            let locked: Vec<bool> = piece
-                .global_of
-                .iter()
-                .map(|&g| on_seam[g as usize])
-                .collect();
-            let region_target = options.target_triangles(piece.mesh.triangle_count());
-            let (region_stats, remap) = decimate_locked_walk(
-                &mut piece.mesh,
-                region_target,
-                options.max_error,
-                &locked,
-                Walk::Sequential,
-            );
-            (piece, region_stats, remap)
-        })
+        .map(|tris| decimate_region(mesh, tris, &local_of, &split.on_seam, options))
         .collect();
     drop(local_of);
-    drop(grouped);
-    let mut positions: Vec<Vec3> = Vec::new();
-    let mut triangles: Vec<[u32; 3]> = Vec::new();
-    // Output index of each seam vertex, once placed; seam vertices keep their exact input
-    // position.
-    let mut seam_index = vec![u32::MAX; nv];
-    let mut place_seam = |g: usize, positions: &mut Vec<Vec3>| -> u32 {
-        if seam_index[g] == u32::MAX {
-            seam_index[g] = positions.len() as u32;
-            positions.push(mesh.positions[g]);
-        }
-        seam_index[g]
-    };
-    for (piece, region_stats, remap) in decimated {
-        stats.add_work(&region_stats);
-        let output_of = place_survivors(
-            &piece.mesh,
-            &remap,
-            |old, positions| {
-                let g = piece.global_of[old] as usize;
-                on_seam[g].then(|| place_seam(g, positions))
-            },
-            &mut positions,
-        );
-        triangles.extend(
-            piece
-                .mesh
-                .triangles
-                .iter()
-                .map(|t| t.map(|v| output_of[v as usize])),
-        );
-    }
-    for &t in &seam_tris {
-        let tri = mesh.triangles[t as usize].map(|v| place_seam(v as usize, &mut positions));
-        triangles.push(tri);
-    }
-    *mesh = TriMesh {
-        positions,
-        triangles,
-        normals: Vec::new(),
-        attributes: Vec::new(),
-    };
-    let mut at_seam = vec![false; mesh.vertex_count()];
-    for &i in seam_index.iter().filter(|&&i| i != u32::MAX) {
-        at_seam[i as usize] = true;
-    }
-    drop(seam_index);
+    let at_seam = split.assemble(mesh, decimated, &mut stats);
     let last = decimate_band(mesh, &at_seam, target, options.max_error);
     stats.add_work(&last);
     stats.triangles_after = last.triangles_after;
     stats
+}
+
+/// A mesh cut into regions: runs of vertices in Morton order of position (compact pieces
+/// of surface). Triangles with all three vertices in one region are that region's; the
+/// others are seam triangles, and their vertices stay locked until the seam band is
+/// decimated.
+struct Regions {
+    count: usize,
+    /// Every region's triangles (indices, 4 bytes each), grouped by region in mesh order:
+    /// region `r` holds `grouped[start[r]..start[r + 1]]`.
+    grouped: Vec<u32>,
+    start: Vec<usize>,
+    /// The seam triangles, in mesh order.
+    seam_tris: Vec<u32>,
+    /// Whether each mesh vertex is a corner of a seam triangle.
+    on_seam: Vec<bool>,
+}
+
+impl Regions {
+    /// Cuts `mesh` into regions of `region_vertices` vertices (a closed surface has about
+    /// two triangles per vertex).
+    fn split(mesh: &TriMesh, region_vertices: usize) -> Regions {
+        let nv = mesh.vertex_count();
+        let region_of = morton_regions(&mesh.positions, region_vertices);
+        let count = nv.div_ceil(region_vertices);
+        const SEAM: u32 = u32::MAX;
+        let triangle_region: Vec<u32> = mesh
+            .triangles
+            .par_iter()
+            .map(|tri| {
+                let r = region_of[tri[0] as usize];
+                if tri.iter().all(|&v| region_of[v as usize] == r) {
+                    r
+                } else {
+                    SEAM
+                }
+            })
+            .collect();
+        drop(region_of);
+        let mut start = vec![0usize; count + 1];
+        let mut seam_tris = Vec::new();
+        let mut on_seam = vec![false; nv];
+        for (t, &r) in triangle_region.iter().enumerate() {
+            if r == SEAM {
+                seam_tris.push(t as u32);
+                for &v in &mesh.triangles[t] {
+                    on_seam[v as usize] = true;
+                }
+            } else {
+                start[r as usize + 1] += 1;
+            }
+        }
+        for r in 0..count {
+            start[r + 1] += start[r];
+        }
+        let mut grouped = vec![0u32; start[count]];
+        let mut fill = start.clone();
+        for (t, &r) in triangle_region.iter().enumerate() {
+            if r != SEAM {
+                grouped[fill[r as usize]] = t as u32;
+                fill[r as usize] += 1;
+            }
+        }
+        Regions {
+            count,
+            grouped,
+            start,
+            seam_tris,
+            on_seam,
+        }
+    }
+
+    /// Region `r`'s triangles.
+    fn triangles_of(&self, r: usize) -> &[u32] {
+        &self.grouped[self.start[r]..self.start[r + 1]]
+    }
+
+    /// Replaces `mesh` by the decimated regions, in region order, then the seam triangles
+    /// (their vertices at their exact input positions); returns which output vertices lie
+    /// on a seam.
+    fn assemble(
+        self,
+        mesh: &mut TriMesh,
+        decimated: Vec<(Piece, DecimateStats, Vec<u32>)>,
+        stats: &mut DecimateStats,
+    ) -> Vec<bool> {
+        let Regions {
+            grouped,
+            start,
+            seam_tris,
+            on_seam,
+            ..
+        } = self;
+        // The region lists are done with: freed before the output grows.
+        drop((grouped, start));
+        let mut positions: Vec<Vec3> = Vec::new();
+        let mut triangles: Vec<[u32; 3]> = Vec::new();
+        // Output index of each seam vertex, once placed.
+        let mut seam_index = vec![u32::MAX; mesh.vertex_count()];
+        let mut place_seam = |g: usize, positions: &mut Vec<Vec3>| -> u32 {
+            if seam_index[g] == u32::MAX {
+                seam_index[g] = positions.len() as u32;
+                positions.push(mesh.positions[g]);
+            }
+            seam_index[g]
+        };
+        for (piece, region_stats, remap) in decimated {
+            stats.add_work(&region_stats);
+            let output_of = place_survivors(
+                &piece.mesh,
+                &remap,
+                |old, positions| {
+                    let g = piece.global_of[old] as usize;
+                    on_seam[g].then(|| place_seam(g, positions))
+                },
+                &mut positions,
+            );
+            triangles.extend(
+                piece
+                    .mesh
+                    .triangles
+                    .iter()
+                    .map(|t| t.map(|v| output_of[v as usize])),
+            );
+        }
+        for &t in &seam_tris {
+            let tri = mesh.triangles[t as usize].map(|v| place_seam(v as usize, &mut positions));
+            triangles.push(tri);
+        }
+        *mesh = TriMesh {
+            positions,
+            triangles,
+            normals: Vec::new(),
+            attributes: Vec::new(),
+        };
+        let mut at_seam = vec![false; mesh.vertex_count()];
+        for &i in seam_index.iter().filter(|&&i| i != u32::MAX) {
+            at_seam[i as usize] = true;
+        }
+        at_seam
+    }
+}
+
+/// Takes one region's triangles `tris` out of `mesh` (numbering its vertices in
+/// `local_of`, which no other region shares) and decimates it to the options' fraction,
+/// its seam vertices locked.
+fn decimate_region(
+    mesh: &TriMesh,
+    tris: &[u32],
+    local_of: &[AtomicU32],
+    on_seam: &[bool],
+    options: &DecimateOptions,
+) -> (Piece, DecimateStats, Vec<u32>) {
+    let mut global_of: Vec<u32> = Vec::new();
+    let triangles = tris
+        .iter()
+        .map(|&t| {
+            mesh.triangles[t as usize].map(|v| {
+                let slot = &local_of[v as usize];
+                match slot.load(Ordering::Relaxed) {
+                    u32::MAX => {
+                        let local = global_of.len() as u32;
+                        slot.store(local, Ordering::Relaxed);
+                        global_of.push(v);
+                        local
+                    }
+                    local => local,
+                }
+            })
+        })
+        .collect();
+    let mut piece = Piece {
+        mesh: TriMesh {
+            positions: global_of
+                .iter()
+                .map(|&g| mesh.positions[g as usize])
+                .collect(),
+            triangles,
+            normals: Vec::new(),
+            attributes: Vec::new(),
+        },
+        global_of,
+    };
+    let locked: Vec<bool> = piece
+        .global_of
+        .iter()
+        .map(|&g| on_seam[g as usize])
+        .collect();
+    let region_target = options.target_triangles(piece.mesh.triangle_count());
+    let (stats, remap) = decimate_locked_walk(
+        &mut piece.mesh,
+        region_target,
+        options.max_error,
+        &locked,
+        Walk::Sequential,
+    );
+    (piece, stats, remap)
 }
 
 /// Interleaves the bits of three 10-bit coordinates.
