@@ -62,6 +62,10 @@ pub struct ReconstructOptions {
     pub containment: Option<ContainmentOptions>,
 }
 
+/// The fraction of triangles the memory estimate assumes a decimation without a triangle
+/// target (an error bound alone) removes: its result is not known before it runs.
+const ASSUMED_BOUNDED_REDUCTION: f32 = 0.8;
+
 impl ReconstructOptions {
     /// meniscus's defaults for particle radius `r` (world units): the paper's stages, with
     /// anisotropic kernels ([`Kernel::Anisotropic`]) and the coverage balls of
@@ -142,13 +146,17 @@ impl ReconstructOptions {
 
     /// Memory the surface needs after the tiles, per marching-cubes triangle: the largest
     /// of the stages' own working sets, each at the triangle count it meets (an
-    /// error-bounded decimation counts as 0.8), and what would lower it.
+    /// error-bounded decimation counts as [`ASSUMED_BOUNDED_REDUCTION`]), and what would
+    /// lower it.
     pub(crate) fn post_processing_cost(&self) -> OutputCost {
         let mut triangles = 1.0;
         let mut peak = match &self.decimate {
             None => (STITCH_BYTES_PER_TRIANGLE, "decimation"),
             Some(d) => {
-                triangles *= 1.0 - d.target_reduction.unwrap_or(0.8).clamp(0.0, 1.0) as f64;
+                triangles *= 1.0
+                    - d.target_reduction
+                        .unwrap_or(ASSUMED_BOUNDED_REDUCTION)
+                        .clamp(0.0, 1.0) as f64;
                 (triangles * MESH_BYTES_PER_TRIANGLE, "more decimation")
             }
         };
