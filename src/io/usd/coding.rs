@@ -2,8 +2,8 @@
 //! and structural tables, and LZ4 blocks in the chunked framing Pixar's readers expect.
 //!
 //! **Integer coding.** A list of `n` 32-bit integers becomes the list of differences to
-//! the previous one (the first to 0), then: the most common difference (4 bytes, the
-//! largest one on a tie), a 2-bit code per integer (four to a byte, lowest bits first:
+//! the previous one (the first to 0), then: a common difference (4 bytes; here the most
+//! common one that fits an `i16`, the largest on a tie), a 2-bit code per integer (four to a byte, lowest bits first:
 //! 0 the common difference, 1 an `i8`, 2 an `i16`, 3 an `i32` follows), and the
 //! differences that are not the common one, in order, each in the size its code says.
 //! Arithmetic wraps, so any `u32` or `i32` sequence round-trips.
@@ -34,51 +34,63 @@ fn code(delta: i32, common: i32) -> (u8, usize) {
 }
 
 /// The differences of `values` to their predecessors (the first to 0), wrapping.
-fn deltas<I: Iterator<Item = i32>>(values: I) -> impl Iterator<Item = i32> {
-    values.scan(0i32, |previous, v| {
-        let d = v.wrapping_sub(*previous);
-        *previous = v;
-        Some(d)
-    })
+fn deltas(values: impl Iterator<Item = i32>, len: usize) -> Vec<i32> {
+    let mut out = Vec::with_capacity(len);
+    let mut previous = 0i32;
+    for v in values {
+        out.push(v.wrapping_sub(previous));
+        previous = v;
+    }
+    out
 }
 
-/// The most common difference of `values`, the largest on a tie (0 when empty).
-fn most_common_delta<I: Iterator<Item = i32>>(values: I) -> i32 {
-    let mut counts: hashbrown::HashMap<i32, usize> = hashbrown::HashMap::new();
-    let (mut best, mut best_count) = (0i32, 0usize);
-    for d in deltas(values) {
-        let c = counts.entry(d).or_insert(0);
-        *c += 1;
-        if *c > best_count || (*c == best_count && d > best) {
-            best = d;
-            best_count = *c;
+/// The most common of `deltas` among those that fit an `i16`, the largest on a tie (0
+/// when none fits). Counting in a table keeps this linear and cheap; a difference beyond
+/// an `i16` repeated more often than every small one (rare in indices and tables) would
+/// only cost size: any common value decodes.
+fn most_common(deltas: &[i32]) -> i32 {
+    let mut counts = vec![0u32; 1 << 16];
+    for &d in deltas {
+        if let Ok(s) = i16::try_from(d) {
+            counts[(s as i32 + 32768) as usize] += 1;
         }
     }
-    best
+    // Largest count, then largest value.
+    let (count, value) = counts
+        .iter()
+        .enumerate()
+        .map(|(i, &c)| (c, i as i32 - 32768))
+        .max()
+        .expect("a non-empty table");
+    if count == 0 {
+        0
+    } else {
+        value
+    }
 }
 
-/// The integer coding of the `len` integers `values()` yields (called twice: once to
-/// find the common difference, once to code).
-pub(crate) fn encode_ints<I: Iterator<Item = i32>>(len: usize, values: impl Fn() -> I) -> Vec<u8> {
-    if len == 0 {
+/// The integer coding of the `len` integers `values` yields.
+pub(crate) fn encode_ints(len: usize, values: impl Iterator<Item = i32>) -> Vec<u8> {
+    let deltas = deltas(values, len);
+    if deltas.is_empty() {
         return Vec::new();
     }
-    let common = most_common_delta(values());
-    let codes_start = 4;
-    let vints_start = codes_start + (len * 2).div_ceil(8);
-    let mut out = Vec::with_capacity(vints_start + len);
-    out.extend_from_slice(&common.to_le_bytes());
-    out.resize(vints_start, 0);
-    for (i, d) in deltas(values()).enumerate() {
-        let (c, width) = code(d, common);
-        out[codes_start + i / 4] |= c << (2 * (i % 4));
-        out.extend_from_slice(&d.to_le_bytes()[..width]);
+    let common = most_common(&deltas);
+    let codes = 4;
+    let mut vints = codes + deltas.len().div_ceil(4);
+    let mut out = vec![0u8; vints + 4 * deltas.len()];
+    out[..4].copy_from_slice(&common.to_le_bytes());
+    for (k, group) in deltas.chunks(4).enumerate() {
+        let mut byte = 0u8;
+        for (i, &d) in group.iter().enumerate() {
+            let (c, width) = code(d, common);
+            byte |= c << (2 * i);
+            out[vints..vints + width].copy_from_slice(&d.to_le_bytes()[..width]);
+            vints += width;
+        }
+        out[codes + k] = byte;
     }
-    debug_assert_eq!(
-        out[codes_start..vints_start].len(),
-        (len * 2).div_ceil(8),
-        "one code per integer"
-    );
+    out.truncate(vints);
     out
 }
 
@@ -115,10 +127,7 @@ pub(crate) fn lz4_framed(input: &[u8]) -> io::Result<Vec<u8>> {
 }
 
 /// The compressed form of an int array or table: integer coding, then LZ4.
-pub(crate) fn compress_ints<I: Iterator<Item = i32>>(
-    len: usize,
-    values: impl Fn() -> I,
-) -> io::Result<Vec<u8>> {
+pub(crate) fn compress_ints(len: usize, values: impl Iterator<Item = i32>) -> io::Result<Vec<u8>> {
     lz4_framed(&encode_ints(len, values))
 }
 
@@ -190,7 +199,7 @@ mod tests {
     fn the_format_description_example_codes_to_its_bytes() {
         // Differences 123, 1, 1, 100000, 0, 1, 0: the common one is 1.
         let input = [123, 124, 125, 100125, 100125, 100126, 100126];
-        let out = encode_ints(input.len(), || input.iter().copied());
+        let out = encode_ints(input.len(), input.iter().copied());
         let mut expected = 1i32.to_le_bytes().to_vec();
         // Codes, two bits each from the lowest: 01 00 00 11 | 01 00 01 (xx).
         expected.extend([0b1100_0001, 0b0001_0001]);
@@ -219,7 +228,7 @@ mod tests {
             u32::MAX as i32,
         ];
         for n in 0..=input.len() {
-            let out = encode_ints(n, || input[..n].iter().copied());
+            let out = encode_ints(n, input[..n].iter().copied());
             assert_eq!(decode_ints(&out, n), &input[..n], "first {n}");
         }
     }
@@ -228,14 +237,14 @@ mod tests {
     fn a_tie_takes_the_largest_common_difference() {
         // Differences 2, 2, -3, -3 (from 0): 2 and -3 tie; 2 is taken.
         let input = [2, 4, 1, -2];
-        let out = encode_ints(4, || input.iter().copied());
+        let out = encode_ints(4, input.iter().copied());
         assert_eq!(i32::from_le_bytes(out[..4].try_into().unwrap()), 2);
     }
 
     #[test]
     fn a_constant_array_compresses_to_a_few_bytes() {
         let n = 1_000_000;
-        let out = compress_ints(n, || std::iter::repeat_n(3, n)).unwrap();
+        let out = compress_ints(n, std::iter::repeat_n(3, n)).unwrap();
         assert!(out.len() < 2000, "{} bytes", out.len());
         assert!(decompress_ints(&out, n).iter().all(|&v| v == 3));
     }
@@ -261,7 +270,7 @@ mod tests {
         let indices: Vec<i32> = (0..30_000)
             .map(|i| i / 6 + (rng.next_u64() % 40) as i32)
             .collect();
-        let out = compress_ints(indices.len(), || indices.iter().copied()).unwrap();
+        let out = compress_ints(indices.len(), indices.iter().copied()).unwrap();
         assert!(out.len() < indices.len() * 4 / 2, "{} bytes", out.len());
         assert_eq!(decompress_ints(&out, indices.len()), indices);
     }

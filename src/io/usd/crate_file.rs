@@ -293,12 +293,11 @@ impl<W: Write + Seek> CrateWriter<W> {
         Ok(rep)
     }
 
-    /// An `int` array of the `len` values `values()` yields (called twice when the array
-    /// is compressed).
-    pub(crate) fn int_array<I: Iterator<Item = i32>>(
+    /// An `int` array of the `len` values `values` yields.
+    pub(crate) fn int_array(
         &mut self,
         len: usize,
-        values: impl Fn() -> I,
+        values: impl Iterator<Item = i32>,
     ) -> io::Result<ValueRep> {
         if len == 0 {
             return Ok(ValueRep::empty_array(Type::Int));
@@ -307,7 +306,7 @@ impl<W: Write + Seek> CrateWriter<W> {
         let mut rep = ValueRep::array_at(Type::Int, self.pos);
         self.write_u64(len as u64)?;
         if len < MIN_COMPRESSED_ARRAY {
-            let bytes: Vec<u8> = values().flat_map(i32::to_le_bytes).collect();
+            let bytes: Vec<u8> = values.flat_map(i32::to_le_bytes).collect();
             self.write(&bytes)?;
         } else {
             let compressed = coding::compress_ints(len, values)?;
@@ -407,7 +406,7 @@ impl<W: Write + Seek> CrateWriter<W> {
 
     /// A compressed int table: its compressed size, then the bytes.
     fn write_compressed_ints(&mut self, values: &[u32]) -> io::Result<()> {
-        let compressed = coding::compress_ints(values.len(), || values.iter().map(|&v| v as i32))?;
+        let compressed = coding::compress_ints(values.len(), values.iter().map(|&v| v as i32))?;
         self.write_u64(compressed.len() as u64)?;
         self.write(&compressed)
     }
@@ -712,9 +711,9 @@ mod tests {
     #[test]
     fn a_time_series_points_at_the_shared_times_and_its_samples() {
         let mut w = CrateWriter::new(Cursor::new(Vec::new())).unwrap();
-        let small = w.int_array(3, || [7, 8, 9].into_iter()).unwrap();
-        let large = w.int_array(1000, || 0..1000).unwrap();
-        let empty = w.int_array(0, std::iter::empty).unwrap();
+        let small = w.int_array(3, [7, 8, 9].into_iter()).unwrap();
+        let large = w.int_array(1000, 0..1000).unwrap();
+        let empty = w.int_array(0, std::iter::empty()).unwrap();
         let times = w.times(&[1.0, 2.0, 5.0]).unwrap();
         let series = w.time_samples(times, &[small, large, empty]).unwrap();
         let (_, out) = w.finish().unwrap();

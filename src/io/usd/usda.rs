@@ -203,8 +203,10 @@ impl<W: Write> TextTree<'_, W> {
         for property in &prim.properties {
             self.property(property, &format!("{pad}    "))?;
         }
-        for child in &prim.children {
-            writeln!(self.out)?;
+        for (k, child) in prim.children.iter().enumerate() {
+            if k > 0 || !prim.properties.is_empty() {
+                writeln!(self.out)?;
+            }
             self.prim(child, depth + 1)?;
         }
         writeln!(self.out, "{pad}}}")

@@ -153,16 +153,21 @@ impl<'a> SpecWriter<'a, '_> {
     }
 }
 
-/// Writes `values` as an array of `element` to `file`.
+/// Writes `values` as an array of `element` to `file` (through concrete iterators: this
+/// is the per-frame hot path).
 fn array(
     file: &mut CrateWriter<BufWriter<File>>,
     element: Element,
     values: Values<'_>,
 ) -> io::Result<ValueRep> {
-    let len = values.len(element.width());
-    match element {
-        Element::Int => file.int_array(len, || values.ints()),
-        other => file.float_array(crate_type(other), len, values.floats()),
+    let (ty, len) = (crate_type(element), values.len(element.width()));
+    let vectors = |v: &[glam::Vec3]| v.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>();
+    match values {
+        Values::Vec3(v) => file.float_array(ty, len, v.iter().flat_map(|p| p.to_array())),
+        Values::Floats(v) => file.float_array(ty, len, v.iter().copied()),
+        Values::Corners(c) => file.float_array(ty, len, vectors(&c).into_iter()),
+        Values::Triangles(t) => file.int_array(len, t.iter().flatten().map(|&i| i as i32)),
+        Values::Repeat(v, n) => file.int_array(len, std::iter::repeat_n(v, n)),
     }
 }
 
