@@ -43,6 +43,12 @@ fn files(dir: &Path) -> Vec<String> {
 }
 
 #[test]
+fn a_writer_can_move_between_threads() {
+    fn send<T: Send>() {}
+    send::<UsdStageWriter>();
+}
+
+#[test]
 fn both_formats_are_written_by_finish_only() {
     let dir = tempfile::tempdir().unwrap();
     for (name, head) in [

@@ -142,8 +142,9 @@ pub struct UsdStageStats {
     pub vertices: usize,
 }
 
-/// The format-specific part of the writer.
-trait Encoder {
+/// The format-specific part of the writer (`Send`, so a writer can move to the thread
+/// that finishes a run's frames).
+trait Encoder: Send {
     /// Writes sample `slot` (at `time`) of series `index`, defined by `series`.
     fn sample(
         &mut self,
