@@ -8,7 +8,7 @@
 //! one with velocity). Every scene runs in a child process so that its peak RSS (Linux
 //! VmHWM) is its own.
 
-use meniscus::attributes::{select_attributes, AttributeSelection};
+use meniscus::attributes::AttributeSelection;
 use meniscus::io::particles::read_particles;
 use meniscus::job::peak_rss_bytes;
 use meniscus::pipeline::{reconstruct_source, ReconstructOptions};
@@ -66,12 +66,10 @@ fn main() {
 fn child(path: &Path, radius: f32) {
     let clock = Instant::now();
     // The velocity, when the file has one, as the CLI's default.
-    let particles = select_attributes(
-        path,
-        read_particles(path, None).expect("readable scene"),
-        &AttributeSelection::Velocity,
-    )
-    .expect("valid attributes");
+    let particles = read_particles(path, None)
+        .expect("readable scene")
+        .select(path, &AttributeSelection::Velocity)
+        .expect("valid attributes");
     let carried: Vec<String> = particles
         .attributes
         .iter()

@@ -9,6 +9,8 @@
 //! hashbrown map keyed by block coordinate; only blocks touched by some particle's
 //! influence sphere exist. Nothing is sized by the scene's bounding box.
 
+use crate::error::{Error, Result};
+use glam::Vec3;
 use hashbrown::HashMap;
 use rayon::prelude::*;
 
@@ -30,6 +32,94 @@ pub fn local_index(a: i32, b: i32, c: i32) -> usize {
 #[inline]
 pub fn split_coordinate(i: i32) -> (i32, i32) {
     (i.div_euclid(BLOCK_EDGE), i.rem_euclid(BLOCK_EDGE))
+}
+
+/// Largest coordinate, in cells, the lattice accepts (block keys must pack in 21 bits).
+const MAX_CELL_COORDINATE: f64 = (1u64 << 23) as f64;
+
+/// An inclusive box of block keys.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct BlockRange {
+    /// Lowest block key, per axis.
+    pub lo: BlockKey,
+    /// Highest block key, per axis (inclusive).
+    pub hi: BlockKey,
+}
+
+impl BlockRange {
+    /// True when `key` lies in the range.
+    pub fn contains(&self, key: BlockKey) -> bool {
+        (0..3).all(|a| self.lo[a] <= key[a] && key[a] <= self.hi[a])
+    }
+
+    /// The range grown by `lo` blocks downwards and `hi` blocks upwards on every axis.
+    pub fn grown(&self, lo: i32, hi: i32) -> BlockRange {
+        BlockRange {
+            lo: self.lo.map(|c| c - lo),
+            hi: self.hi.map(|c| c + hi),
+        }
+    }
+}
+
+/// Edge of a half-block, in cells.
+pub(crate) const HALF_BLOCK_EDGE: i32 = BLOCK_EDGE / 2;
+
+/// The home half-block of one position (the 4³ cells of its home block's eighth that
+/// contain it), `inv_h` = 1 / cell size (world units). Its home block is
+/// [`block_of_half`].
+#[inline]
+pub(crate) fn home_half_block(p: Vec3, inv_h: f64) -> BlockKey {
+    home_cube(p, inv_h, HALF_BLOCK_EDGE)
+}
+
+/// The block a half-block lies in: its key divided by 2, rounded down.
+#[inline]
+pub(crate) fn block_of_half(half: BlockKey) -> BlockKey {
+    half.map(|c| c.div_euclid(2))
+}
+
+/// The home block of one position, `inv_h` = 1 / cell size (world units).
+#[inline]
+pub(crate) fn home_block(p: Vec3, inv_h: f64) -> BlockKey {
+    home_cube(p, inv_h, BLOCK_EDGE)
+}
+
+/// The cube of `edge`³ cells, on the global lattice, that contains `p`.
+#[inline]
+fn home_cube(p: Vec3, inv_h: f64, edge: i32) -> BlockKey {
+    let c = p.as_dvec3() * inv_h;
+    [c.x, c.y, c.z].map(|v| (v.floor() as i32).div_euclid(edge))
+}
+
+/// Checks that every position of a chunk whose first particle has input index `first` is
+/// finite and within the lattice's coordinate range, for cells of `h` (world units) made
+/// from the particle radius `particle_radius` (named in the message).
+pub(crate) fn check_positions(
+    first: usize,
+    positions: &[Vec3],
+    h: f64,
+    particle_radius: f32,
+) -> Result<()> {
+    let inv_h = 1.0 / h;
+    if let Some(i) = positions.par_iter().position_first(|p| {
+        !p.is_finite() || (p.as_dvec3() * inv_h).abs().max_element() > MAX_CELL_COORDINATE
+    }) {
+        let p = positions[i];
+        let i = first + i;
+        return Err(Error::ParticleOutOfRange {
+            path: None,
+            message: if p.is_finite() {
+                format!(
+                    "particle {i} at {p} lies {:.3e} cells of {h:.3e} (the cell size, from the particle radius {}) from the origin; the lattice reaches 2^23 cells: the particle radius is too small for these coordinates, or the coordinates are not in the radius's units",
+                    (p.as_dvec3() * inv_h).abs().max_element(),
+                    particle_radius
+                )
+            } else {
+                format!("particle {i} has a non-finite coordinate {p}")
+            },
+        });
+    }
+    Ok(())
 }
 
 /// The values of one block.
@@ -340,9 +430,11 @@ impl<T> SharedSlots<T> {
     }
 }
 
+#[cfg(test)]
 /// Per key (cell or block), the range of a sorted index list holding its entries.
 pub(crate) type KeyRanges = hashbrown::HashMap<[i32; 3], (u32, u32)>;
 
+#[cfg(test)]
 /// `keys` binned: the indices in [`sort_by_key_zyx`] order, and for every key present the
 /// range of that order holding its indices (ascending index within a key).
 pub(crate) fn bin_by_key(keys: &[[i32; 3]]) -> (Vec<u32>, KeyRanges) {
@@ -351,6 +443,7 @@ pub(crate) fn bin_by_key(keys: &[[i32; 3]]) -> (Vec<u32>, KeyRanges) {
     (order, ranges)
 }
 
+#[cfg(test)]
 /// The range of positions each key holds in `keys`, a sequence in which equal keys are
 /// contiguous (panics otherwise).
 pub(crate) fn group_runs(keys: impl IntoIterator<Item = [i32; 3]>) -> KeyRanges {

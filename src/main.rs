@@ -9,12 +9,11 @@ use clap::parser::ValueSource;
 use clap::{ArgMatches, Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use meniscus::attributes::AttributeSelection;
-use meniscus::field::AnisotropyOptions;
 use meniscus::io::mesh::MeshWriteOptions;
 use meniscus::io::particles::ParticleFormat;
 use meniscus::job::{
-    check_outputs, output_kind, peak_rss_bytes, plan_frames, run_frames, FrameReport, FrameStatus,
-    JobOptions, OutputKind,
+    check_outputs, output_profile, peak_rss_bytes, plan_frames, run_frames, FrameReport,
+    FrameStatus, JobOptions,
 };
 use meniscus::pipeline::ReconstructOptions;
 use meniscus::settings::{Decimation, ReconstructSettings};
@@ -85,66 +84,47 @@ struct ReconstructArgs {
     #[arg(allow_negative_numbers = true, short = 'r', long)]
     particle_radius: f32,
     /// Influence radius R, multiples of r.
-    #[arg(allow_negative_numbers = true, long, default_value_t = 4.0)]
+    #[arg(allow_negative_numbers = true, long, default_value_t = defaults().influence_radius)]
     influence_radius: f32,
     /// Marching-cubes cell size h, multiples of r.
     #[arg(
         allow_negative_numbers = true,
         short = 'c',
         long,
-        default_value_t = 1.0
+        default_value_t = defaults().cell_size
     )]
     cell_size: f32,
     /// Lower eigenvalue threshold t_low of the Solenthaler concavity factor (isotropic
     /// kernel).
-    #[arg(long, default_value_t = 0.4)]
+    #[arg(long, default_value_t = defaults().t_low)]
     t_low: f32,
     /// Upper eigenvalue threshold t_high of the Solenthaler concavity factor (isotropic
     /// kernel).
-    #[arg(long, default_value_t = 3.5)]
+    #[arg(long, default_value_t = defaults().t_high)]
     t_high: f32,
     /// Icosphere subdivision level for isolated particles (no neighbour within R), or
     /// `off` to leave them in the field.
-    #[arg(long, default_value = "2")]
+    #[arg(long, default_value_t = off_or(defaults().isolated_spheres))]
     isolated_spheres: String,
-    /// Quadric decimation: fraction of triangles to remove (0.8 = the paper's), `adaptive`
-    /// (stop on the error bound only: flat regions simplify, curved ones keep their
-    /// triangles), or `off` [default: 0.81, which holds the anisotropic surface to the
-    /// paper's triangle count]
-    #[arg(long)]
+    #[arg(long, help = with_defaults(DECIMATE_HELP, |s| s.decimate))]
     decimate: Option<String>,
-    /// Error bound of decimation, multiples of r (RMS distance of a collapse to the
-    /// original planes), or `off`; with a fraction, whichever is reached first stops it
-    /// [default: 0.1]
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true, help = with_defaults(DECIMATE_ERROR_HELP, |s| off_or(s.decimate_error)))]
     decimate_error: Option<String>,
-    /// Taubin smoothing steps after decimation (0 = off): removes the field's small bumps
-    /// without shrinking the surface [default: 2]
-    #[arg(long)]
+    #[arg(long, help = with_defaults(SMOOTH_HELP, |s| s.smooth))]
     smooth: Option<u32>,
     /// Loop subdivision steps after decimation (0 = off).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = defaults().subdivide)]
     subdivide: u32,
-    /// Least depth of every non-isolated particle centre under the final surface,
-    /// multiples of r (0 to 1): where decimation or subdivision left one shallower or
-    /// outside, the surface over it is pushed out; `off` leaves the surface as they made
-    /// it [default: 0.25]
-    #[arg(long)]
+    #[arg(long, help = with_defaults(KEEP_INSIDE_HELP, |s| off_or(s.keep_inside)))]
     keep_inside: Option<String>,
-    /// Coverage radius c, multiples of r: particles the paper's surface would leave
-    /// outside are enclosed in a ball of c·r (0 = off, the pure Solenthaler field)
-    /// [default: 0.9]
-    #[arg(allow_negative_numbers = true, long)]
+    #[arg(allow_negative_numbers = true, long, help = with_defaults(COVERAGE_HELP, |s| s.particle_coverage))]
     particle_coverage: Option<f32>,
     /// Iso-surface offset, multiples of r: extract where phi = offset·r, moving the surface
     /// outwards by about that much (0 = the paper's surface; 0.133 removes its inward
     /// bias on the shipped frames, at some flat-region smoothness).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = defaults().iso_offset, allow_negative_numbers = true)]
     iso_offset: f32,
-    /// Particle kernel: `anisotropic` (Yu & Turk 2013 kernels stretched along the local
-    /// surface: smoother, and on the particles instead of inside them) or `isotropic` (the
-    /// paper's Solenthaler field) [default: anisotropic]
-    #[arg(long, value_enum)]
+    #[arg(long, value_enum, help = with_defaults(KERNEL_HELP, |s| kernel_name(s.kernel)))]
     kernel: Option<KernelArg>,
     /// The pipeline of Akinci et al. 2013 exactly: `--kernel isotropic
     /// --particle-coverage 0 --decimate 0.8 --decimate-error off --smooth 0 --keep-inside off`
@@ -152,16 +132,16 @@ struct ReconstructArgs {
     #[arg(long)]
     paper: bool,
     /// Anisotropic kernels: radius h_a of an unstretched kernel, multiples of r.
-    #[arg(long, default_value_t = AnisotropyOptions::default().kernel_radius)]
+    #[arg(long, default_value_t = defaults().kernel_radius)]
     kernel_radius: f32,
     /// Anisotropic kernels: largest ratio of the longest to the shortest axis (k_r).
-    #[arg(long, default_value_t = AnisotropyOptions::default().max_stretch)]
+    #[arg(long, default_value_t = defaults().max_stretch)]
     max_stretch: f32,
     /// Anisotropic kernels: fewest neighbours within R for a stretched kernel (N_ε).
-    #[arg(long, default_value_t = AnisotropyOptions::default().min_neighbours)]
+    #[arg(long, default_value_t = defaults().min_neighbours)]
     min_neighbours: u32,
     /// Anisotropic kernels: centre smoothing λ in [0, 1] (0 = the particle positions).
-    #[arg(long, default_value_t = AnisotropyOptions::default().centre_smoothing)]
+    #[arg(long, default_value_t = defaults().centre_smoothing)]
     centre_smoothing: f32,
     /// Tile edge in marching-cubes cells (rounded up to 8-cell blocks); default: one tile
     /// if the scene fits the memory budget, else the largest tile that does. The
@@ -225,6 +205,46 @@ struct ReconstructArgs {
     #[arg(short, long)]
     quiet: bool,
 }
+
+/// The settings' defaults, for particles of radius 1: every default of `reconstruct`'s
+/// flags comes from them ([`ReconstructSettings::new`], which reads the library's).
+fn defaults() -> ReconstructSettings {
+    ReconstructSettings::new(1.0)
+}
+
+/// `off` for `None`, else the value.
+fn off_or<T: std::fmt::Display>(value: Option<T>) -> String {
+    value.map_or_else(|| "off".to_string(), |v| v.to_string())
+}
+
+/// A kernel as `--kernel` names it.
+fn kernel_name(kernel: meniscus::field::Kernel) -> &'static str {
+    match kernel {
+        meniscus::field::Kernel::Isotropic => "isotropic",
+        _ => "anisotropic",
+    }
+}
+
+/// A flag's help with its default and, where `--paper` changes it, the paper's value.
+fn with_defaults<T: std::fmt::Display>(
+    help: &str,
+    value: impl Fn(&ReconstructSettings) -> T,
+) -> String {
+    let (default, paper) = (value(&defaults()), value(&ReconstructSettings::paper(1.0)));
+    let paper = paper.to_string();
+    if paper == default.to_string() {
+        format!("{help} [default: {default}]")
+    } else {
+        format!("{help} [default: {default}; --paper: {paper}]")
+    }
+}
+
+const DECIMATE_HELP: &str = "Quadric decimation: fraction of triangles to remove (0.8 = the paper's), `adaptive` (stop on the error bound only: flat regions simplify, curved ones keep their triangles), or `off`; the default holds the anisotropic surface to the paper's triangle count";
+const DECIMATE_ERROR_HELP: &str = "Error bound of decimation, multiples of r (RMS distance of a collapse to the original planes), or `off`; with a fraction, whichever is reached first stops it";
+const SMOOTH_HELP: &str = "Taubin smoothing steps after decimation (0 = off): removes the field's small bumps without shrinking the surface";
+const KEEP_INSIDE_HELP: &str = "Least depth of every non-isolated particle centre under the final surface, multiples of r (0 to 1): where decimation or subdivision left one shallower or outside, the surface over it is pushed out; `off` leaves the surface as they made it";
+const COVERAGE_HELP: &str = "Coverage radius c, multiples of r: particles the paper's surface would leave outside are enclosed in a ball of c·r (0 = off, the pure Solenthaler field)";
+const KERNEL_HELP: &str = "Particle kernel: `anisotropic` (Yu & Turk 2013 kernels stretched along the local surface: smoother, and on the particles instead of inside them) or `isotropic` (the paper's Solenthaler field)";
 
 /// Why a command failed: what it prints and its exit code.
 enum Failure {
@@ -403,15 +423,7 @@ fn reconstruct(
     cancel: &meniscus::CancelToken,
 ) -> Result<(), Failure> {
     // Options first, then the frames: usage errors (exit 2) before any file is read.
-    if args.threads == Some(0) {
-        return Err(Failure::option("--threads", "must be at least 1, got 0"));
-    }
-    if !(args.fps.is_finite() && args.fps > 0.0) {
-        return Err(Failure::option(
-            "--fps",
-            format!("must be > 0 (frames per second), got {}", args.fps),
-        ));
-    }
+    check_run_options(args)?;
     let options = options_from(args)?;
     let attributes = match &args.attributes {
         Some(list) => list
@@ -419,9 +431,6 @@ fn reconstruct(
             .map_err(|e| Failure::option("--attributes", e))?,
         None => AttributeSelection::default(),
     };
-    let error_bound = args
-        .error_bound
-        .unwrap_or(meniscus::archive::default_error_bound(args.particle_radius));
     let plan = plan_frames(&args.input, &args.output, &args.farm.choice())?;
     check_outputs(&plan).map_err(|e| Failure::Usage(e.to_string()))?;
     for warning in ineffective_options(args, given, &plan, &attributes) {
@@ -433,40 +442,93 @@ fn reconstruct(
             .build_global()
             .map_err(|e| Failure::Run(e.to_string()))?;
     }
-    let job = JobOptions {
+    let job = job_options(args, attributes, cancel);
+    let clock = Instant::now();
+    let reports = run_with_progress(args, &plan, &options, &job).map_err(|e| match e {
+        meniscus::Error::FramesExist { .. } => Failure::Run(format!(
+            "{e}\nhint: --skip-existing skips the frames the archive holds and appends the others"
+        )),
+        e => e.into(),
+    })?;
+    let total = clock.elapsed().as_secs_f64();
+    if !args.quiet {
+        summarize(&reports, total, &args.output);
+    }
+    if let Some(path) = &args.stats {
+        write_stats(path, &options, &reports, total)?;
+    }
+    check_failed(&reports)
+}
+
+/// The options of a run that the library does not check: `--threads`, `--fps`.
+fn check_run_options(args: &ReconstructArgs) -> Result<(), Failure> {
+    if args.threads == Some(0) {
+        return Err(Failure::option("--threads", "must be at least 1, got 0"));
+    }
+    if !(args.fps.is_finite() && args.fps > 0.0) {
+        return Err(Failure::option(
+            "--fps",
+            format!("must be > 0 (frames per second), got {}", args.fps),
+        ));
+    }
+    Ok(())
+}
+
+/// What the run does with its files.
+fn job_options(
+    args: &ReconstructArgs,
+    attributes: AttributeSelection,
+    cancel: &meniscus::CancelToken,
+) -> JobOptions {
+    JobOptions {
         input_format: args.input_format,
         write: MeshWriteOptions {
             normals: !args.no_normals,
             ..MeshWriteOptions::default()
         },
         skip_existing: args.skip_existing,
-        archive_error_bound: error_bound,
+        archive_error_bound: args
+            .error_bound
+            .unwrap_or(meniscus::archive::default_error_bound(args.particle_radius)),
         archive_attribute_error_bound: args.attribute_error_bound,
         fps: args.fps,
         attributes,
         cancel: cancel.clone(),
         keep_going: args.keep_going,
-    };
-    let bar = if args.quiet {
-        ProgressBar::hidden()
-    } else {
-        let bar =
-            ProgressBar::with_draw_target(Some(plan.len() as u64), ProgressDrawTarget::stderr());
-        bar.set_style(
-            ProgressStyle::with_template(
-                "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} frames  {msg}",
-            )
-            .expect("valid template"),
-        );
-        bar.enable_steady_tick(std::time::Duration::from_millis(120));
-        bar
-    };
-    let clock = Instant::now();
+    }
+}
+
+/// The progress bar of `frames` frames on stderr (hidden with `--quiet`).
+fn progress_bar(args: &ReconstructArgs, frames: usize) -> ProgressBar {
+    if args.quiet {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::with_draw_target(Some(frames as u64), ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} frames  {msg}",
+        )
+        .expect("valid template"),
+    );
+    bar.enable_steady_tick(std::time::Duration::from_millis(120));
+    bar
+}
+
+/// Runs the frames of `plan` behind a progress bar, printing what each finished frame
+/// calls for: its `--json-progress` line, its error (with `--keep-going`), warnings, and
+/// the stage table of a single frame.
+fn run_with_progress(
+    args: &ReconstructArgs,
+    plan: &[(meniscus::sequence::Frame, PathBuf)],
+    options: &ReconstructOptions,
+    job: &JobOptions,
+) -> meniscus::Result<Vec<FrameReport>> {
+    let bar = progress_bar(args, plan.len());
     let mut warned = false;
     let result = run_frames(
-        &plan,
-        &options,
-        &job,
+        plan,
+        options,
+        job,
         &mut |_, frame| bar.set_prefix(frame.input.display().to_string()),
         &mut |stage| bar.set_message(stage.to_string()),
         &mut |report: &FrameReport| {
@@ -506,41 +568,44 @@ fn reconstruct(
         },
     );
     bar.finish_and_clear();
-    let reports = result.map_err(|e| match e {
-        meniscus::Error::FramesExist { .. } => Failure::Run(format!(
-            "{e}\nhint: --skip-existing skips the frames the archive holds and appends the others"
-        )),
-        e => e.into(),
-    })?;
-    let total = clock.elapsed().as_secs_f64();
-    if !args.quiet {
-        summarize(&reports, total);
-    }
+    result
+}
+
+/// Writes the `--stats` JSON: the options, every frame's report, the run's time and peak
+/// memory.
+fn write_stats(
+    path: &std::path::Path,
+    options: &ReconstructOptions,
+    reports: &[FrameReport],
+    total: f64,
+) -> Result<(), Failure> {
+    let json = serde_json::json!({
+        "options": options,
+        "frames": reports,
+        "total_seconds": total,
+        "peak_rss_bytes": peak_rss_bytes(),
+    });
+    let text = serde_json::to_string_pretty(&json).map_err(|e| Failure::Run(e.to_string()))?;
+    std::fs::write(path, text).map_err(|e| Failure::from(meniscus::Error::io(path, e)))
+}
+
+/// Fails the run when any frame failed (with `--keep-going`), naming them.
+fn check_failed(reports: &[FrameReport]) -> Result<(), Failure> {
     let failed: Vec<&FrameReport> = reports
         .iter()
         .filter(|r| r.status == FrameStatus::Failed)
         .collect();
-    if let Some(path) = &args.stats {
-        let json = serde_json::json!({
-            "options": options,
-            "frames": reports,
-            "total_seconds": total,
-            "peak_rss_bytes": peak_rss_bytes(),
-        });
-        let text = serde_json::to_string_pretty(&json).map_err(|e| Failure::Run(e.to_string()))?;
-        std::fs::write(path, text).map_err(|e| Failure::from(meniscus::Error::io(path, e)))?;
+    if failed.is_empty() {
+        return Ok(());
     }
-    if !failed.is_empty() {
-        let numbers: Vec<String> = failed.iter().map(|r| r.frame.to_string()).collect();
-        return Err(Failure::Run(format!(
-            "{} of {} frames failed (frame{} {}); the others were written",
-            failed.len(),
-            reports.len(),
-            if failed.len() == 1 { "" } else { "s" },
-            numbers.join(", ")
-        )));
-    }
-    Ok(())
+    let numbers: Vec<String> = failed.iter().map(|r| r.frame.to_string()).collect();
+    Err(Failure::Run(format!(
+        "{} of {} frames failed (frame{} {}); the others were written",
+        failed.len(),
+        reports.len(),
+        if failed.len() == 1 { "" } else { "s" },
+        numbers.join(", ")
+    )))
 }
 
 /// Options the user gave that the chosen output makes pointless, each with the reason;
@@ -552,7 +617,7 @@ fn ineffective_options(
     attributes: &AttributeSelection,
 ) -> Vec<String> {
     let given = |id: &str| given.value_source(id) == Some(ValueSource::CommandLine);
-    let kind = output_kind(plan);
+    let profile = output_profile(plan);
     let output = &args.output;
     let mut warnings = Vec::new();
     // Raw .xyz holds no attributes (a list of names is an error when it is read).
@@ -566,7 +631,7 @@ fn ineffective_options(
     if raw_positions && *attributes == AttributeSelection::All {
         warnings.push("--attributes all has no effect: raw .xyz input holds positions only".into());
     }
-    if kind != OutputKind::Archive {
+    if !profile.quantized {
         for (id, option) in [
             ("error_bound", "--error-bound"),
             ("attribute_error_bound", "--attribute-error-bound"),
@@ -577,50 +642,47 @@ fn ineffective_options(
                 ));
             }
         }
-    } else {
-        if given("attribute_error_bound") {
-            if *attributes == AttributeSelection::None {
-                warnings.push(
-                    "--attribute-error-bound has no effect: --attributes none carries no attributes"
-                        .into(),
-                );
-            } else if raw_positions {
-                warnings.push(
-                    "--attribute-error-bound has no effect: raw .xyz input holds positions only"
-                        .into(),
-                );
-            }
+    } else if given("attribute_error_bound") {
+        if *attributes == AttributeSelection::None {
+            warnings.push(
+                "--attribute-error-bound has no effect: --attributes none carries no attributes"
+                    .into(),
+            );
+        } else if raw_positions {
+            warnings.push(
+                "--attribute-error-bound has no effect: raw .xyz input holds positions only".into(),
+            );
         }
-        if given("no_normals") {
+    }
+    if given("no_normals") && !profile.normals {
+        warnings.push(format!(
+            "--no-normals has no effect: {output:?} stores no normals (they are computed when frames are extracted)"
+        ));
+    }
+    // An error bound of world units given as multiples of r (as it once was).
+    if let (true, Some(bound)) = (profile.quantized, args.error_bound) {
+        let r = args.particle_radius as f64;
+        if bound > 0.1 * r {
             warnings.push(format!(
-                "--no-normals has no effect: {output:?} stores no normals (they are computed when frames are extracted)"
+                "--error-bound is in world units: {bound} is {:.3} × the particle radius (default {} = {} r)",
+                bound / r,
+                meniscus::archive::default_error_bound(args.particle_radius),
+                meniscus::archive::DEFAULT_ERROR_BOUND_RADII
             ));
-        }
-        // An error bound of world units given as multiples of r (as it once was).
-        if let Some(bound) = args.error_bound {
-            let r = args.particle_radius as f64;
-            if bound > 0.1 * r {
-                warnings.push(format!(
-                    "--error-bound is in world units: {bound} is {:.3} × the particle radius (default {} = {} r)",
-                    bound / r,
-                    meniscus::archive::default_error_bound(args.particle_radius),
-                    meniscus::archive::DEFAULT_ERROR_BOUND_RADII
-                ));
-            }
         }
     }
     if given("fps") {
-        match kind {
-            OutputKind::AnimatedGltf if plan.len() == 1 => warnings.push(format!(
+        match profile.animated {
+            true if plan.len() == 1 => warnings.push(format!(
                 "--fps has no effect: {output:?} holds a single frame, which does not play"
             )),
-            OutputKind::AnimatedGltf => {}
-            _ => warnings.push(format!(
+            true => {}
+            false => warnings.push(format!(
                 "--fps has no effect: only a {{}} sequence written into one .glb/.gltf is animated, and {output:?} is not one"
             )),
         }
     }
-    if given("skip_existing") && kind == OutputKind::AnimatedGltf {
+    if given("skip_existing") && profile.written_whole {
         warnings.push(format!(
             "--skip-existing has no effect: {output:?} holds the whole sequence and is written whole"
         ));
@@ -641,7 +703,9 @@ fn ineffective_options(
     warnings
 }
 
-fn summarize(reports: &[FrameReport], total: f64) {
+/// The run's summary line: frames, time, triangles, where they went (`output` as given
+/// to `-o`) and peak memory.
+fn summarize(reports: &[FrameReport], total: f64, output: &str) {
     let count = |s| reports.iter().filter(|r| r.status == s).count();
     let (done, skipped, failed) = (
         count(FrameStatus::Done),
@@ -650,7 +714,7 @@ fn summarize(reports: &[FrameReport], total: f64) {
     );
     let triangles: usize = reports.iter().map(|r| r.triangles()).sum();
     eprintln!(
-        "{} frame(s) reconstructed{}{} in {:.2} s, {} triangles written, peak memory {}",
+        "{} frame(s) reconstructed{}{} in {:.2} s, {} triangles written to {}, peak memory {}",
         done,
         if skipped > 0 {
             format!(", {skipped} skipped")
@@ -664,6 +728,7 @@ fn summarize(reports: &[FrameReport], total: f64) {
         },
         total,
         triangles,
+        output,
         peak_rss_bytes()
             .map(|b| format!("{:.1} MiB", b as f64 / (1 << 20) as f64))
             .unwrap_or_else(|| "unknown".into()),

@@ -8,8 +8,8 @@
 use crate::containment::ContainmentOptions;
 use crate::decimation::DecimateOptions;
 use crate::error::{Error, Result};
-use crate::field::{AnisotropyOptions, Kernel};
-use crate::pipeline::{ReconstructOptions, DEFAULT_DECIMATION, DEFAULT_DECIMATION_ERROR};
+use crate::field::Kernel;
+use crate::pipeline::{ReconstructOptions, DEFAULT_DECIMATION_ERROR};
 use crate::smoothing::SmoothOptions;
 use std::path::PathBuf;
 
@@ -43,6 +43,17 @@ impl std::str::FromStr for Decimation {
                 .ok_or_else(|| {
                     format!("takes a fraction in [0, 1), `adaptive` or `off`, got {fraction:?}")
                 }),
+        }
+    }
+}
+
+impl std::fmt::Display for Decimation {
+    /// As [`FromStr`](std::str::FromStr) reads it: the fraction, `adaptive` or `off`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Decimation::Off => f.write_str("off"),
+            Decimation::Fraction(x) => write!(f, "{x}"),
+            Decimation::Adaptive => f.write_str("adaptive"),
         }
     }
 }
@@ -81,7 +92,7 @@ pub struct ReconstructSettings {
     /// Icosphere level of the spheres of isolated particles, or `None` to leave them in
     /// the field. Default `Some(2)`.
     pub isolated_spheres: Option<u32>,
-    /// Decimation. Default a fraction of [`DEFAULT_DECIMATION`] (0.81; the paper's is 0.8).
+    /// Decimation. Default a fraction of [`DEFAULT_DECIMATION`](crate::pipeline::DEFAULT_DECIMATION) (0.81; the paper's is 0.8).
     pub decimate: Decimation,
     /// Error bound of decimation, multiples of `r`: no collapse moves the surface by more;
     /// with a fraction, whichever is reached first stops it. `None`: no bound. Default
@@ -110,55 +121,69 @@ pub struct ReconstructSettings {
 }
 
 impl ReconstructSettings {
-    /// The defaults, for particles of radius `particle_radius` (world units).
+    /// The defaults ([`ReconstructOptions::new`]), for particles of radius
+    /// `particle_radius` (world units).
     pub fn new(particle_radius: f32) -> Self {
-        let defaults = AnisotropyOptions::default();
+        Self::of(&ReconstructOptions::new(1.0), particle_radius)
+    }
+
+    /// The pipeline of Akinci et al. 2013 exactly ([`ReconstructOptions::paper`]):
+    /// isotropic kernels, no coverage balls, decimation by 0.8 without an error bound, no
+    /// smoothing, no containment; the other settings as [`Self::new`].
+    pub fn paper(particle_radius: f32) -> Self {
+        Self::of(&ReconstructOptions::paper(1.0), particle_radius)
+    }
+
+    /// The settings of `unit`, options for particles of radius 1 (so that its lengths
+    /// are multiples of `r`), for particles of radius `particle_radius`.
+    fn of(unit: &ReconstructOptions, particle_radius: f32) -> Self {
+        let field = &unit.field;
+        let anisotropy = &field.anisotropy;
         ReconstructSettings {
             particle_radius,
-            influence_radius: 4.0,
-            cell_size: 1.0,
-            t_low: 0.4,
-            t_high: 3.5,
-            particle_coverage: 0.9,
-            iso_offset: 0.0,
-            kernel: Kernel::Anisotropic,
-            kernel_radius: defaults.kernel_radius,
-            max_stretch: defaults.max_stretch,
-            min_neighbours: defaults.min_neighbours,
-            centre_smoothing: defaults.centre_smoothing,
-            isolated_spheres: Some(2),
-            decimate: Decimation::Fraction(DEFAULT_DECIMATION),
-            decimate_error: Some(DEFAULT_DECIMATION_ERROR),
-            smooth: SmoothOptions::default().steps,
-            subdivide: 1,
-            defer_subdivision: false,
-            keep_inside: Some(ContainmentOptions::default().min_depth),
-            tile_size: None,
-            memory_budget: None,
-            temp_dir: None,
+            influence_radius: field.influence_radius,
+            cell_size: field.cell_size,
+            t_low: field.t_low,
+            t_high: field.t_high,
+            particle_coverage: field.particle_coverage,
+            iso_offset: field.iso_offset,
+            kernel: field.kernel,
+            kernel_radius: anisotropy.kernel_radius,
+            max_stretch: anisotropy.max_stretch,
+            min_neighbours: anisotropy.min_neighbours,
+            centre_smoothing: anisotropy.centre_smoothing,
+            isolated_spheres: unit.isolated_sphere_level,
+            decimate: match &unit.decimate {
+                None => Decimation::Off,
+                Some(d) => d
+                    .target_reduction
+                    .map_or(Decimation::Adaptive, Decimation::Fraction),
+            },
+            decimate_error: unit.decimate.as_ref().and_then(|d| d.max_error),
+            smooth: unit.smooth.as_ref().map_or(0, |s| s.steps),
+            subdivide: unit.subdivide.levels + unit.deferred_subdivision,
+            defer_subdivision: unit.deferred_subdivision > 0,
+            keep_inside: unit.containment.as_ref().map(|c| c.min_depth),
+            tile_size: unit.tiles.tile_size_cells,
+            memory_budget: unit.tiles.memory_budget_bytes,
+            temp_dir: unit.tiles.temp_dir.clone(),
         }
     }
 
-    /// The pipeline of Akinci et al. 2013 exactly (as
-    /// [`ReconstructOptions::paper`]): isotropic kernels, no coverage balls, decimation
-    /// by 0.8 without an error bound, no smoothing, no containment; the other settings as
-    /// [`Self::new`].
-    pub fn paper(particle_radius: f32) -> Self {
-        ReconstructSettings {
-            kernel: Kernel::Isotropic,
-            particle_coverage: 0.0,
-            decimate: Decimation::Fraction(0.8),
-            decimate_error: None,
-            smooth: 0,
-            keep_inside: None,
-            ..Self::new(particle_radius)
-        }
-    }
-
-    /// The pipeline's options, checked: [`Error::InvalidOption`] names the setting
-    /// (`decimate_error`, `influence_radius/cell_size`, ...).
+    /// The pipeline's options, checked ([`ReconstructOptions::validate`]):
+    /// [`Error::InvalidOption`] names the setting (`decimate_error`,
+    /// `influence_radius/cell_size`, `keep_inside`, ...).
     pub fn options(&self) -> Result<ReconstructOptions> {
         let r = self.particle_radius;
+        // The one setting in other units than the option it sets: checked as given.
+        if let Some(e) = self.decimate_error {
+            if !(e.is_finite() && e > 0.0) {
+                return Err(Error::InvalidOption {
+                    option: "decimate_error",
+                    message: format!("must be > 0 (multiples of r), got {e}"),
+                });
+            }
+        }
         let mut options = ReconstructOptions::new(r);
         let field = &mut options.field;
         field.influence_radius = self.influence_radius;
@@ -187,27 +212,10 @@ impl ReconstructSettings {
             options.deferred_subdivision = self.subdivide;
             options.subdivide.levels = 0;
         }
-        options.containment = match self.keep_inside {
-            None => None,
-            Some(d) if d.is_finite() && (0.0..=1.0).contains(&d) => Some(ContainmentOptions {
-                min_depth: d,
-                ..Default::default()
-            }),
-            Some(d) => {
-                return Err(Error::InvalidOption {
-                    option: "keep_inside",
-                    message: format!("takes a depth in [0, 1] (multiples of r), got {d}"),
-                })
-            }
-        };
-        if let Some(e) = self.decimate_error {
-            if !(e.is_finite() && e > 0.0) {
-                return Err(Error::InvalidOption {
-                    option: "decimate_error",
-                    message: format!("must be > 0 (multiples of r), got {e}"),
-                });
-            }
-        }
+        options.containment = self.keep_inside.map(|depth| ContainmentOptions {
+            min_depth: depth,
+            ..Default::default()
+        });
         let max_error = self.decimate_error.map(|e| e * r);
         options.decimate = match self.decimate {
             Decimation::Off => None,
@@ -216,22 +224,31 @@ impl ReconstructSettings {
                 max_error: Some(max_error.unwrap_or(DEFAULT_DECIMATION_ERROR * r)),
                 ..Default::default()
             }),
-            Decimation::Fraction(f) => {
-                if !(0.0..1.0).contains(&f) {
-                    return Err(Error::InvalidOption {
-                        option: "decimate",
-                        message: format!("takes a fraction in [0, 1), got {f}"),
-                    });
-                }
-                Some(DecimateOptions {
-                    target_reduction: Some(f),
-                    max_error,
-                    ..Default::default()
-                })
-            }
+            Decimation::Fraction(f) => Some(DecimateOptions {
+                target_reduction: Some(f),
+                max_error,
+                ..Default::default()
+            }),
         };
-        options.field.validate()?;
+        options.validate().map_err(|e| match e {
+            Error::InvalidOption { option, message } => Error::InvalidOption {
+                option: setting_of(option),
+                message,
+            },
+            e => e,
+        })?;
         Ok(options)
+    }
+}
+
+/// The setting that sets the option at `path` in [`ReconstructOptions`] (the same name
+/// where they agree).
+fn setting_of(path: &'static str) -> &'static str {
+    match path {
+        "decimate.target_reduction" | "decimate" => "decimate",
+        "decimate.max_error" => "decimate_error",
+        "containment.min_depth" => "keep_inside",
+        other => other,
     }
 }
 

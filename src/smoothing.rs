@@ -25,8 +25,14 @@ use crate::mesh::{TriMesh, VertexTriangles};
 use glam::DVec3;
 use rayon::prelude::*;
 
+/// Peak of Taubin smoothing per control-mesh triangle: the mesh (24 B), the vertices'
+/// neighbour lists (≈ 14 B, and ≈ 14 B of vertex → triangle lists while they are built)
+/// and two f64 copies of the positions (≈ 24 B), bytes.
+pub(crate) const BYTES_PER_INPUT_TRIANGLE: f64 = 72.0;
+
 /// Options of [`smooth`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[non_exhaustive]
 pub struct SmoothOptions {
     /// Taubin steps (each a λ pass and a μ pass). Default 2; 0 leaves the mesh as it is.
     pub steps: u32,
@@ -47,6 +53,14 @@ impl Default for SmoothOptions {
 }
 
 impl SmoothOptions {
+    /// `steps` Taubin steps with the default weights.
+    pub fn steps(steps: u32) -> Self {
+        SmoothOptions {
+            steps,
+            ..Default::default()
+        }
+    }
+
     /// Checks the weights: `0 < λ < 1` and `−1 < μ < −λ`.
     pub fn validate(&self) -> crate::error::Result<()> {
         let (l, m) = (self.lambda, self.mu);

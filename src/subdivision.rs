@@ -25,11 +25,28 @@ use crate::mesh::{Attribute, TriMesh};
 use glam::DVec3;
 use rayon::prelude::*;
 
+/// Peak working set of one Loop step, bytes per input triangle (the input's triangles,
+/// side → edge indices, the output mesh; measured 104 on 32M particles, 134 on 4M where
+/// heap left over from the tiles counts more). 110 put the 32M scene's whole-run estimate
+/// (1906 MiB) within 1 % of its measured peaks (1863–1922 MiB over three sessions) and
+/// under a 2 GiB budget; 120 refused that run. Since the step frees the input positions
+/// before writing the triangles (2026-11-24) that run peaks at 1762 MiB: the estimate is
+/// now 8 % high, kept as margin.
+pub(crate) const BYTES_PER_INPUT_TRIANGLE: f64 = 110.0;
+
 /// Options of [`subdivide`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[non_exhaustive]
 pub struct SubdivideOptions {
     /// Subdivision steps. Default 1.
     pub levels: u32,
+}
+
+impl SubdivideOptions {
+    /// `levels` subdivision steps.
+    pub fn levels(levels: u32) -> Self {
+        SubdivideOptions { levels }
+    }
 }
 
 impl Default for SubdivideOptions {
@@ -72,117 +89,28 @@ fn subdivide_once(mesh: TriMesh) -> TriMesh {
     } = mesh;
     let nv = old_positions.len();
     let tris = &old_triangles;
-    // Triangle side `s` is side `s % 3` of triangle `s / 3`, from corner `s % 3` to the
-    // next; its undirected edge is (smaller vertex, larger vertex).
-    let ends = |s: u32| -> (u32, u32) {
-        let t = &tris[s as usize / 3];
-        let k = s as usize % 3;
-        let (a, b) = (t[k], t[(k + 1) % 3]);
-        (a.min(b), a.max(b))
-    };
-    // Every side once, sorted by (edge, side): bucketed by the smaller vertex (4 bytes
-    // per side, no sort of wide records), each bucket ordered by the larger one.
-    let mut bucket_start = vec![0u32; nv + 1];
-    for s in 0..tris.len() as u32 * 3 {
-        bucket_start[ends(s).0 as usize + 1] += 1;
-    }
-    for v in 0..nv {
-        bucket_start[v + 1] += bucket_start[v];
-    }
-    let mut sides = vec![0u32; tris.len() * 3];
-    {
-        let mut fill = bucket_start.clone();
-        for s in 0..tris.len() as u32 * 3 {
-            let a = ends(s).0 as usize;
-            sides[fill[a] as usize] = s;
-            fill[a] += 1;
-        }
-    }
-    let pos = |i: u32| old_positions[i as usize].as_dvec3();
-    let opposite = |s: u32| tris[s as usize / 3][(s as usize % 3 + 2) % 3];
-    // One pass over the buckets in vertex order: sort each by the larger vertex (sides of
-    // one edge stay in side order), number the edges in (min, max) order, give every side
-    // its edge, and gather the vertex neighbourhoods (valence, neighbour sum, boundary
-    // neighbours) edge by edge.
-    let mut edge_start: Vec<u32> = Vec::with_capacity(sides.len() / 2 + 1);
-    let mut side_edge = vec![0u32; tris.len() * 3];
-    let mut valence = vec![0u32; nv];
-    let mut sum = vec![DVec3::ZERO; nv];
-    let mut boundary_count = vec![0u32; nv];
-    let mut boundary_sum = vec![DVec3::ZERO; nv];
-    let mut non_manifold = vec![false; nv];
-    let mut bucket: Vec<(u32, u32)> = Vec::new();
-    for a in 0..nv {
-        let range = bucket_start[a] as usize..bucket_start[a + 1] as usize;
-        bucket.clear();
-        bucket.extend(sides[range.clone()].iter().map(|&s| (ends(s).1, s)));
-        // Sides were filled in ascending order: (larger vertex, side) is the stable order.
-        bucket.sort_unstable();
-        for (slot, &(_, s)) in sides[range.clone()].iter_mut().zip(&bucket) {
-            *slot = s;
-        }
-        let mut i = 0;
-        while i < bucket.len() {
-            let b = bucket[i].0;
-            let mut j = i + 1;
-            while j < bucket.len() && bucket[j].0 == b {
-                j += 1;
-            }
-            let e = edge_start.len() as u32;
-            edge_start.push((range.start + i) as u32);
-            for &(_, s) in &bucket[i..j] {
-                side_edge[s as usize] = e;
-            }
-            let (a32, b) = (a as u32, b as usize);
-            valence[a] += 1;
-            valence[b] += 1;
-            sum[a] += pos(b as u32);
-            sum[b] += pos(a32);
-            match j - i {
-                1 => {
-                    boundary_count[a] += 1;
-                    boundary_count[b] += 1;
-                    boundary_sum[a] += pos(b as u32);
-                    boundary_sum[b] += pos(a32);
-                }
-                2 => {}
-                _ => {
-                    non_manifold[a] = true;
-                    non_manifold[b] = true;
-                }
-            }
-            i = j;
-        }
-    }
-    drop(bucket);
-    drop(bucket_start);
-    let ne = edge_start.len();
-    edge_start.push(sides.len() as u32);
-    let beta = loop_betas(&valence);
+    let (mut sides, bucket_start) = sides_by_smaller_vertex(tris, nv);
+    let (edges, rings) = number_edges(tris, &old_positions, &mut sides, bucket_start);
+    let EdgeTable {
+        edge_start,
+        side_edge,
+    } = edges;
+    let ne = edge_start.len() - 1;
+    let beta = loop_betas(&rings.valence);
     // Vertex points, then edge points, written straight into the output's positions.
     let mut positions: Vec<glam::Vec3> = Vec::with_capacity(nv + ne);
-    positions.par_extend((0..nv).into_par_iter().map(|v| {
-        let p = pos(v as u32);
-        let n = valence[v];
-        let moved = if non_manifold[v] || boundary_count[v] > 2 || n == 0 {
-            p
-        } else if boundary_count[v] == 2 {
-            0.75 * p + 0.125 * boundary_sum[v]
-        } else if boundary_count[v] == 0 {
-            let (nf, beta) = (n as f64, beta[n as usize]);
-            (1.0 - nf * beta) * p + beta * sum[v]
-        } else {
-            p
-        };
-        moved.as_vec3()
-    }));
+    positions.par_extend(
+        (0..nv)
+            .into_par_iter()
+            .map(|v| rings.vertex_point(v, old_positions[v].as_dvec3(), &beta)),
+    );
     let stencil = Stencil {
         tris,
         sides: &sides,
         edge_start: &edge_start,
-        valence: &valence,
-        boundary_count: &boundary_count,
-        non_manifold: &non_manifold,
+        valence: &rings.valence,
+        boundary_count: &rings.boundary_count,
+        non_manifold: &rings.non_manifold,
         beta: &beta,
     };
     let attributes: Vec<Attribute> = old_attributes
@@ -191,13 +119,15 @@ fn subdivide_once(mesh: TriMesh) -> TriMesh {
         .map(|a| stencil.apply(a))
         .collect();
     drop(old_attributes);
-    drop((valence, sum, boundary_count, boundary_sum, non_manifold));
+    drop(rings);
+    let pos = |i: u32| old_positions[i as usize].as_dvec3();
     positions.par_extend((0..ne).into_par_iter().map(|e| {
         let group = &sides[edge_start[e] as usize..edge_start[e + 1] as usize];
-        let (a, b) = ends(group[0]);
+        let (a, b) = side_ends(tris, group[0]);
         let (a, b) = (pos(a), pos(b));
         let p = if group.len() == 2 {
-            0.375 * (a + b) + 0.125 * (pos(opposite(group[0])) + pos(opposite(group[1])))
+            let opposite = |s: u32| pos(tris[s as usize / 3][(s as usize % 3 + 2) % 3]);
+            0.375 * (a + b) + 0.125 * (opposite(group[0]) + opposite(group[1]))
         } else {
             0.5 * (a + b)
         };
@@ -221,6 +151,154 @@ fn subdivide_once(mesh: TriMesh) -> TriMesh {
         normals: Vec::new(),
         attributes,
     }
+}
+
+/// The undirected edge (smaller vertex, larger vertex) of triangle side `s`: side `s % 3`
+/// of triangle `s / 3`, from corner `s % 3` to the next.
+#[inline]
+fn side_ends(tris: &[[u32; 3]], s: u32) -> (u32, u32) {
+    let t = &tris[s as usize / 3];
+    let k = s as usize % 3;
+    let (a, b) = (t[k], t[(k + 1) % 3]);
+    (a.min(b), a.max(b))
+}
+
+/// Every side once, bucketed by the smaller vertex of its edge (4 bytes per side, no
+/// sort of wide records), in side order within a bucket; and the buckets' starts.
+fn sides_by_smaller_vertex(tris: &[[u32; 3]], nv: usize) -> (Vec<u32>, Vec<u32>) {
+    let mut bucket_start = vec![0u32; nv + 1];
+    for s in 0..tris.len() as u32 * 3 {
+        bucket_start[side_ends(tris, s).0 as usize + 1] += 1;
+    }
+    for v in 0..nv {
+        bucket_start[v + 1] += bucket_start[v];
+    }
+    let mut sides = vec![0u32; tris.len() * 3];
+    let mut fill = bucket_start.clone();
+    for s in 0..tris.len() as u32 * 3 {
+        let a = side_ends(tris, s).0 as usize;
+        sides[fill[a] as usize] = s;
+        fill[a] += 1;
+    }
+    (sides, bucket_start)
+}
+
+/// The edges of one step: every side's edge, edges numbered in (min, max) order.
+struct EdgeTable {
+    /// Edge `e` is `sides[edge_start[e]..edge_start[e + 1]]` (one more entry at the end).
+    edge_start: Vec<u32>,
+    /// The edge of every side.
+    side_edge: Vec<u32>,
+}
+
+/// The vertices' neighbourhoods, gathered edge by edge.
+struct Rings {
+    valence: Vec<u32>,
+    /// Sum of the neighbours' positions.
+    sum: Vec<DVec3>,
+    /// Neighbours across boundary edges: count and sum.
+    boundary_count: Vec<u32>,
+    boundary_sum: Vec<DVec3>,
+    /// On an edge of more than two triangles.
+    non_manifold: Vec<bool>,
+}
+
+impl Rings {
+    /// Loop's vertex point of vertex `v` at `p` (boundary rule on a regular boundary,
+    /// fixed on a corner, a non-manifold edge or alone).
+    fn vertex_point(&self, v: usize, p: DVec3, beta: &[f64]) -> glam::Vec3 {
+        let n = self.valence[v];
+        let moved = if self.non_manifold[v] || self.boundary_count[v] > 2 || n == 0 {
+            p
+        } else if self.boundary_count[v] == 2 {
+            0.75 * p + 0.125 * self.boundary_sum[v]
+        } else if self.boundary_count[v] == 0 {
+            let (nf, beta) = (n as f64, beta[n as usize]);
+            (1.0 - nf * beta) * p + beta * self.sum[v]
+        } else {
+            p
+        };
+        moved.as_vec3()
+    }
+}
+
+/// One pass over the buckets in vertex order: sorts each by the larger vertex (sides of
+/// one edge stay in side order), numbers the edges in (min, max) order, gives every side
+/// its edge, and gathers the vertex neighbourhoods (valence, neighbour sum, boundary
+/// neighbours) edge by edge. `sides` ends sorted by (edge, side).
+fn number_edges(
+    tris: &[[u32; 3]],
+    positions: &[glam::Vec3],
+    sides: &mut [u32],
+    bucket_start: Vec<u32>,
+) -> (EdgeTable, Rings) {
+    let nv = positions.len();
+    let pos = |i: u32| positions[i as usize].as_dvec3();
+    let mut edge_start: Vec<u32> = Vec::with_capacity(sides.len() / 2 + 1);
+    let mut side_edge = vec![0u32; tris.len() * 3];
+    let mut rings = Rings {
+        valence: vec![0u32; nv],
+        sum: vec![DVec3::ZERO; nv],
+        boundary_count: vec![0u32; nv],
+        boundary_sum: vec![DVec3::ZERO; nv],
+        non_manifold: vec![false; nv],
+    };
+    let mut bucket: Vec<(u32, u32)> = Vec::new();
+    for a in 0..nv {
+        let range = bucket_start[a] as usize..bucket_start[a + 1] as usize;
+        bucket.clear();
+        bucket.extend(
+            sides[range.clone()]
+                .iter()
+                .map(|&s| (side_ends(tris, s).1, s)),
+        );
+        // Sides were filled in ascending order: (larger vertex, side) is the stable order.
+        bucket.sort_unstable();
+        for (slot, &(_, s)) in sides[range.clone()].iter_mut().zip(&bucket) {
+            *slot = s;
+        }
+        let mut i = 0;
+        while i < bucket.len() {
+            let b = bucket[i].0;
+            let mut j = i + 1;
+            while j < bucket.len() && bucket[j].0 == b {
+                j += 1;
+            }
+            let e = edge_start.len() as u32;
+            edge_start.push((range.start + i) as u32);
+            for &(_, s) in &bucket[i..j] {
+                side_edge[s as usize] = e;
+            }
+            let (a32, b) = (a as u32, b as usize);
+            let r = &mut rings;
+            r.valence[a] += 1;
+            r.valence[b] += 1;
+            r.sum[a] += pos(b as u32);
+            r.sum[b] += pos(a32);
+            match j - i {
+                1 => {
+                    r.boundary_count[a] += 1;
+                    r.boundary_count[b] += 1;
+                    r.boundary_sum[a] += pos(b as u32);
+                    r.boundary_sum[b] += pos(a32);
+                }
+                2 => {}
+                _ => {
+                    r.non_manifold[a] = true;
+                    r.non_manifold[b] = true;
+                }
+            }
+            i = j;
+        }
+    }
+    edge_start.push(sides.len() as u32);
+    (
+        EdgeTable {
+            edge_start,
+            side_edge,
+        },
+        rings,
+    )
 }
 
 /// The masks of one step as [`subdivide_once`] found them, for per-vertex values.

@@ -2,25 +2,19 @@
 //! at every final vertex, the same for any tiling and thread count, with clear errors for
 //! bad attributes.
 
+mod support;
+
 use glam::{DVec3, Mat3, Vec3};
-use meniscus::attributes::{select_attributes, Attribute, AttributeSelection};
+use meniscus::attributes::{Attribute, AttributeSelection};
 use meniscus::io::particles::{read_particles, write_particles, ParticleFormat, Particles};
 use meniscus::mesh::Surface;
 use meniscus::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
 use meniscus::tiles::TileOptions;
 use meniscus::CancelToken;
-use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn dataset(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("datasets")
-        .join(rel)
-}
-
-fn positions(rel: &str) -> Vec<Vec3> {
-    read_particles(&dataset(rel), None).unwrap().positions
-}
+use std::path::Path;
+use support::{
+    dataset, dir_with_temp, in_pool, interrupt_once_spilled, meniscus, names_in, positions,
+};
 
 /// Particles at `positions` with a vector `velocity = f(x)` and a scalar `density`.
 fn with_fields(
@@ -49,11 +43,9 @@ fn run(
     options: &ReconstructOptions,
     threads: usize,
 ) -> (Surface, ReconstructionStats) {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap()
-        .install(|| reconstruct_source(particles, options, &|_| {}, &CancelToken::new()).unwrap())
+    in_pool(threads, || {
+        reconstruct_source(particles, options, &|_| {}, &CancelToken::new()).unwrap()
+    })
 }
 
 fn bits(values: &[f32]) -> Vec<u32> {
@@ -162,19 +154,15 @@ fn a_linear_velocity_field_is_the_field_at_the_weighted_mean_position() {
 
 #[test]
 fn attributes_do_not_depend_on_tiling_or_thread_count() {
-    let particles = select_attributes(
-        Path::new("frame 25"),
-        read_particles(&dataset("dambreak_small/ParticleData_Fluid_25.vtk"), None).unwrap(),
-        &AttributeSelection::All,
-    )
-    .unwrap();
+    let particles = read_particles(&dataset("dambreak_small/ParticleData_Fluid_25.vtk"), None)
+        .unwrap()
+        .select(Path::new("frame 25"), &AttributeSelection::All)
+        .unwrap();
     assert_eq!(particles.attributes[0].name, "velocity");
     // Marching cubes and one Loop step: the mesh is the same for every tiling, so the
     // attributes must be too, bit for bit.
-    let raw = ReconstructOptions {
-        subdivide: meniscus::subdivision::SubdivideOptions { levels: 1 },
-        ..ReconstructOptions::raw(0.012)
-    };
+    let mut raw = ReconstructOptions::raw(0.012);
+    raw.subdivide.levels = 1;
     let (whole, _) = run(particles.clone(), &raw, 2);
     let velocity = &whole.fluid.attributes[0];
     assert_eq!(velocity.len(), whole.fluid.vertex_count());
@@ -183,13 +171,8 @@ fn attributes_do_not_depend_on_tiling_or_thread_count() {
         "a moving fluid"
     );
     for tile in [32, 64] {
-        let tiled = ReconstructOptions {
-            tiles: TileOptions {
-                tile_size_cells: Some(tile),
-                ..TileOptions::default()
-            },
-            ..raw.clone()
-        };
+        let mut tiled = raw.clone();
+        tiled.tiles = TileOptions::tile_size(tile);
         let (pieces, stats) = run(particles.clone(), &tiled, 2);
         assert!(stats.tiles.tiles > 1);
         assert_eq!(
@@ -225,10 +208,8 @@ fn separate_bodies_keep_their_own_values() {
             values: vec![3.0, 7.0],
         }],
     };
-    let options = ReconstructOptions {
-        isolated_sphere_level: None,
-        ..ReconstructOptions::raw(0.025)
-    };
+    let mut options = ReconstructOptions::raw(0.025);
+    options.isolated_sphere_level = None;
     let (surface, _) = run(particles, &options, 2);
     let ids = &surface.fluid.attributes[0];
     assert!(surface.fluid.vertex_count() > 10);
@@ -236,10 +217,6 @@ fn separate_bodies_keep_their_own_values() {
         let expected = if p.x < 0.5 { 3.0 } else { 7.0 };
         assert_eq!(ids.item(i)[0], expected, "vertex {i} at {p}");
     }
-}
-
-fn meniscus() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_meniscus"))
 }
 
 /// Runs the CLI expecting a failure of a file or its content (exit 1); returns stderr
@@ -312,15 +289,10 @@ fn bad_attributes_are_clear_errors_naming_the_file_and_attribute() {
     // An attribute of the wrong length, through the library.
     let mut short = read_particles(&vtk, None).unwrap();
     short.attributes[0].values.pop();
-    let err = select_attributes(&vtk, short, &AttributeSelection::Velocity).unwrap_err();
+    let err = short
+        .select(&vtk, &AttributeSelection::Velocity)
+        .unwrap_err();
     assert!(err.to_string().contains("\"velocity\""), "{err}");
-}
-
-fn entries(dir: &Path) -> Vec<String> {
-    std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect()
 }
 
 #[test]
@@ -343,9 +315,7 @@ fn an_obj_output_warns_once_that_it_drops_the_attributes() {
 
 #[test]
 fn spilled_runs_with_attributes_leave_no_temporary_file_on_success_error_or_ctrl_c() {
-    let dir = tempfile::tempdir().unwrap();
-    let temp = dir.path().join("temp");
-    std::fs::create_dir(&temp).unwrap();
+    let (dir, temp) = dir_with_temp();
     let vtk = dataset("dambreak_small/ParticleData_Fluid_25.vtk");
     let tiled = |out: &Path, tile: &str| {
         let mut cmd = meniscus();
@@ -363,34 +333,23 @@ fn spilled_runs_with_attributes_leave_no_temporary_file_on_success_error_or_ctrl
     let bytes = std::fs::read(&out).unwrap();
     let header = String::from_utf8_lossy(&bytes[..400]);
     assert!(header.contains("property float velocity_x"), "{header}");
-    assert!(entries(&temp).is_empty(), "{:?}", entries(&temp));
+    assert!(names_in(&temp).is_empty(), "{:?}", names_in(&temp));
     // An error after the spill (the output is a directory).
     let blocked = dir.path().join("blocked.ply");
     std::fs::create_dir(&blocked).unwrap();
     let result = tiled(&blocked, "64").output().unwrap();
     assert_eq!(result.status.code(), Some(1));
-    assert!(entries(&temp).is_empty(), "{:?}", entries(&temp));
+    assert!(names_in(&temp).is_empty(), "{:?}", names_in(&temp));
     // Ctrl-C during one-block tiles.
     let out = dir.path().join("c.ply");
     let mut child = tiled(&out, "8")
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let clock = std::time::Instant::now();
-    while entries(&temp).is_empty() {
-        assert!(clock.elapsed().as_secs() < 60, "no spill file appeared");
-        assert!(child.try_wait().unwrap().is_none(), "the run ended early");
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    std::thread::sleep(std::time::Duration::from_millis(100));
-    let status = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    interrupt_once_spilled(&mut child, &temp);
     let result = child.wait_with_output().unwrap();
     assert_eq!(result.status.code(), Some(130));
     assert!(String::from_utf8_lossy(&result.stderr).contains("interrupted"));
     assert!(!out.exists());
-    assert!(entries(&temp).is_empty(), "{:?}", entries(&temp));
+    assert!(names_in(&temp).is_empty(), "{:?}", names_in(&temp));
 }

@@ -1,26 +1,11 @@
 //! The command line: single frames, sequences, statistics, and clear failures that leave
 //! no output behind.
 
+mod support;
+
 use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn meniscus() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_meniscus"))
-}
-
-fn dataset(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("datasets")
-        .join(rel)
-}
-
-fn run(args: &[&str]) -> (bool, String) {
-    let out = meniscus().args(args).output().unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+use support::archive::{decoded, Decoded};
+use support::{dataset, meniscus, names_in, run, splash};
 
 /// `meniscus reconstruct INPUT -r RADIUS -q -o OUTPUT FLAGS...`: success and stderr.
 fn reconstruct(input: &Path, radius: &str, output: &Path, flags: &[&str]) -> (bool, String) {
@@ -53,15 +38,6 @@ fn sequence_in(dir: &Path, padded: bool) -> String {
         .unwrap();
     }
     format!("{}/f_{{}}.xyz", dir.display())
-}
-
-fn files_in(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    v.sort();
-    v
 }
 
 #[test]
@@ -103,7 +79,7 @@ fn reconstructs_a_sequence_and_resumes() {
     let (ok, err) = run(&["reconstruct", &input, "-r", "0.025", "-o", &output, "-q"]);
     assert!(ok, "{err}");
     assert_eq!(
-        files_in(&dir.path().join("out")),
+        names_in(&dir.path().join("out")),
         ["s_001.ply", "s_006.ply", "s_013.ply"]
     );
     // A range that is partly missing fails and names the missing frame.
@@ -179,7 +155,7 @@ fn bad_input_fails_clearly_without_output() {
         assert!(err.contains(expected), "{}: {err}", input.display());
         assert!(!out.exists(), "{}: no output on failure", input.display());
     }
-    assert!(files_in(dir.path()).iter().all(|f| !f.contains(".tmp-")));
+    assert!(names_in(dir.path()).iter().all(|f| !f.contains(".tmp-")));
 }
 
 #[test]
@@ -233,7 +209,7 @@ fn archives_collect_a_sequence_and_extract_frames() {
     let pattern = dir.path().join("all/frame_{}.ply");
     let (ok, err) = run(&["archive", "extract", a, "-o", pattern.to_str().unwrap()]);
     assert!(ok, "{err}");
-    let extracted = files_in(&dir.path().join("all"));
+    let extracted = names_in(&dir.path().join("all"));
     assert_eq!(extracted.len(), 3, "{extracted:?}");
     assert!(extracted
         .iter()
@@ -869,9 +845,6 @@ fn write_obj(path: &Path, k: i64) {
     std::fs::write(path, text).unwrap();
 }
 
-/// Every frame of an archive, decoded: (number, positions, triangles).
-type Decoded = Vec<(i64, Vec<glam::Vec3>, Vec<[u32; 3]>)>;
-
 /// Opens the archive, checks that it verifies clean through its index and holds exactly
 /// `numbers`, and decodes it.
 fn clean_archive(path: &Path, numbers: &[i64]) -> Decoded {
@@ -879,13 +852,7 @@ fn clean_archive(path: &Path, numbers: &[i64]) -> Decoded {
     let v = r.verify();
     assert!(v.is_clean() && !r.recovered_by_scan(), "{v:?}");
     assert_eq!(v.good, numbers);
-    r.frames()
-        .iter()
-        .map(|f| {
-            let m = r.read_frame(f.number).unwrap();
-            (f.number, m.positions, m.triangles)
-        })
-        .collect()
+    decoded(path)
 }
 
 /// Makes a mesh file unreadable.
@@ -1106,7 +1073,7 @@ fn keep_going_reports_a_broken_frame_as_json_and_writes_the_others() {
         "{error}"
     );
     assert!(failed["triangles"].is_null());
-    assert_eq!(files_in(&out), ["s_1.ply", "s_13.ply"]);
+    assert_eq!(names_in(&out), ["s_1.ply", "s_13.ply"]);
     assert!(
         stderr.contains("1 of 3 frames failed (frame 6)"),
         "{stderr}"
@@ -1224,7 +1191,7 @@ fn frames_and_shards_on_the_command_line() {
     // A stepped range; padded names (`f_013.xyz`) are found.
     let (code, _, stderr) = go(&["--frames", "1-13:12"], &out("a"));
     assert_eq!(code, Some(0), "{stderr}");
-    assert_eq!(files_in(&dir.path().join("a")), ["s_001.ply", "s_013.ply"]);
+    assert_eq!(names_in(&dir.path().join("a")), ["s_001.ply", "s_013.ply"]);
     // Shards: round-robin over the frames.
     for (shard, expected) in [
         ("0/2", vec!["s_001.ply", "s_013.ply"]),
@@ -1233,7 +1200,7 @@ fn frames_and_shards_on_the_command_line() {
         let name = format!("shard{}", &shard[..1]);
         let (code, _, stderr) = go(&["--shard", shard], &out(&name));
         assert_eq!(code, Some(0), "{stderr}");
-        assert_eq!(files_in(&dir.path().join(&name)), expected);
+        assert_eq!(names_in(&dir.path().join(&name)), expected);
     }
     // Usage errors (exit 2), naming the bad text; missing frames are an error (exit 1).
     for (extra, says) in [
@@ -1379,9 +1346,6 @@ fn the_paper_flag_is_the_papers_options() {
         "{err}"
     );
 }
-
-#[path = "support/splash.rs"]
-mod splash;
 
 /// Centres containment could not bring under the surface (unbounded decimation folds a
 /// violent splash's sheets) draw a warning, exactly when the statistics count some.

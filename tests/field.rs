@@ -3,20 +3,12 @@
 //! eigenvalues found by bisection on the characteristic polynomial — none of it shares code
 //! with the library's closed forms.
 
+mod support;
+
 use glam::Vec3;
 use meniscus::field::{compute_field, FieldOptions};
 use meniscus::grid::split_coordinate;
-
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((self.0 >> 11) as f64) / ((1u64 << 53) as f64)
-    }
-}
+use support::{in_pool, Lcg};
 
 /// A jittered blob of particles (spacing 2r) with a few loose ones around it.
 fn blob(r: f64, rng: &mut Lcg) -> Vec<Vec3> {
@@ -28,13 +20,13 @@ fn blob(r: f64, rng: &mut Lcg) -> Vec<Vec3> {
                 if (p[0] / 14.0).powi(2) + (p[1] / 10.0).powi(2) + (p[2] / 12.0).powi(2) > r * r {
                     continue;
                 }
-                let q = p.map(|c| c + (rng.next() - 0.5) * 0.6 * r + 1.7);
+                let q = p.map(|c| c + (rng.next_f64() - 0.5) * 0.6 * r + 1.7);
                 pts.push(Vec3::new(q[0] as f32, q[1] as f32, q[2] as f32));
             }
         }
     }
     for _ in 0..20 {
-        let q = [0, 1, 2].map(|_| 1.7 + (rng.next() - 0.5) * 40.0 * r);
+        let q = [0, 1, 2].map(|_| 1.7 + (rng.next_f64() - 0.5) * 40.0 * r);
         pts.push(Vec3::new(q[0] as f32, q[1] as f32, q[2] as f32));
     }
     pts
@@ -129,10 +121,8 @@ fn check_against_oracle(coverage: f32) {
     let r = 0.05f64;
     let mut rng = Lcg(2024);
     let pts = blob(r, &mut rng);
-    let options = FieldOptions {
-        particle_coverage: coverage,
-        ..FieldOptions::new(r as f32)
-    };
+    let mut options = FieldOptions::new(r as f32);
+    options.particle_coverage = coverage;
     // Uncovered particles: the oracle field, trilinearly interpolated from the particle's
     // cell corners, is above −r/4.
     let c = coverage as f64 * r;
@@ -179,8 +169,8 @@ fn check_against_oracle(coverage: f32) {
     while checked < 300 {
         tries += 1;
         assert!(tries < 100_000);
-        let key = keys[(rng.next() * keys.len() as f64) as usize];
-        let local = [0, 1, 2].map(|_| (rng.next() * 8.0) as i32);
+        let key = keys[(rng.next_f64() * keys.len() as f64) as usize];
+        let local = [0, 1, 2].map(|_| (rng.next_f64() * 8.0) as i32);
         let g = [0, 1, 2].map(|a| key[a] * 8 + local[a]);
         assert_eq!(split_coordinate(g[0]).0, key[0]);
         let value = field.value(g[0], g[1], g[2]) as f64;
@@ -232,13 +222,7 @@ fn field_does_not_depend_on_thread_count() {
     let mut rng = Lcg(7);
     let pts = blob(0.05, &mut rng);
     let options = FieldOptions::new(0.05);
-    let run = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| compute_field(&pts, &options).unwrap().0)
-    };
+    let run = |threads: usize| in_pool(threads, || compute_field(&pts, &options).unwrap().0);
     let one = run(1);
     let two = run(3);
     assert_eq!(one.block_count(), two.block_count());
@@ -262,16 +246,18 @@ fn bad_options_are_rejected_with_the_option_name() {
         (FieldOptions::new(-1.0), "invalid particle_radius"),
         (FieldOptions::new(f32::NAN), "invalid particle_radius"),
         (
-            FieldOptions {
-                cell_size: 0.0,
-                ..FieldOptions::new(0.1)
+            {
+                let mut o = FieldOptions::new(0.1);
+                o.cell_size = 0.0;
+                o
             },
             "invalid cell_size",
         ),
         (
-            FieldOptions {
-                influence_radius: -2.0,
-                ..FieldOptions::new(0.1)
+            {
+                let mut o = FieldOptions::new(0.1);
+                o.influence_radius = -2.0;
+                o
             },
             "invalid influence_radius",
         ),
@@ -304,12 +290,10 @@ fn field_matches_direct_sum_for_other_cell_sizes_and_radii() {
     // (cell size, influence radius) in multiples of r: R/h = 8 cells (two half-blocks of
     // reach), 3.85 (one) and 4.29 (two, not a whole number).
     for (cell_size, influence_radius) in [(0.5f32, 4.0f32), (1.3, 5.0), (0.7, 3.0)] {
-        let options = FieldOptions {
-            cell_size,
-            influence_radius,
-            particle_coverage: 0.0,
-            ..FieldOptions::new(r as f32)
-        };
+        let mut options = FieldOptions::new(r as f32);
+        options.cell_size = cell_size;
+        options.influence_radius = influence_radius;
+        options.particle_coverage = 0.0;
         let (field, _) = compute_field(&pts, &options).unwrap();
         let h = options.cell_size_world();
         let keys = field.sorted_keys();
@@ -317,8 +301,8 @@ fn field_matches_direct_sum_for_other_cell_sizes_and_radii() {
         while checked < 120 {
             tries += 1;
             assert!(tries < 100_000);
-            let key = keys[(rng.next() * keys.len() as f64) as usize];
-            let g = [0, 1, 2].map(|a| key[a] * 8 + (rng.next() * 8.0) as i32);
+            let key = keys[(rng.next_f64() * keys.len() as f64) as usize];
+            let g = [0, 1, 2].map(|a| key[a] * 8 + (rng.next_f64() * 8.0) as i32);
             let value = field.value(g[0], g[1], g[2]) as f64;
             let v = g.map(|c| c as f64 * h);
             match oracle_phi(v, &pts, r, influence_radius as f64 * r) {

@@ -2,17 +2,18 @@
 //! the shipped frames (sheets one particle thick, filaments, spray): decimation and Loop
 //! subdivision leave some outside, the containment stage brings them back in.
 
-#[path = "support/splash.rs"]
-mod splash;
+mod support;
 
 use glam::Vec3;
 use meniscus::containment::ContainmentOptions;
 use meniscus::field::Kernel;
 use meniscus::io::particles::read_particles;
 use meniscus::mesh::{validate, InsideTest, TriMesh};
-use meniscus::pipeline::{reconstruct, split_isolated, ReconstructOptions};
+use meniscus::pipeline::{reconstruct, ReconstructOptions};
 use meniscus::subdivision::{subdivide, SubdivideOptions};
 use std::path::Path;
+use support::split_isolated;
+use support::{in_pool, splash};
 
 /// A splash of a shipped frame and its particle radius.
 fn splash_of(path: &str, radius: f32) -> (Vec<Vec3>, f32) {
@@ -113,7 +114,7 @@ fn deferred_subdivision_is_measured_as_decoded() {
     let (surface, stats) = reconstruct(&positions, &o).unwrap();
     assert!(stats.containment.unwrap().too_shallow > 0);
     let mut decoded = surface.fluid.clone();
-    subdivide(&mut decoded, &SubdivideOptions { levels: 1 });
+    subdivide(&mut decoded, &SubdivideOptions::levels(1));
     assert_eq!(outside(&decoded, &positions, r), 0);
 }
 
@@ -124,21 +125,11 @@ fn deferred_subdivision_is_measured_as_decoded() {
 fn a_deeper_setting_moves_more_and_threads_do_not_matter() {
     let (positions, r) = splash_of("datasets/dambreak_small/ParticleData_Fluid_25.xyz", 0.012);
     let mut shallow = options(r, Kernel::Isotropic, None);
-    shallow.containment = Some(ContainmentOptions {
-        min_depth: 0.1,
-        ..Default::default()
-    });
+    shallow.containment = Some(ContainmentOptions::depth(0.1));
     let mut deep = shallow.clone();
-    deep.containment = Some(ContainmentOptions {
-        min_depth: 0.5,
-        ..Default::default()
-    });
+    deep.containment = Some(ContainmentOptions::depth(0.5));
     let (_, a) = reconstruct(&positions, &shallow).unwrap();
-    let (one, b) = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .unwrap()
-        .install(|| reconstruct(&positions, &deep).unwrap());
+    let (one, b) = in_pool(1, || reconstruct(&positions, &deep).unwrap());
     let (two, _) = reconstruct(&positions, &deep).unwrap();
     let (a, b) = (a.containment.unwrap(), b.containment.unwrap());
     assert!(b.too_shallow > a.too_shallow, "{a:?} {b:?}");

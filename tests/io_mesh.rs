@@ -1,12 +1,15 @@
 //! Mesh writers: round trips through the readers for every format, glTF structure, atomic
 //! writes, and bad mesh input.
 
+mod support;
+
 use glam::Vec3;
 use meniscus::io::mesh::{read_mesh, write_surface, MeshFormat, MeshWriteOptions};
 use meniscus::isolated::icosphere;
 use meniscus::mesh::{SphereInstances, Surface, TriMesh};
 use meniscus::Error;
 use std::path::Path;
+use support::Rng;
 
 fn surface() -> Surface {
     let mut fluid = icosphere(2, 1.5);
@@ -524,20 +527,6 @@ fn a_ply_mesh_claiming_more_faces_than_bytes_is_an_error() {
     assert_eq!(read_mesh(&path).unwrap().triangles, vec![[0, 1, 2]]);
 }
 
-/// A deterministic generator (xorshift), so that every run mutates the same way.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
-
 #[test]
 fn mutated_mesh_files_are_read_or_rejected_never_panic() {
     let dir = tempfile::tempdir().unwrap();
@@ -558,49 +547,17 @@ fn mutated_mesh_files_are_read_or_rejected_never_panic() {
     let mut rng = Rng(0x2545_f491_4f6c_dd1d);
     for round in 0..2500 {
         let (name, base) = &bases[round % bases.len()];
-        let mut b = base.clone();
-        match rng.below(4) {
-            0 => {
-                for _ in 0..1 + rng.below(4) {
-                    let i = rng.below(b.len());
-                    b[i] ^= 1 << rng.below(8);
-                }
-            }
-            1 => b.truncate(rng.below(b.len())),
-            2 => {
-                let i = rng.below(b.len());
-                b[i] = rng.next() as u8;
-            }
-            _ => {
-                let digits: Vec<usize> = (0..b.len()).filter(|&i| b[i].is_ascii_digit()).collect();
-                if !digits.is_empty() {
-                    let start = digits[rng.below(digits.len())];
-                    let end = (start..b.len())
-                        .find(|&i| !b[i].is_ascii_digit())
-                        .unwrap_or(b.len());
-                    let huge = [
-                        "18446744073709551615",
-                        "4294967295",
-                        "999999999999",
-                        "1000000000000000000",
-                    ][rng.below(4)];
-                    b.splice(start..end, huge.bytes());
-                }
-            }
-        }
+        let huge = [
+            "18446744073709551615",
+            "4294967295",
+            "999999999999",
+            "1000000000000000000",
+        ];
+        let b = support::mutate(&mut rng, base, &huge, |_, _| {});
         let path = dir.path().join(name);
         std::fs::write(&path, &b).unwrap();
-        match std::panic::catch_unwind(|| read_mesh(&path)) {
-            Ok(Ok(_)) => {}
-            Ok(Err(e)) => assert!(e.to_string().contains(name), "{name}: {e}"),
-            Err(_) => {
-                let keep = std::env::temp_dir().join(format!("meniscus-crash-{round}-{name}"));
-                std::fs::write(&keep, &b).unwrap();
-                panic!(
-                    "round {round}: reading a mutated {name} panicked (kept as {})",
-                    keep.display()
-                );
-            }
+        if let Err(e) = support::without_panic(round, name, &b, || read_mesh(&path)) {
+            assert!(e.to_string().contains(name), "{name}: {e}");
         }
     }
 }

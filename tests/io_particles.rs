@@ -1,19 +1,15 @@
 //! Particle readers: shipped files, cross-format agreement, round trips through the
 //! writers, hand-made fixtures, and every kind of bad input.
 
+mod support;
+
 use glam::Vec3;
 use meniscus::io::particles::{
-    read_particles, stream_bgeo_positions, stream_ply_positions, stream_vtk_positions,
-    write_particles, Attribute, ParticleFormat, Particles,
+    read_particles, stream_positions, write_particles, Attribute, ParticleFormat, Particles,
 };
 use meniscus::Error;
 use std::path::{Path, PathBuf};
-
-fn data(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("datasets")
-        .join(rel)
-}
+use support::{dataset as data, names_in, Rng};
 
 /// splashsurf's example files live in the shared data folder beside the checkout.
 fn shared(rel: &str) -> Option<PathBuf> {
@@ -308,13 +304,13 @@ fn bgeo_streams_in_chunks_like_it_reads_whole() {
         let path = write(dir.path(), name, bytes);
         let mut streamed = Vec::new();
         let mut chunks = 0;
-        let count = stream_bgeo_positions(&path, &mut |chunk| {
+        let count = stream_positions(&path, None, &mut |chunk| {
             chunks += 1;
             streamed.extend_from_slice(chunk);
             Ok(())
         })
         .unwrap();
-        assert_eq!(count, positions.len());
+        assert_eq!(count, Some(positions.len()));
         assert_eq!(chunks, 3, "{name}");
         assert_eq!(bits(&streamed), bits(&positions), "{name}");
         let whole = read_particles(&path, None).unwrap();
@@ -326,7 +322,7 @@ fn bgeo_streams_in_chunks_like_it_reads_whole() {
     // The shipped frame streams to the positions the whole-file reader gives.
     let shipped = data("dambreak_small/ParticleData_Fluid_25.bgeo");
     let mut streamed = Vec::new();
-    stream_bgeo_positions(&shipped, &mut |chunk| {
+    stream_positions(&shipped, None, &mut |chunk| {
         streamed.extend_from_slice(chunk);
         Ok(())
     })
@@ -337,7 +333,7 @@ fn bgeo_streams_in_chunks_like_it_reads_whole() {
     );
     // Cut in the particle data: a clear error naming the stream position.
     let cut = write(dir.path(), "cut.bgeo.gz", &gz[..gz.len() / 2]);
-    let err = stream_bgeo_positions(&cut, &mut |_| Ok(()))
+    let err = stream_positions(&cut, None, &mut |_| Ok(()))
         .unwrap_err()
         .to_string();
     assert!(
@@ -346,13 +342,10 @@ fn bgeo_streams_in_chunks_like_it_reads_whole() {
     );
 }
 
-/// A streaming reader's count and positions, gathered from its chunks.
-type StreamFn =
-    fn(&Path, &mut dyn FnMut(&[Vec3]) -> meniscus::Result<()>) -> meniscus::Result<Option<usize>>;
-
-fn streamed(stream: StreamFn, path: &Path) -> (Option<usize>, Vec<Vec3>) {
+/// The streaming reader's count and positions, gathered from its chunks.
+fn streamed(path: &Path) -> (Option<usize>, Vec<Vec3>) {
     let mut out = Vec::new();
-    let n = stream(path, &mut |chunk| {
+    let n = stream_positions(path, None, &mut |chunk| {
         out.extend_from_slice(chunk);
         Ok(())
     })
@@ -365,7 +358,6 @@ fn streamed(stream: StreamFn, path: &Path) -> (Option<usize>, Vec<Vec3>) {
 /// error; an ASCII file (`ascii`, its last record on line `last_record_line`) streams like
 /// it reads whole, and a cut or a bad number in it is an error naming the line.
 fn check_big_cut_and_ascii(
-    stream: StreamFn,
     dir: &Path,
     ext: &str,
     bytes: &[u8],
@@ -374,7 +366,7 @@ fn check_big_cut_and_ascii(
     last_record_line: usize,
 ) {
     let big = write(dir, &format!("big.{ext}"), bytes);
-    let (n, got) = streamed(stream, &big);
+    let (n, got) = streamed(&big);
     assert_eq!(n, Some(positions.len()));
     assert_eq!(bits(&got), bits(positions));
     assert_eq!(
@@ -382,7 +374,9 @@ fn check_big_cut_and_ascii(
         bits(positions)
     );
     let cut = write(dir, &format!("cut.{ext}"), &bytes[..bytes.len() / 2]);
-    let err = stream(&cut, &mut |_| Ok(())).unwrap_err().to_string();
+    let err = stream_positions(&cut, None, &mut |_| Ok(()))
+        .unwrap_err()
+        .to_string();
     assert!(
         err.contains(&format!("cut.{ext}")) && err.contains("truncated"),
         "{err}"
@@ -391,7 +385,7 @@ fn check_big_cut_and_ascii(
     let text = write(dir, &format!("a.{ext}"), ascii.as_bytes());
     let whole = read_particles(&text, None).unwrap().positions;
     assert!(whole.len() > 2);
-    let (n, got) = streamed(stream, &text);
+    let (n, got) = streamed(&text);
     assert_eq!(n, Some(whole.len()));
     assert_eq!(bits(&got), bits(&whole));
     let lines = last_record_line;
@@ -401,7 +395,9 @@ fn check_big_cut_and_ascii(
         &format!("acut.{ext}"),
         &ascii.as_bytes()[..before_last],
     );
-    let err = stream(&cut, &mut |_| Ok(())).unwrap_err().to_string();
+    let err = stream_positions(&cut, None, &mut |_| Ok(()))
+        .unwrap_err()
+        .to_string();
     assert!(
         err.contains("truncated") && err.contains(&format!("line {lines}")),
         "{err}"
@@ -409,7 +405,9 @@ fn check_big_cut_and_ascii(
     let mut bad = ascii.as_bytes()[..before_last].to_vec();
     bad.extend_from_slice(b"1 2 oops 4 5 6\n");
     let bad = write(dir, &format!("abad.{ext}"), &bad);
-    let err = stream(&bad, &mut |_| Ok(())).unwrap_err().to_string();
+    let err = stream_positions(&bad, None, &mut |_| Ok(()))
+        .unwrap_err()
+        .to_string();
     assert!(
         err.contains("\"oops\"") && err.contains(&format!("line {lines}")),
         "{err}"
@@ -418,7 +416,6 @@ fn check_big_cut_and_ascii(
 
 #[test]
 fn vtk_streams_its_points_like_it_reads_whole() {
-    let collect = |path: &Path| streamed(stream_vtk_positions, path);
     // Shipped frames (SPlisHSPlasH layout, float points) and the written sample (with
     // point data after the points).
     let dir = tempfile::tempdir().unwrap();
@@ -430,10 +427,10 @@ fn vtk_streams_its_points_like_it_reads_whole() {
         data("analytic/droplets.vtk"),
         written,
     ] {
-        let (n, streamed) = collect(&path);
+        let (n, got) = streamed(&path);
         let whole = read_particles(&path, None).unwrap().positions;
         assert_eq!(n, Some(whole.len()), "{}", path.display());
-        assert_eq!(bits(&streamed), bits(&whole), "{}", path.display());
+        assert_eq!(bits(&got), bits(&whole), "{}", path.display());
     }
     // More than one chunk, double precision.
     let positions: Vec<Vec3> = (0..100_000)
@@ -447,7 +444,6 @@ fn vtk_streams_its_points_like_it_reads_whole() {
         }
     }
     check_big_cut_and_ascii(
-        stream_vtk_positions,
         dir.path(),
         "vtk",
         &doubles,
@@ -460,14 +456,13 @@ fn vtk_streams_its_points_like_it_reads_whole() {
 
 #[test]
 fn ply_streams_its_vertices_like_it_reads_whole() {
-    let collect = |path: &Path| streamed(stream_ply_positions, path);
     let dir = tempfile::tempdir().unwrap();
     // The written sample (velocity and density interleaved with the positions).
     let written = dir.path().join("sample.ply");
     write_particles(&written, &sample(), ParticleFormat::Ply).unwrap();
-    let (n, streamed) = collect(&written);
+    let (n, got) = streamed(&written);
     assert_eq!(n, Some(50));
-    assert_eq!(bits(&streamed), bits(&sample().positions));
+    assert_eq!(bits(&got), bits(&sample().positions));
     // Big-endian doubles behind another property, over two chunks, a face element after.
     let positions: Vec<Vec3> = (0..70_000)
         .map(|i| Vec3::new(i as f32 * 0.5, (i % 11) as f32, -(i as f32) * 0.01))
@@ -488,7 +483,6 @@ fn ply_streams_its_vertices_like_it_reads_whole() {
         bytes.extend_from_slice(&i.to_be_bytes());
     }
     check_big_cut_and_ascii(
-        stream_ply_positions,
         dir.path(),
         "ply",
         &bytes,
@@ -500,23 +494,14 @@ fn ply_streams_its_vertices_like_it_reads_whole() {
 }
 
 // ---------------------------------------------------------------------------------------
-// Streaming with payload: `SpooledParticles` against `read_particles` + `select_attributes`.
+// Streaming with payload: `SpooledParticles` against `read_particles` + `Particles::select`.
 
-use meniscus::attributes::{select_attributes, AttributeLayout, AttributeSelection};
+use meniscus::attributes::{AttributeLayout, AttributeSelection};
 use meniscus::io::particles::{ParticleSource, SpooledParticles};
 use meniscus::CancelToken;
 
 fn names(list: &[&str]) -> AttributeSelection {
     AttributeSelection::Names(list.iter().map(|n| n.to_string()).collect())
-}
-
-fn entries(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    v.sort();
-    v
 }
 
 /// `count` particles with a 3-component velocity, a scalar density and a 2-component
@@ -640,13 +625,15 @@ fn check_streamed(
     temp: &Path,
 ) {
     let label = format!("{} {selection:?}", path.display());
-    let parsed =
-        select_attributes(path, read_particles(path, Some(format)).unwrap(), selection).unwrap();
+    let parsed = read_particles(path, Some(format))
+        .unwrap()
+        .select(path, selection)
+        .unwrap();
     let spooled =
         SpooledParticles::from_file(path, format, selection, Some(temp), &CancelToken::new())
             .unwrap()
             .unwrap_or_else(|| panic!("{label}: not streamed"));
-    let files = entries(temp);
+    let files = names_in(temp);
     let expect_files = if parsed.attributes.is_empty() { 1 } else { 2 };
     assert_eq!(files.len(), expect_files, "{label}: {files:?}");
     let (positions, payload, layout) = drain(&spooled);
@@ -669,9 +656,9 @@ fn check_streamed(
     assert_eq!(differ, None, "{label}: payload differs");
     drop(spooled);
     assert!(
-        entries(temp).is_empty(),
+        names_in(temp).is_empty(),
         "{label}: left {:?}",
-        entries(temp)
+        names_in(temp)
     );
 }
 
@@ -757,12 +744,10 @@ fn a_bad_selection_fails_before_any_temporary_file_and_like_the_parser() {
             names(&["velocity", "nope"]),
             names(&["velocity", "Velocity"]),
         ] {
-            let parsed = select_attributes(
-                &path,
-                read_particles(&path, Some(format)).unwrap(),
-                &selection,
-            )
-            .unwrap_err();
+            let parsed = read_particles(&path, Some(format))
+                .unwrap()
+                .select(&path, &selection)
+                .unwrap_err();
             let streamed = SpooledParticles::from_file(
                 &path,
                 format,
@@ -774,7 +759,7 @@ fn a_bad_selection_fails_before_any_temporary_file_and_like_the_parser() {
             .unwrap_or_else(|| panic!("{}: {selection:?} accepted", path.display()));
             assert!(matches!(streamed, Error::Attribute { .. }), "{streamed}");
             assert_eq!(streamed.to_string(), parsed.to_string());
-            assert!(entries(&temp).is_empty(), "left {:?}", entries(&temp));
+            assert!(names_in(&temp).is_empty(), "left {:?}", names_in(&temp));
         }
     }
     // The listing names what the input has.
@@ -828,12 +813,10 @@ fn a_non_finite_attribute_value_is_a_clear_error_and_leaves_no_file() {
             )
             .err()
             .unwrap_or_else(|| panic!("{}: accepted", path.display()));
-            let parsed = select_attributes(
-                path,
-                read_particles(path, Some(format)).unwrap(),
-                &selection,
-            )
-            .unwrap_err();
+            let parsed = read_particles(path, Some(format))
+                .unwrap()
+                .select(path, &selection)
+                .unwrap_err();
             match &err {
                 Error::Attribute {
                     path: p,
@@ -854,7 +837,7 @@ fn a_non_finite_attribute_value_is_a_clear_error_and_leaves_no_file() {
             if attribute != "velocity" || selection == AttributeSelection::Velocity {
                 assert_eq!(err.to_string(), parsed.to_string());
             }
-            assert!(entries(&temp).is_empty(), "left {:?}", entries(&temp));
+            assert!(names_in(&temp).is_empty(), "left {:?}", names_in(&temp));
         }
         // Positions only: the attributes are not read, so not checked.
         let fine = SpooledParticles::from_file(
@@ -869,7 +852,7 @@ fn a_non_finite_attribute_value_is_a_clear_error_and_leaves_no_file() {
         assert_eq!(fine.particle_count(), 80_000);
         assert!(fine.attribute_layout().is_empty());
         drop(fine);
-        assert!(entries(&temp).is_empty());
+        assert!(names_in(&temp).is_empty());
     }
 }
 
@@ -900,7 +883,7 @@ fn a_cancelled_stream_removes_its_files() {
         .err()
         .unwrap();
         assert!(matches!(err, Error::Interrupted), "{err}");
-        assert!(entries(&temp).is_empty(), "left {:?}", entries(&temp));
+        assert!(names_in(&temp).is_empty(), "left {:?}", names_in(&temp));
     }
 }
 
@@ -1034,60 +1017,23 @@ fn text_renamed_xyz_is_an_error() {
     assert_eq!(p.positions.len(), 2);
 }
 
-/// A deterministic generator (xorshift), so that every run mutates the same way.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
-
 /// A mutated copy of `base`: flipped bytes, a truncation, or a number in the text
 /// replaced by a huge one.
 fn mutate(rng: &mut Rng, base: &[u8]) -> Vec<u8> {
-    let mut b = base.to_vec();
-    match rng.below(4) {
-        0 => {
-            for _ in 0..1 + rng.below(4) {
-                let i = rng.below(b.len());
-                b[i] ^= 1 << rng.below(8);
-            }
+    let huge = [
+        "18446744073709551615",
+        "4294967295",
+        "999999999999",
+        "6148914691236517206",
+        "2147483647",
+    ];
+    support::mutate(rng, base, &huge, |rng, b| {
+        if b.len() >= 8 {
+            // Binary header fields: a big-endian i32 of 2^31 − 1.
+            let i = rng.below(b.len() - 4);
+            b[i..i + 4].copy_from_slice(&i32::MAX.to_be_bytes());
         }
-        1 => b.truncate(rng.below(b.len())),
-        2 => {
-            let i = rng.below(b.len());
-            b[i] = rng.next() as u8;
-        }
-        _ => {
-            // Overwrite a run of ASCII digits with a huge number.
-            let digits: Vec<usize> = (0..b.len()).filter(|&i| b[i].is_ascii_digit()).collect();
-            if !digits.is_empty() {
-                let start = digits[rng.below(digits.len())];
-                let end = (start..b.len())
-                    .find(|&i| !b[i].is_ascii_digit())
-                    .unwrap_or(b.len());
-                let huge = [
-                    "18446744073709551615",
-                    "4294967295",
-                    "999999999999",
-                    "6148914691236517206",
-                    "2147483647",
-                ][rng.below(5)];
-                b.splice(start..end, huge.bytes());
-            } else if b.len() >= 8 {
-                // Binary header fields: a big-endian i32 of 2^31 − 1.
-                let i = rng.below(b.len() - 4);
-                b[i..i + 4].copy_from_slice(&i32::MAX.to_be_bytes());
-            }
-        }
-    }
-    b
+    })
 }
 
 #[test]
@@ -1133,18 +1079,9 @@ fn mutated_particle_files_are_read_or_rejected_never_panic() {
         let bytes = mutate(&mut rng, base);
         let path = dir.path().join(name);
         std::fs::write(&path, &bytes).unwrap();
-        let result = std::panic::catch_unwind(|| read_particles(&path, None));
-        match result {
-            Ok(Ok(_)) => {}
-            Ok(Err(e)) => assert!(e.to_string().contains(name), "{name}: {e}"),
-            Err(_) => {
-                let keep = std::env::temp_dir().join(format!("meniscus-crash-{round}-{name}"));
-                std::fs::write(&keep, &bytes).unwrap();
-                panic!(
-                    "round {round}: reading a mutated {name} panicked (kept as {})",
-                    keep.display()
-                );
-            }
+        let result = support::without_panic(round, name, &bytes, || read_particles(&path, None));
+        if let Err(e) = result {
+            assert!(e.to_string().contains(name), "{name}: {e}");
         }
     }
 }
@@ -1171,7 +1108,7 @@ fn a_gzip_bgeo_holding_more_points_than_its_header_announces_fails_fast() {
         );
     };
     check(read_particles(&path, None).expect_err("undercounting header"));
-    check(stream_bgeo_positions(&path, &mut |_| Ok(())).expect_err("undercounting header"));
+    check(stream_positions(&path, None, &mut |_| Ok(())).expect_err("undercounting header"));
     for selection in [AttributeSelection::None, AttributeSelection::All] {
         let spooled = SpooledParticles::from_file(
             &path,

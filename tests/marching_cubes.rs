@@ -1,21 +1,13 @@
 //! Marching cubes on synthetic fields: manifoldness for any sign pattern, accuracy on an
 //! analytic sphere, thread-count independence.
 
+mod support;
+
 use hashbrown::HashMap;
 use meniscus::grid::{local_index, split_coordinate, SparseField, BLOCK_VOLUME};
 use meniscus::marching_cubes::extract_surface;
 use meniscus::mesh::validate;
-
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f32 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((self.0 >> 40) as f32) / ((1u64 << 24) as f32)
-    }
-}
+use support::{in_pool, Lcg};
 
 /// A field whose vertices in the box [lo, hi]³ take `value(i, j, k)`; all else outside.
 fn field_from(
@@ -46,7 +38,7 @@ fn random_sign_fields_give_closed_oriented_manifolds() {
     for seed in 1..=6u64 {
         let mut rng = Lcg(seed);
         let field = field_from(-9, 9, 1.0, |_, _, _| {
-            let v = rng.next() - 0.55;
+            let v = rng.next_f32() - 0.55;
             if v == 0.0 {
                 0.1
             } else {
@@ -108,15 +100,9 @@ fn output_does_not_depend_on_thread_count() {
     let mut rng = Lcg(42);
     let field = field_from(-20, 20, 1.0, |i, j, k| {
         let d = ((i * i + j * j + k * k) as f32).sqrt() - 15.0;
-        d + rng.next() * 2.0 - 1.0
+        d + rng.next_f32() * 2.0 - 1.0
     });
-    let run = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| extract_surface(&field).0)
-    };
+    let run = |threads: usize| in_pool(threads, || extract_surface(&field).0);
     let one = run(1);
     assert!(validate(&one).is_closed_manifold() || validate(&one).degenerate_triangles > 0);
     assert_eq!(one, run(2));

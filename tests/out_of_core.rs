@@ -2,51 +2,15 @@
 //! failures (unwritable temp dir, budget too small, truncated input, Ctrl-C) that leave
 //! no output and no temporary file behind.
 
-use glam::Vec3;
+mod support;
+
 use meniscus::mesh::{validate, InsideTest};
 use meniscus::pipeline::{reconstruct_source, ReconstructOptions};
 use meniscus::CancelToken;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
-
-fn dataset(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("datasets")
-        .join(rel)
-}
-
-fn xyz(rel: &str) -> Vec<Vec3> {
-    std::fs::read(dataset(rel))
-        .unwrap()
-        .chunks_exact(12)
-        .map(|c| {
-            let f = |k: usize| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap());
-            Vec3::new(f(0), f(1), f(2))
-        })
-        .collect()
-}
-
-fn meniscus() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_meniscus"))
-}
-
-fn entries(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    v.sort();
-    v
-}
-
-fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap()
-        .install(f)
-}
+use support::{dataset, dir_with_temp, in_pool, interrupt_once_spilled, meniscus, names_in, xyz};
 
 #[test]
 fn decimation_in_tiles_keeps_the_surface_closed_on_target_and_thread_independent() {
@@ -113,9 +77,7 @@ fn decimation_in_tiles_keeps_the_surface_closed_on_target_and_thread_independent
 
 #[test]
 fn a_tiled_cli_run_leaves_no_temporary_file() {
-    let dir = tempfile::tempdir().unwrap();
-    let temp = dir.path().join("temp");
-    std::fs::create_dir(&temp).unwrap();
+    let (dir, temp) = dir_with_temp();
     let out = dir.path().join("s.ply");
     let status = meniscus()
         .args(["reconstruct"])
@@ -128,7 +90,7 @@ fn a_tiled_cli_run_leaves_no_temporary_file() {
         .unwrap();
     assert!(status.success());
     assert!(out.exists());
-    assert!(entries(&temp).is_empty(), "{:?}", entries(&temp));
+    assert!(names_in(&temp).is_empty(), "{:?}", names_in(&temp));
 }
 
 /// Runs the CLI expecting a failure; returns its stderr after checking that neither the
@@ -149,12 +111,12 @@ fn fails_cleanly(args: &[&str], input: &Path, temp: &Path, out: &Path) -> String
     assert!(!out.exists(), "{args:?} left {}", out.display());
     if temp.is_dir() {
         assert!(
-            entries(temp).is_empty(),
+            names_in(temp).is_empty(),
             "{args:?} left {:?}",
-            entries(temp)
+            names_in(temp)
         );
     }
-    let siblings = entries(out.parent().unwrap());
+    let siblings = names_in(out.parent().unwrap());
     assert!(
         siblings
             .iter()
@@ -185,9 +147,7 @@ fn an_unwritable_temp_dir_is_a_clear_error() {
 
 #[test]
 fn a_budget_too_small_for_one_tile_fails_before_any_work() {
-    let dir = tempfile::tempdir().unwrap();
-    let temp = dir.path().join("temp");
-    std::fs::create_dir(&temp).unwrap();
+    let (dir, temp) = dir_with_temp();
     let out_dir = dir.path().join("out");
     std::fs::create_dir(&out_dir).unwrap();
     let input = dataset("dambreak_small/ParticleData_Fluid_25.xyz");
@@ -229,9 +189,7 @@ fn a_budget_too_small_for_one_tile_fails_before_any_work() {
 
 #[test]
 fn truncated_inputs_fail_cleanly_in_a_tiled_run() {
-    let dir = tempfile::tempdir().unwrap();
-    let temp = dir.path().join("temp");
-    std::fs::create_dir(&temp).unwrap();
+    let (dir, temp) = dir_with_temp();
     let out_dir = dir.path().join("out");
     std::fs::create_dir(&out_dir).unwrap();
     let args = ["-r", "0.012", "--tile-size", "64", "-q"];
@@ -259,9 +217,7 @@ fn truncated_inputs_fail_cleanly_in_a_tiled_run() {
 
 #[test]
 fn ctrl_c_stops_a_tiled_run_and_removes_its_files() {
-    let dir = tempfile::tempdir().unwrap();
-    let temp = dir.path().join("temp");
-    std::fs::create_dir(&temp).unwrap();
+    let (dir, temp) = dir_with_temp();
     let out = dir.path().join("s.ply");
     // One-block tiles: hundreds of tiles, several seconds of work.
     let mut child = meniscus()
@@ -275,27 +231,13 @@ fn ctrl_c_stops_a_tiled_run_and_removes_its_files() {
         .spawn()
         .unwrap();
     // Wait until the spill file exists, then interrupt.
-    let clock = Instant::now();
-    while entries(&temp).is_empty() {
-        assert!(
-            clock.elapsed() < Duration::from_secs(60),
-            "no spill file appeared"
-        );
-        assert!(child.try_wait().unwrap().is_none(), "the run ended early");
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    std::thread::sleep(Duration::from_millis(100));
-    let status = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    interrupt_once_spilled(&mut child, &temp);
     let result = child.wait_with_output().unwrap();
     let err = String::from_utf8_lossy(&result.stderr);
     assert!(!result.status.success());
     assert!(err.contains("interrupted"), "{err}");
     assert!(!out.exists());
-    assert!(entries(&temp).is_empty(), "{:?}", entries(&temp));
+    assert!(names_in(&temp).is_empty(), "{:?}", names_in(&temp));
 }
 
 #[test]
@@ -339,9 +281,7 @@ fn bgeo_vtk_and_ply_are_streamed_and_mesh_like_their_xyz() {
     // The shipped BGEO and VTK (and a PLY written from them) hold the same positions as
     // the .xyz of the frame: streamed into a temporary .xyz and mapped, they must give the
     // same file, tiled or not, and leave no temporary file behind.
-    let dir = tempfile::tempdir().unwrap();
-    let temp = dir.path().join("temp");
-    std::fs::create_dir(&temp).unwrap();
+    let (dir, temp) = dir_with_temp();
     // The frame as binary PLY too.
     let ply = dir.path().join("frame25.ply");
     let particles = meniscus::io::particles::read_particles(
@@ -387,7 +327,7 @@ fn bgeo_vtk_and_ply_are_streamed_and_mesh_like_their_xyz() {
             outputs[0] == outputs[1],
             "tiles {tiles:?}: bgeo and xyz differ"
         );
-        assert!(entries(&temp).is_empty(), "left {:?}", entries(&temp));
+        assert!(names_in(&temp).is_empty(), "left {:?}", names_in(&temp));
     }
 }
 
@@ -398,9 +338,7 @@ fn a_tiled_run_streaming_attributes_writes_the_file_of_the_parsed_path() {
     // path is forced with a copy whose title line is longer than the section scan follows.
     use meniscus::attributes::AttributeSelection;
     use meniscus::io::particles::{ParticleFormat, SpooledParticles};
-    let dir = tempfile::tempdir().unwrap();
-    let temp = dir.path().join("temp");
-    std::fs::create_dir(&temp).unwrap();
+    let (dir, temp) = dir_with_temp();
     let vtk = dataset("dambreak_small/ParticleData_Fluid_25.vtk");
     let bytes = std::fs::read(&vtk).unwrap();
     let first_line = bytes.iter().position(|&b| b == b'\n').unwrap() + 1;
@@ -434,7 +372,7 @@ fn a_tiled_run_streaming_attributes_writes_the_file_of_the_parsed_path() {
     )
     .unwrap()
     .is_none());
-    assert!(entries(&temp).is_empty(), "left {:?}", entries(&temp));
+    assert!(names_in(&temp).is_empty(), "left {:?}", names_in(&temp));
 
     let mut outputs = Vec::new();
     for (input, attributes) in [(&vtk, "velocity"), (&parsed_input, "velocity")] {
@@ -468,7 +406,7 @@ fn a_tiled_run_streaming_attributes_writes_the_file_of_the_parsed_path() {
             tiles["spill_bytes"].as_u64().unwrap() > 0,
             "not spilled: {tiles}"
         );
-        assert!(entries(&temp).is_empty(), "left {:?}", entries(&temp));
+        assert!(names_in(&temp).is_empty(), "left {:?}", names_in(&temp));
         outputs.push(std::fs::read(&out).unwrap());
     }
     assert!(
@@ -487,12 +425,10 @@ fn a_tiled_run_streaming_attributes_writes_the_file_of_the_parsed_path() {
             .unwrap();
     let (from_stream, stats) = reconstruct_source(streamed, &options, &|_| {}, &cancel).unwrap();
     assert!(stats.tiles.tiles > 1);
-    let parsed = meniscus::attributes::select_attributes(
-        &vtk,
-        meniscus::io::particles::read_particles(&vtk, None).unwrap(),
-        &velocity,
-    )
-    .unwrap();
+    let parsed = meniscus::io::particles::read_particles(&vtk, None)
+        .unwrap()
+        .select(&vtk, &velocity)
+        .unwrap();
     let (from_parse, _) = reconstruct_source(parsed, &options, &|_| {}, &cancel).unwrap();
     assert_eq!(from_stream.fluid.attributes.len(), 1);
     assert_eq!(from_stream.fluid.attributes[0].name, "velocity");
@@ -504,7 +440,7 @@ fn a_tiled_run_streaming_attributes_writes_the_file_of_the_parsed_path() {
         from_stream == from_parse,
         "streamed and parsed surfaces differ"
     );
-    assert!(entries(&temp).is_empty(), "left {:?}", entries(&temp));
+    assert!(names_in(&temp).is_empty(), "left {:?}", names_in(&temp));
 }
 
 /// The PID of a process that has exited (and that no process has taken since).
@@ -573,9 +509,9 @@ fn a_run_removes_what_killed_runs_left_and_keeps_what_live_ones_hold() {
     assert!(status.success());
     let mut kept: Vec<String> = kept_temp.to_vec();
     kept.sort();
-    assert_eq!(entries(&temp), kept);
+    assert_eq!(names_in(&temp), kept);
     let mut kept: Vec<String> = kept_out.to_vec();
     kept.push("s.ply".into());
     kept.sort();
-    assert_eq!(entries(&outputs), kept);
+    assert_eq!(names_in(&outputs), kept);
 }

@@ -2,37 +2,23 @@
 //! refused collapses, boundaries kept, the paper's flat-region claim on the analytic box,
 //! droplets as one blob plus one sphere per isolated particle.
 
+mod support;
+
 use glam::Vec3;
 use meniscus::decimation::{decimate, DecimateOptions};
-use meniscus::io::particles::read_particles;
 use meniscus::isolated::icosphere;
 use meniscus::mesh::{triangle_components, validate, TriMesh};
 use meniscus::pipeline::{reconstruct, ReconstructOptions};
 use meniscus::subdivision::{subdivide, SubdivideOptions};
-use std::path::PathBuf;
-
-fn dataset(rel: &str) -> Vec<Vec3> {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("datasets")
-        .join(rel);
-    read_particles(&path, None).unwrap().positions
-}
+use support::{in_pool, positions, shipped_frames};
 
 #[test]
 fn full_pipeline_keeps_every_frame_a_closed_manifold_and_reports_its_ratio() {
-    let frames: Vec<(String, f32)> = [1, 9, 17, 25, 31, 45]
-        .iter()
-        .map(|k| (format!("dambreak_small/ParticleData_Fluid_{k}.xyz"), 0.012))
-        .chain(
-            [1, 6, 9, 13, 20]
-                .iter()
-                .map(|k| (format!("double_dambreak/ParticleData_Fluid_{k}.xyz"), 0.025)),
-        )
-        .collect();
+    let frames = shipped_frames();
     for (rel, r) in frames {
         let options = ReconstructOptions::new(r);
         let fraction = options.decimate.as_ref().unwrap().target_reduction.unwrap() as f64;
-        let (surface, stats) = reconstruct(&dataset(&rel), &options).unwrap();
+        let (surface, stats) = reconstruct(&positions(&rel), &options).unwrap();
         let report = validate(&surface.fluid);
         assert!(report.is_closed_manifold(), "{rel}: {report:?}");
         assert!(surface.fluid.signed_volume() > 0.0, "{rel}");
@@ -109,28 +95,14 @@ fn collapses_that_would_pinch_or_fold_are_refused() {
         normals: vec![],
         attributes: Vec::new(),
     };
-    let stats = decimate(
-        &mut tet,
-        &DecimateOptions {
-            target_reduction: Some(0.9),
-            max_error: None,
-            ..Default::default()
-        },
-    );
+    let stats = decimate(&mut tet, &DecimateOptions::fraction(0.9));
     assert_eq!(stats.collapses, 0);
     assert_eq!(tet.triangle_count(), 4);
     assert!(stats.refused_topology > 0);
     // Simplifying a sphere as far as it goes: the collapses that would make it a
     // tetrahedron's worth of doubled triangles are refused, and it stays a closed manifold.
     let mut sphere = icosphere(2, 1.0);
-    let stats = decimate(
-        &mut sphere,
-        &DecimateOptions {
-            target_reduction: Some(0.999),
-            max_error: None,
-            ..Default::default()
-        },
-    );
+    let stats = decimate(&mut sphere, &DecimateOptions::fraction(0.999));
     let report = validate(&sphere);
     assert!(report.is_closed_manifold(), "{report:?}");
     assert!(sphere.triangle_count() >= 4, "{stats:?}");
@@ -190,7 +162,7 @@ fn subdivision_after_decimation_stays_closed() {
     let mut m = noisy_sphere(4, 0.02);
     decimate(&mut m, &DecimateOptions::default());
     let t = m.triangle_count();
-    subdivide(&mut m, &SubdivideOptions { levels: 2 });
+    subdivide(&mut m, &SubdivideOptions::levels(2));
     assert_eq!(m.triangle_count(), 16 * t);
     assert!(validate(&m).is_closed_manifold());
 }
@@ -230,7 +202,7 @@ fn flat_normal_error(mesh: &TriMesh, half: Vec3, r: f32) -> f64 {
 #[test]
 fn on_the_box_the_pipeline_beats_finer_marching_cubes_with_fewer_triangles() {
     let r = 0.025;
-    let particles = dataset("analytic/box.xyz");
+    let particles = positions("analytic/box.xyz");
     let half = Vec3::new(0.5, 0.3, 0.2);
     let (full, _) = reconstruct(&particles, &ReconstructOptions::new(r)).unwrap();
     let mut fine_options = ReconstructOptions::raw(r);
@@ -255,7 +227,7 @@ fn on_the_box_the_pipeline_beats_finer_marching_cubes_with_fewer_triangles() {
 #[test]
 fn droplets_are_one_blob_and_500_spheres_of_radius_r() {
     let r = 0.025;
-    let particles = dataset("analytic/droplets.xyz");
+    let particles = positions("analytic/droplets.xyz");
     let (surface, stats) = reconstruct(&particles, &ReconstructOptions::new(r)).unwrap();
     assert_eq!(stats.isolated_particles, 500);
     assert_eq!(triangle_components(&surface.fluid).1, 1);
@@ -275,7 +247,7 @@ fn droplets_are_one_blob_and_500_spheres_of_radius_r() {
 #[test]
 fn on_the_sphere_post_processing_stays_as_close_as_marching_cubes() {
     let r = 0.025f32;
-    let particles = dataset("analytic/sphere.xyz");
+    let particles = positions("analytic/sphere.xyz");
     let deviation = |mesh: &TriMesh| {
         let d: Vec<f32> = mesh
             .positions
@@ -313,19 +285,13 @@ fn an_error_bound_beats_the_fixed_fraction_on_the_box() {
     // field, whose faces are rougher: the anisotropic default's faces are as flat with
     // either rule (0.65° fixed, 0.68° adaptive).
     let r = 0.025;
-    let particles = dataset("analytic/box.xyz");
+    let particles = positions("analytic/box.xyz");
     let half = Vec3::new(0.5, 0.3, 0.2);
     let mut base = ReconstructOptions::new(r);
     base.field.kernel = meniscus::field::Kernel::Isotropic;
     let (fixed, _) = reconstruct(&particles, &base).unwrap();
-    let adaptive_options = ReconstructOptions {
-        decimate: Some(DecimateOptions {
-            target_reduction: None,
-            max_error: Some(0.1 * r),
-            ..Default::default()
-        }),
-        ..base.clone()
-    };
+    let mut adaptive_options = base.clone();
+    adaptive_options.decimate = Some(DecimateOptions::error_bound(0.1 * r));
     let (adaptive, _) = reconstruct(&particles, &adaptive_options).unwrap();
     assert!(validate(&adaptive.fluid).is_closed_manifold());
     let (e_fixed, e_adaptive) = (
@@ -379,29 +345,19 @@ fn decimating_by_regions_keeps_the_surface_closed_deterministic_and_on_target() 
     // the band around the seams is decimated last.
     let r = 0.012;
     let (raw, _) = reconstruct(
-        &dataset("dambreak_small/ParticleData_Fluid_25.xyz"),
+        &positions("dambreak_small/ParticleData_Fluid_25.xyz"),
         &ReconstructOptions::raw(r),
     )
     .unwrap();
     let raw = raw.fluid;
-    let whole_options = DecimateOptions {
-        region_triangles: 0,
-        ..Default::default()
-    };
-    let region_options = DecimateOptions {
-        region_triangles: 8 * 1024,
-        ..Default::default()
-    };
+    let whole_options = DecimateOptions::default().with_region_triangles(0);
+    let region_options = DecimateOptions::default().with_region_triangles(8 * 1024);
     let run = |threads: usize, options: &DecimateOptions| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| {
-                let mut mesh = raw.clone();
-                let stats = decimate(&mut mesh, options);
-                (mesh, stats)
-            })
+        in_pool(threads, || {
+            let mut mesh = raw.clone();
+            let stats = decimate(&mut mesh, options);
+            (mesh, stats)
+        })
     };
     let (by_regions, stats) = run(2, &region_options);
     assert!(stats.regions >= 6, "{stats:?}");

@@ -4,24 +4,18 @@
 //! The figures these bounds come from are in `docs/quality.md` (measured there with the
 //! independent `meshq.py`; the measures here are simpler and computed in the test).
 
-use glam::{DVec3, Vec3};
+mod support;
+
+use glam::DVec3;
 use meniscus::field::Kernel;
-use meniscus::io::particles::read_particles;
 use meniscus::mesh::{InsideTest, TriMesh};
 use meniscus::pipeline::{reconstruct, ReconstructOptions};
-use std::path::PathBuf;
-
-fn dataset(rel: &str) -> Vec<Vec3> {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("datasets")
-        .join(rel);
-    read_particles(&path, None).unwrap().positions
-}
+use support::positions;
 
 fn surface(rel: &str, kernel: Kernel) -> TriMesh {
     let mut options = ReconstructOptions::new(0.025);
     options.field.kernel = kernel;
-    let (surface, _) = reconstruct(&dataset(rel), &options).unwrap();
+    let (surface, _) = reconstruct(&positions(rel), &options).unwrap();
     assert!(surface.spheres.centers.is_empty(), "{rel}");
     surface.fluid
 }
@@ -113,7 +107,7 @@ fn box_figures(mesh: &TriMesh) -> Figures {
 
 fn assert_particles_inside(mesh: &TriMesh, rel: &str) {
     let inside = InsideTest::new(mesh, 0.05);
-    let outside = dataset(rel)
+    let outside = positions(rel)
         .iter()
         .filter(|p| !inside.contains(**p))
         .count();

@@ -2,18 +2,13 @@
 //! closed 2-manifold output, distance to analytic surfaces, particles inside the surface,
 //! thread-count independence.
 
-use glam::Vec3;
-use meniscus::io::particles::read_particles;
-use meniscus::mesh::{validate, InsideTest, TriMesh};
-use meniscus::pipeline::{reconstruct, split_isolated, ReconstructOptions};
-use std::path::PathBuf;
+mod support;
 
-fn dataset(rel: &str) -> Vec<Vec3> {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("datasets")
-        .join(rel);
-    read_particles(&path, None).unwrap().positions
-}
+use glam::Vec3;
+use meniscus::mesh::{validate, InsideTest, TriMesh};
+use meniscus::pipeline::{reconstruct, ReconstructOptions};
+use support::split_isolated;
+use support::{in_pool, positions};
 
 /// Field + marching cubes only (no decimation or subdivision), isolated spheres on.
 /// Field, marching cubes and spheres with the paper's (isotropic) field, which these
@@ -44,7 +39,7 @@ fn median_edge(mesh: &TriMesh) -> f32 {
 #[test]
 fn analytic_sphere_is_one_closed_component_near_the_true_sphere() {
     let r = 0.025f32;
-    let (surface, _) = reconstruct(&dataset("analytic/sphere.xyz"), &raw_options(r)).unwrap();
+    let (surface, _) = reconstruct(&positions("analytic/sphere.xyz"), &raw_options(r)).unwrap();
     let mesh = &surface.fluid;
     assert_closed_manifold(mesh, "sphere");
     assert_eq!(validate(mesh).components, 1);
@@ -82,7 +77,7 @@ fn analytic_sphere_is_one_closed_component_near_the_true_sphere() {
 #[test]
 fn analytic_box_is_one_closed_component_near_the_true_box() {
     let r = 0.025f32;
-    let (surface, _) = reconstruct(&dataset("analytic/box.xyz"), &raw_options(r)).unwrap();
+    let (surface, _) = reconstruct(&positions("analytic/box.xyz"), &raw_options(r)).unwrap();
     let mesh = &surface.fluid;
     assert_closed_manifold(mesh, "box");
     assert_eq!(validate(mesh).components, 1);
@@ -123,7 +118,7 @@ fn analytic_box_is_one_closed_component_near_the_true_box() {
 }
 
 fn check_frame(rel: &str, r: f32) {
-    let particles = dataset(rel);
+    let particles = positions(rel);
     let options = raw_options(r);
     let (surface, stats) = reconstruct(&particles, &options).unwrap();
     assert_closed_manifold(&surface.fluid, rel);
@@ -161,17 +156,13 @@ fn every_double_dambreak_frame_is_closed_with_all_particles_inside() {
 
 #[test]
 fn reconstruction_does_not_depend_on_thread_count() {
-    let particles = dataset("dambreak_small/ParticleData_Fluid_31.xyz");
+    let particles = positions("dambreak_small/ParticleData_Fluid_31.xyz");
     let run = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| {
-                reconstruct(&particles, &ReconstructOptions::new(0.012))
-                    .unwrap()
-                    .0
-            })
+        in_pool(threads, || {
+            reconstruct(&particles, &ReconstructOptions::new(0.012))
+                .unwrap()
+                .0
+        })
     };
     let one = run(1);
     assert!(one.fluid.triangle_count() > 10_000);
@@ -184,7 +175,7 @@ fn the_iso_offset_moves_the_surface_outwards_onto_the_true_box() {
     // The paper's surface lies inside the outer particles; an offset of 0.133 r moves it
     // out (by 0.19 r on these faces): the flat faces then sit on the true box faces.
     let r = 0.025f32;
-    let particles = dataset("analytic/box.xyz");
+    let particles = positions("analytic/box.xyz");
     let half = Vec3::new(0.5, 0.3, 0.2);
     // Mean signed distance (positive outside) of the vertices of the flat faces (at least
     // 3r from every box edge) to the true box.
@@ -258,6 +249,6 @@ fn a_panic_inside_reconstruct_is_an_internal_error_not_a_crash() {
         "{text}"
     );
     // The library is still usable afterwards.
-    let (surface, _) = reconstruct(&dataset("analytic/sphere.xyz"), &options).unwrap();
+    let (surface, _) = reconstruct(&positions("analytic/sphere.xyz"), &options).unwrap();
     assert!(!surface.fluid.triangles.is_empty());
 }

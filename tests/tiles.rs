@@ -2,26 +2,14 @@
 //! several tile sizes (including tiles smaller than the influence radius) and thread
 //! counts.
 
+mod support;
+
 use glam::Vec3;
 use meniscus::field::{FieldOptions, Kernel};
 use meniscus::mesh::Surface;
 use meniscus::pipeline::{reconstruct, ReconstructOptions, ReconstructionStats};
 use meniscus::tiles::TileOptions;
-use std::path::PathBuf;
-
-fn xyz(rel: &str) -> Vec<Vec3> {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("datasets")
-        .join(rel);
-    let bytes = std::fs::read(&path).unwrap();
-    bytes
-        .chunks_exact(12)
-        .map(|c| {
-            let f = |k: usize| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap());
-            Vec3::new(f(0), f(1), f(2))
-        })
-        .collect()
-}
+use support::{in_pool, shipped_frames, xyz};
 
 /// Field, marching cubes and isolated particles only (no post-processing), tiled or not.
 struct Run {
@@ -30,22 +18,14 @@ struct Run {
 }
 
 fn run(positions: &[Vec3], options: &FieldOptions, tile: Option<u32>, threads: usize) -> Run {
-    let options = ReconstructOptions {
-        field: options.clone(),
-        tiles: TileOptions {
-            tile_size_cells: tile,
-            ..TileOptions::default()
-        },
-        ..ReconstructOptions::raw(options.particle_radius)
-    };
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap()
-        .install(|| {
-            let (surface, stats) = reconstruct(positions, &options).unwrap();
-            Run { surface, stats }
-        })
+    let mut field = options.clone();
+    let mut options = ReconstructOptions::raw(field.particle_radius);
+    std::mem::swap(&mut options.field, &mut field);
+    options.tiles = tile.map_or_else(TileOptions::default, TileOptions::tile_size);
+    in_pool(threads, || {
+        let (surface, stats) = reconstruct(positions, &options).unwrap();
+        Run { surface, stats }
+    })
 }
 
 fn assert_same(a: &Run, b: &Run, what: &str) {
@@ -76,14 +56,8 @@ fn assert_same(a: &Run, b: &Run, what: &str) {
 
 #[test]
 fn tiled_runs_equal_the_untiled_run_on_every_frame() {
-    let frames: Vec<(String, f32)> = [1, 9, 17, 25, 31, 45]
-        .iter()
-        .map(|k| (format!("dambreak_small/ParticleData_Fluid_{k}.xyz"), 0.012))
-        .chain(
-            [1, 6, 9, 13, 20]
-                .iter()
-                .map(|k| (format!("double_dambreak/ParticleData_Fluid_{k}.xyz"), 0.025)),
-        )
+    let frames: Vec<(String, f32)> = shipped_frames()
+        .into_iter()
         .chain(
             ["sphere", "box", "droplets", "sheet"]
                 .iter()
@@ -122,10 +96,8 @@ fn anisotropic_tiled_runs_equal_the_untiled_run_for_any_thread_count() {
         ("analytic/sheet.xyz", 0.025, [8, 16]),
     ] {
         let positions = xyz(rel);
-        let options = FieldOptions {
-            kernel: Kernel::Anisotropic,
-            ..FieldOptions::new(r)
-        };
+        let mut options = FieldOptions::new(r);
+        options.kernel = Kernel::Anisotropic;
         let whole = run(&positions, &options, None, 2);
         assert!(whole.surface.fluid.triangles.len() > 1000, "{rel}");
         assert_same(
@@ -152,11 +124,9 @@ fn anisotropic_tiled_runs_equal_the_untiled_run_for_any_thread_count() {
 fn tiles_smaller_than_the_influence_radius_and_any_thread_count() {
     // R = 8r at h = r/2 is 16 cells = 2 blocks, so one-block tiles are half of R.
     let positions = xyz("analytic/sheet.xyz");
-    let options = FieldOptions {
-        cell_size: 0.5,
-        influence_radius: 8.0,
-        ..FieldOptions::new(0.025)
-    };
+    let mut options = FieldOptions::new(0.025);
+    options.cell_size = 0.5;
+    options.influence_radius = 8.0;
     let whole = run(&positions, &options, None, 1);
     assert!(whole.stats.tiles.tiles == 1);
     let small = run(&positions, &options, Some(8), 3);

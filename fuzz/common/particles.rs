@@ -3,7 +3,9 @@
 
 use super::{check_error, input_file, scratch_dir};
 use meniscus::attributes::AttributeSelection;
-use meniscus::io::particles::{read_particles, ParticleFormat, ParticleSource, SpooledParticles};
+use meniscus::io::particles::{
+    read_particles, stream_positions, ParticleFormat, ParticleSource, SpooledParticles,
+};
 use meniscus::CancelToken;
 
 pub fn run(name: &str, format: ParticleFormat, data: &[u8]) {
@@ -16,14 +18,7 @@ pub fn run(name: &str, format: ParticleFormat, data: &[u8]) {
         positions += chunk.len();
         Ok(())
     };
-    let streamed = match format {
-        ParticleFormat::Bgeo => {
-            meniscus::io::particles::stream_bgeo_positions(&path, &mut count).map(Some)
-        }
-        ParticleFormat::Ply => meniscus::io::particles::stream_ply_positions(&path, &mut count),
-        ParticleFormat::Vtk => meniscus::io::particles::stream_vtk_positions(&path, &mut count),
-        ParticleFormat::Xyz => Ok(None),
-    };
+    let streamed = stream_positions(&path, Some(format), &mut count);
     if let Ok(Some(n)) = streamed {
         assert_eq!(n, positions, "the streamed count disagrees with the chunks");
     }

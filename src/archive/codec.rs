@@ -118,6 +118,33 @@ pub(crate) fn push_gates(stack: &mut Vec<Gate>, t: [u32; 3], skip_first: bool) {
     }
 }
 
+/// The position stream: the vertices of `mesh` in decoded order (`old_of_new`),
+/// quantized with `step`, each as the zigzag varints of its residual to its prediction
+/// in `plan`.
+fn position_residuals(
+    mesh: &TriMesh,
+    step: f64,
+    old_of_new: &[u32],
+    plan: &[Prediction],
+) -> Vec<u8> {
+    let quantized: Vec<[i64; 3]> = old_of_new
+        .iter()
+        .map(|&v| {
+            mesh.positions[v as usize]
+                .to_array()
+                .map(|c| (c as f64 / step).round() as i64)
+        })
+        .collect();
+    let mut residuals = Vec::with_capacity(quantized.len() * 4);
+    for (v, q) in quantized.iter().enumerate() {
+        let pred = plan[v].resolve(&quantized);
+        for k in 0..3 {
+            put_varint(&mut residuals, zigzag(q[k].wrapping_sub(pred[k])));
+        }
+    }
+    residuals
+}
+
 /// Version-1 payload: the three streams of `mesh` (quantization step `step`, world
 /// units) compressed with zstd `level`. Returns the payload and the vertex and triangle
 /// counts it holds.
@@ -285,21 +312,7 @@ impl HalfEdges {
             gate_edge.push((3 * t + (k + 2) % 3) as u32);
             gate_edge.push((3 * t + (k + 1) % 3) as u32);
         }
-        let quantized: Vec<[i64; 3]> = old_of_new
-            .iter()
-            .map(|&v| {
-                mesh.positions[v as usize]
-                    .to_array()
-                    .map(|c| (c as f64 / step).round() as i64)
-            })
-            .collect();
-        let mut residuals = Vec::with_capacity(quantized.len() * 4);
-        for (v, q) in quantized.iter().enumerate() {
-            let pred = numbering.plan[v].resolve(&quantized);
-            for k in 0..3 {
-                put_varint(&mut residuals, zigzag(q[k].wrapping_sub(pred[k])));
-            }
-        }
+        let residuals = position_residuals(mesh, step, &old_of_new, &numbering.plan);
         out.reserve(flags.len() + codes.len() + residuals.len() + 16);
         for stream in [&flags, &codes, &residuals] {
             put_varint(out, stream.len() as u64);

@@ -225,113 +225,32 @@ pub(crate) fn decode_frame(
     let fluid_triangles = read_count(&raw, pos, "fluid triangle count", nt)?;
     let (v, t) = (fluid_vertices, fluid_triangles);
     check_counts(v, t, raw.len() - *pos)?;
-    // `fused`: the first Loop step ran while decoding.
-    let (mut fluid, remaining_levels, fused) = match (shape, levels) {
-        // The first Loop step while decoding, the parts in parallel ...
-        (CLOSED_IN_PARTS, 1..) => (
-            decode_parts_subdivided(&raw, pos, v, t, step)?,
-            levels - 1,
-            true,
-        ),
-        (CLOSED_IN_PARTS, 0) => return Err("a mesh in parts must be subdivided".into()),
-        // ... or the whole mesh ...
-        (CLOSED, 1..) => (
-            decode_streams_subdivided(&raw, pos, v, t, step)?,
-            levels - 1,
-            true,
-        ),
-        // ... or the mesh as stored, subdivided after.
-        (OPEN | CLOSED, _) => (decode_streams(&raw, pos, v, t, step)?, levels, false),
-        _ => return Err(format!("unknown fluid shape {shape}")),
-    };
+    let mut fluid = decode_fluid(&raw, pos, shape, levels, v, t, step)?;
     if attribute_streams.is_none() {
-        subdivide(
-            &mut fluid,
-            &SubdivideOptions {
-                levels: remaining_levels,
-            },
-        );
+        fluid.subdivide_rest();
     }
-    let count = read_count(&raw, pos, "sphere count", nt)?;
-    let mut spheres = SphereInstances::default();
-    if count > 0 {
-        let half = step / 2.0;
-        let tv = read_count(&raw, pos, "sphere template vertex count", nv)?;
-        let tt = read_count(&raw, pos, "sphere template triangle count", nt)?;
-        // Three coordinates of at least a byte each per centre.
-        if count > (raw.len() - *pos) / 3 {
-            return Err(format!(
-                "{count} sphere centres cannot fit in the {} bytes left",
-                raw.len() - *pos
-            ));
-        }
-        spheres.template = decode_streams(&raw, pos, tv, tt, half)?;
-        spheres.centers.reserve(count);
-        let mut q = [0i64; 3];
-        for _ in 0..count {
-            for c in &mut q {
-                let d = get_varint(&raw, pos).ok_or("sphere centres cut off")?;
-                *c = c.wrapping_add(unzigzag(d));
-            }
-            spheres
-                .centers
-                .push(Vec3::from_array(q.map(|c| (c as f64 * half) as f32)));
-        }
-    }
+    let spheres = decode_spheres(&raw, pos, nv, nt, step)?;
     if *pos != raw.len() {
         return Err("trailing bytes after the frame".into());
     }
     drop(raw);
+    let count = spheres.centers.len();
+    let mut surface = Surface {
+        fluid: fluid.mesh,
+        spheres,
+    };
     if let Some((descriptor, streams)) = attribute_streams {
-        // Values of the control vertices; the fused step's values by the same masks as
-        // its positions, then the remaining steps with the positions.
         let (control, instances) = attributes::decode_streams(descriptor, streams, v, count)?;
-        fluid.attributes = if fused {
-            control
-                .into_iter()
-                .map(|a| {
-                    let values = loop_values_of_closed(
-                        &fluid.triangles,
-                        v,
-                        fluid.vertex_count(),
-                        &a.values,
-                        a.components,
-                    )
-                    .ok_or("the subdivided fluid mesh is not a Loop step of its control mesh")?;
-                    Ok(crate::mesh::Attribute { values, ..a })
-                })
-                .collect::<Result<_, String>>()?
-        } else {
-            control
-        };
-        subdivide(
-            &mut fluid,
-            &SubdivideOptions {
-                levels: remaining_levels,
-            },
-        );
-        spheres.attributes = instances;
-        for a in &fluid.attributes {
-            if a.len() != fluid.vertex_count() {
-                return Err(format!(
-                    "attribute {:?} decodes to {} items for {} fluid vertices",
-                    a.name,
-                    a.len(),
-                    fluid.vertex_count()
-                ));
-            }
-        }
-        for a in &spheres.attributes {
-            if a.len() != spheres.centers.len() {
-                return Err(format!(
-                    "attribute {:?} decodes to {} items for {} sphere instances",
-                    a.name,
-                    a.len(),
-                    spheres.centers.len()
-                ));
-            }
-        }
+        add_attributes(
+            &mut surface,
+            fluid.fused,
+            fluid.remaining_levels,
+            v,
+            control,
+            instances,
+        )?;
     }
+    let (fluid, spheres) = (&surface.fluid, &surface.spheres);
     let got_vertices = fluid.vertex_count() + count * spheres.template.vertex_count();
     let got_triangles = fluid.triangle_count() + count * spheres.template.triangle_count();
     if (got_vertices, got_triangles) != (vertices, triangles) {
@@ -339,5 +258,158 @@ pub(crate) fn decode_frame(
             "decodes to {got_vertices} vertices and {got_triangles} triangles, header says {vertices} and {triangles}"
         ));
     }
-    Ok(Surface { fluid, spheres })
+    Ok(surface)
+}
+
+/// The fluid mesh as decoded, before its remaining Loop steps.
+struct DecodedFluid {
+    mesh: TriMesh,
+    /// Loop steps still to run.
+    remaining_levels: u32,
+    /// The first Loop step ran while decoding.
+    fused: bool,
+}
+
+impl DecodedFluid {
+    /// Runs the remaining Loop steps.
+    fn subdivide_rest(&mut self) {
+        subdivide(
+            &mut self.mesh,
+            &SubdivideOptions {
+                levels: self.remaining_levels,
+            },
+        );
+        self.remaining_levels = 0;
+    }
+}
+
+/// Decodes the fluid mesh of `v` vertices and `t` triangles stored with `shape`, to have
+/// `levels` Loop steps.
+fn decode_fluid(
+    raw: &[u8],
+    pos: &mut usize,
+    shape: u8,
+    levels: u32,
+    v: usize,
+    t: usize,
+    step: f64,
+) -> Result<DecodedFluid, String> {
+    let (mesh, remaining_levels, fused) = match (shape, levels) {
+        // The first Loop step while decoding, the parts in parallel ...
+        (CLOSED_IN_PARTS, 1..) => (
+            decode_parts_subdivided(raw, pos, v, t, step)?,
+            levels - 1,
+            true,
+        ),
+        (CLOSED_IN_PARTS, 0) => return Err("a mesh in parts must be subdivided".into()),
+        // ... or the whole mesh ...
+        (CLOSED, 1..) => (
+            decode_streams_subdivided(raw, pos, v, t, step)?,
+            levels - 1,
+            true,
+        ),
+        // ... or the mesh as stored, subdivided after.
+        (OPEN | CLOSED, _) => (decode_streams(raw, pos, v, t, step)?, levels, false),
+        _ => return Err(format!("unknown fluid shape {shape}")),
+    };
+    Ok(DecodedFluid {
+        mesh,
+        remaining_levels,
+        fused,
+    })
+}
+
+/// Decodes the sphere instances: the template, on the lattice of half the step, and the
+/// centres (none when the count is 0).
+fn decode_spheres(
+    raw: &[u8],
+    pos: &mut usize,
+    nv: u64,
+    nt: u64,
+    step: f64,
+) -> Result<SphereInstances, String> {
+    let count = read_count(raw, pos, "sphere count", nt)?;
+    let mut spheres = SphereInstances::default();
+    if count == 0 {
+        return Ok(spheres);
+    }
+    let half = step / 2.0;
+    let tv = read_count(raw, pos, "sphere template vertex count", nv)?;
+    let tt = read_count(raw, pos, "sphere template triangle count", nt)?;
+    // Three coordinates of at least a byte each per centre.
+    if count > (raw.len() - *pos) / 3 {
+        return Err(format!(
+            "{count} sphere centres cannot fit in the {} bytes left",
+            raw.len() - *pos
+        ));
+    }
+    spheres.template = decode_streams(raw, pos, tv, tt, half)?;
+    spheres.centers.reserve(count);
+    let mut q = [0i64; 3];
+    for _ in 0..count {
+        for c in &mut q {
+            let d = get_varint(raw, pos).ok_or("sphere centres cut off")?;
+            *c = c.wrapping_add(unzigzag(d));
+        }
+        spheres
+            .centers
+            .push(Vec3::from_array(q.map(|c| (c as f64 * half) as f32)));
+    }
+    Ok(spheres)
+}
+
+/// Gives the decoded surface its attributes: the values `control` of the `v` control
+/// vertices through the fused Loop step (by the same masks as its positions, when it
+/// ran) and the remaining `levels` steps, and the instances' values as stored; checks
+/// that every attribute has one item per vertex or instance.
+fn add_attributes(
+    surface: &mut Surface,
+    fused: bool,
+    levels: u32,
+    v: usize,
+    control: Vec<crate::mesh::Attribute>,
+    instances: Vec<crate::mesh::Attribute>,
+) -> Result<(), String> {
+    let (fluid, spheres) = (&mut surface.fluid, &mut surface.spheres);
+    fluid.attributes = if fused {
+        control
+            .into_iter()
+            .map(|a| {
+                let values = loop_values_of_closed(
+                    &fluid.triangles,
+                    v,
+                    fluid.vertex_count(),
+                    &a.values,
+                    a.components,
+                )
+                .ok_or("the subdivided fluid mesh is not a Loop step of its control mesh")?;
+                Ok(crate::mesh::Attribute { values, ..a })
+            })
+            .collect::<Result<_, String>>()?
+    } else {
+        control
+    };
+    subdivide(fluid, &SubdivideOptions { levels });
+    spheres.attributes = instances;
+    for a in &fluid.attributes {
+        if a.len() != fluid.vertex_count() {
+            return Err(format!(
+                "attribute {:?} decodes to {} items for {} fluid vertices",
+                a.name,
+                a.len(),
+                fluid.vertex_count()
+            ));
+        }
+    }
+    for a in &spheres.attributes {
+        if a.len() != spheres.centers.len() {
+            return Err(format!(
+                "attribute {:?} decodes to {} items for {} sphere instances",
+                a.name,
+                a.len(),
+                spheres.centers.len()
+            ));
+        }
+    }
+    Ok(())
 }

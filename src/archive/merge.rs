@@ -1,8 +1,9 @@
 //! `archive merge`: several archives joined into one without re-encoding.
 
-use super::{
-    archive_error, index_bytes, ArchiveReader, RecordHeader, HEADER_LEN, MAGIC, RECORD_HEADER_LEN,
+use super::container::{
+    archive_error, file_header, index_bytes, RecordHeader, HEADER_LEN, RECORD_HEADER_LEN, VERSION,
 };
+use super::reader::ArchiveReader;
 use crate::error::{Error, Result};
 use std::fs::File;
 use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
@@ -53,6 +54,18 @@ impl Drop for TempFile {
 /// a frame would). Inputs are opened one at a time (each read whole, as
 /// [`ArchiveReader::open`] does), then their records are read one by one.
 pub fn merge(inputs: &[PathBuf], output: &Path) -> Result<MergeStats> {
+    check_output(inputs, output)?;
+    let (entries, version) = plan(inputs)?;
+    let bytes = write_merged(inputs, &entries, version, output)?;
+    Ok(MergeStats {
+        inputs: inputs.len(),
+        frames: entries.len(),
+        bytes,
+    })
+}
+
+/// Refuses no inputs, and an `output` that exists and is none of them.
+fn check_output(inputs: &[PathBuf], output: &Path) -> Result<()> {
     if inputs.is_empty() {
         return Err(Error::io(
             output,
@@ -74,6 +87,12 @@ pub fn merge(inputs: &[PathBuf], output: &Path) -> Result<MergeStats> {
             ));
         }
     }
+    Ok(())
+}
+
+/// The records to copy, in increasing frame order, and the merged archive's version;
+/// refuses damaged inputs, mixed version classes, error bounds and frame numbers.
+fn plan(inputs: &[PathBuf]) -> Result<(Vec<Entry>, u32)> {
     let mut entries: Vec<Entry> = Vec::new();
     // The first input (and frame) that set the version class and the step.
     let mut version: Option<(u32, usize)> = None;
@@ -146,8 +165,12 @@ pub fn merge(inputs: &[PathBuf], output: &Path) -> Result<MergeStats> {
         };
         return Err(archive_error(b, Some(w[1].number), message));
     }
-    let version = version.map_or(super::VERSION, |(v, _)| v);
+    Ok((entries, version.map_or(VERSION, |(v, _)| v)))
+}
 
+/// Writes the merged archive to a temporary file beside `output`, copying and checking
+/// each record of `entries`, then renames it into place; returns its bytes.
+fn write_merged(inputs: &[PathBuf], entries: &[Entry], version: u32, output: &Path) -> Result<u64> {
     if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     }
@@ -162,15 +185,12 @@ pub fn merge(inputs: &[PathBuf], output: &Path) -> Result<MergeStats> {
     let mut temp = TempFile(Some(temp_path.clone()));
     let mut out = BufWriter::new(file);
     let write_err = |e| Error::io(&temp_path, e);
-    let mut header = [0u8; HEADER_LEN as usize];
-    header[0..8].copy_from_slice(MAGIC);
-    header[8..12].copy_from_slice(&version.to_le_bytes());
-    out.write_all(&header).map_err(write_err)?;
+    out.write_all(&file_header(version)).map_err(write_err)?;
     let mut files: Vec<Option<File>> = inputs.iter().map(|_| None).collect();
     let mut index: Vec<(i64, u64)> = Vec::with_capacity(entries.len());
     let mut end = HEADER_LEN;
     let mut record = Vec::new();
-    for e in &entries {
+    for e in entries {
         let path = &inputs[e.input];
         let file = match &mut files[e.input] {
             Some(f) => f,
@@ -204,9 +224,5 @@ pub fn merge(inputs: &[PathBuf], output: &Path) -> Result<MergeStats> {
     drop(file);
     std::fs::rename(&temp_path, output).map_err(|e| Error::io(output, e))?;
     temp.0 = None;
-    Ok(MergeStats {
-        inputs: inputs.len(),
-        frames: entries.len(),
-        bytes: end + tail.len() as u64,
-    })
+    Ok(end + tail.len() as u64)
 }

@@ -26,6 +26,7 @@ use crate::mesh::TriMesh;
 use crate::subdivision::{children, loop_betas};
 use glam::Vec3;
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 
 /// Control triangles per part: a mesh of `n` triangles has `n / PART_TRIANGLES` parts
 /// (at least one) of equal size.
@@ -361,6 +362,63 @@ fn side_corners(st: &State, side: u32) -> [u32; 3] {
     [tri[k], tri[(k + 1) % 3], tri[(k + 2) % 3]]
 }
 
+/// One part's slices of the subdivided mesh's outputs, written by [`PartOutput::write`].
+struct PartOutput<'a> {
+    part: usize,
+    state: &'a State<'a>,
+    /// The part's own control vertices' vertex points.
+    vertices: &'a mut [MaybeUninit<Vec3>],
+    /// The edge points of its edges (its cut edges' are written apart).
+    edge_points: &'a mut [MaybeUninit<Vec3>],
+    /// Four children per triangle.
+    triangles: &'a mut [MaybeUninit<[u32; 3]>],
+    /// The number of its first edge point in the subdivided mesh.
+    edge_base: u32,
+}
+
+impl PartOutput<'_> {
+    /// Writes the part's slices (edge points of cut edges numbered from `cut_base`);
+    /// returns whether it filled each exactly.
+    fn write(self, numbers: &Numbers, beta: &[f64], cut_base: u32) -> bool {
+        let (p, st) = (self.part, self.state);
+        let own = (0..st.positions.len()).filter(|&k| numbers.own(p, k));
+        let mut vertex_count = 0;
+        for (out, k) in self.vertices.iter_mut().zip(own) {
+            out.write(st.vertex_point(k, beta));
+            vertex_count += 1;
+        }
+        for (out, e) in self.edge_points.iter_mut().zip(&st.edge_points) {
+            out.write(*e);
+        }
+        let ids = &numbers.global[p];
+        let mut triangle_count = 0;
+        for ((out, tri), sides) in self
+            .triangles
+            .chunks_exact_mut(4)
+            .zip(&st.triangles)
+            .zip(&st.side_edge)
+        {
+            let m = sides.map(|e| {
+                if e & CUT != 0 {
+                    cut_base + (e & !CUT)
+                } else {
+                    self.edge_base + e
+                }
+            });
+            for (slot, child) in out
+                .iter_mut()
+                .zip(children(tri.map(|v| ids[v as usize]), m))
+            {
+                slot.write(child);
+            }
+            triangle_count += 4;
+        }
+        vertex_count == self.vertices.len()
+            && self.edge_points.len() == st.edge_points.len()
+            && triangle_count == self.triangles.len()
+    }
+}
+
 /// The subdivided mesh, part by part in parallel: control vertices (each part's own, in
 /// part order), the edge points of each part, then those of the cut edges.
 fn write_subdivision(
@@ -407,48 +465,20 @@ fn write_subdivision(
             let (e, er) = std::mem::take(&mut erest).split_at_mut(st.edge_points.len());
             let (t, tr) = std::mem::take(&mut trest).split_at_mut(st.triangles.len() * 4);
             (vrest, erest, trest) = (vr, er, tr);
-            jobs.push((p, st, v, e, t, edge_base));
+            jobs.push(PartOutput {
+                part: p,
+                state: st,
+                vertices: v,
+                edge_points: e,
+                triangles: t,
+                edge_base,
+            });
             edge_base += st.edge_points.len() as u32;
         }
         let covered = vrest.is_empty() && erest.is_empty() && trest.is_empty();
         let complete = jobs
             .into_par_iter()
-            .map(|(p, st, vertex_out, edge_out, tri_out, edge_base)| {
-                let own = (0..st.positions.len()).filter(|&k| numbers.own(p, k));
-                let mut vertex_count = 0;
-                for (out, k) in vertex_out.iter_mut().zip(own) {
-                    out.write(st.vertex_point(k, &beta));
-                    vertex_count += 1;
-                }
-                for (out, e) in edge_out.iter_mut().zip(&st.edge_points) {
-                    out.write(*e);
-                }
-                let ids = &numbers.global[p];
-                let mut triangle_count = 0;
-                for ((out, tri), sides) in tri_out
-                    .chunks_exact_mut(4)
-                    .zip(&st.triangles)
-                    .zip(&st.side_edge)
-                {
-                    let m = sides.map(|e| {
-                        if e & CUT != 0 {
-                            cut_base + (e & !CUT)
-                        } else {
-                            edge_base + e
-                        }
-                    });
-                    for (slot, child) in out
-                        .iter_mut()
-                        .zip(children(tri.map(|v| ids[v as usize]), m))
-                    {
-                        slot.write(child);
-                    }
-                    triangle_count += 4;
-                }
-                vertex_count == vertex_out.len()
-                    && edge_out.len() == st.edge_points.len()
-                    && triangle_count == tri_out.len()
-            })
+            .map(|job| job.write(numbers, &beta, cut_base))
             .all(|filled| filled);
         assert!(covered && complete, "every output slot is written");
     }

@@ -1,29 +1,15 @@
 //! Particle attributes carried to the surface (velocity for motion blur, density, any
 //! scalar or vector the input holds).
 //!
-//! **Input:** the particles' selected attributes (the payload the tile engine carries
-//! beside the positions) and the final surface. **Output:** one value per surface vertex,
-//! the normalized kernel-weighted mean of the particles within the influence radius `R`
-//! of the vertex, with the field's kernel `k(s) = max(0, (1 − s²)³)`, `s = |x − x_i| / R`:
+//! This module is a leaf: the attribute types ([`Attribute`], [`AttributeLayout`]), the
+//! choice of which a run carries ([`AttributeSelection`]) and their checks, which the
+//! readers (`io`), the tiles and the writers share. Selecting the attributes of read
+//! particles is [`crate::io::particles::Particles::select`].
 //!
-//! ```text
-//! a(x) = Σ_i k(|x − x_i| / R) · a_i  /  Σ_i k(|x − x_i| / R)
-//! ```
-//!
-//! evaluated at the **final** vertex positions (after decimation and subdivision), so the
-//! value is a function of the position alone: the particles within `R` are summed in the
-//! engine's canonical order (home half-block, input index) in f64, the same in every
-//! tiling and for every thread count, bit for bit. A vertex with no particle within `R`
-//! takes the value of its nearest particle (the lowest input index on a tie). An isolated
-//! particle's sphere takes its particle's value.
-//!
-//! A constant attribute is reproduced exactly (to f32 rounding); a linear one,
-//! `a(x) = A·x + b`, comes out as `A·x̄ + b` with `x̄` the kernel-weighted mean position,
-//! which lies within `R` of the vertex: the error is at most `‖A‖·R`.
+//! The stage that carries the attributes to the surface is `transfer`.
 
-mod transfer;
-
-pub(crate) use transfer::transfer;
+use crate::error::{Error, Result};
+use std::path::Path;
 
 /// Per-item values of one named attribute: per particle, per mesh vertex or per sphere
 /// instance, `components` floats each.
@@ -74,7 +60,7 @@ impl AttributeLayout {
 }
 
 /// Floats per payload row of `layout`.
-pub fn payload_width(layout: &[AttributeLayout]) -> usize {
+pub(crate) fn payload_width(layout: &[AttributeLayout]) -> usize {
     layout.iter().map(|a| a.components).sum()
 }
 
@@ -117,101 +103,69 @@ impl AttributeSelection {
     pub fn is_none(&self) -> bool {
         *self == AttributeSelection::None
     }
+
+    /// The indices into `available` (an input's attribute names, in file order) of the
+    /// attributes this selection asks for, in its order. A name the input lacks (or
+    /// selected twice) is an [`Error::Attribute`] naming `path` and listing the
+    /// names it has. The one rule for whole-file and streaming readers.
+    pub(crate) fn resolve(&self, path: &Path, available: &[&str]) -> Result<Vec<usize>> {
+        Ok(match self {
+            AttributeSelection::None => Vec::new(),
+            AttributeSelection::All => (0..available.len()).collect(),
+            AttributeSelection::Velocity => available
+                .iter()
+                .position(|n| VELOCITY_NAMES.iter().any(|v| n.eq_ignore_ascii_case(v)))
+                .into_iter()
+                .collect(),
+            AttributeSelection::Names(names) => {
+                let mut wanted = Vec::with_capacity(names.len());
+                for name in names {
+                    let exact = available.iter().position(|n| *n == name.as_str());
+                    let folded: Vec<usize> = (0..available.len())
+                        .filter(|&k| available[k].eq_ignore_ascii_case(name))
+                        .collect();
+                    let k = match (exact, folded.as_slice()) {
+                        (Some(k), _) => k,
+                        (None, [k]) => *k,
+                        _ => {
+                            return Err(Error::Attribute {
+                                path: path.to_path_buf(),
+                                attribute: name.clone(),
+                                message: if available.is_empty() {
+                                    "the input holds no point attributes".into()
+                                } else {
+                                    format!("not in the input, which has: {}", available.join(", "))
+                                },
+                            })
+                        }
+                    };
+                    if wanted.contains(&k) {
+                        return Err(Error::Attribute {
+                            path: path.to_path_buf(),
+                            attribute: name.clone(),
+                            message: "selected twice".into(),
+                        });
+                    }
+                    wanted.push(k);
+                }
+                wanted
+            }
+        })
+    }
 }
 
 /// Names the default selection takes as the velocity (compared ignoring case).
 pub const VELOCITY_NAMES: [&str; 3] = ["v", "vel", "velocity"];
 
-/// The indices into `available` (an input's attribute names, in file order) of the
-/// attributes `selection` asks for, in its order. A name the input lacks (or selected
-/// twice) is an [`crate::Error::Attribute`] naming `path` and listing the names it has.
-/// The one rule for whole-file and streaming readers.
-pub fn resolve_selection(
-    path: &std::path::Path,
-    available: &[&str],
-    selection: &AttributeSelection,
-) -> crate::Result<Vec<usize>> {
-    Ok(match selection {
-        AttributeSelection::None => Vec::new(),
-        AttributeSelection::All => (0..available.len()).collect(),
-        AttributeSelection::Velocity => available
-            .iter()
-            .position(|n| VELOCITY_NAMES.iter().any(|v| n.eq_ignore_ascii_case(v)))
-            .into_iter()
-            .collect(),
-        AttributeSelection::Names(names) => {
-            let mut wanted = Vec::with_capacity(names.len());
-            for name in names {
-                let exact = available.iter().position(|n| *n == name.as_str());
-                let folded: Vec<usize> = (0..available.len())
-                    .filter(|&k| available[k].eq_ignore_ascii_case(name))
-                    .collect();
-                let k = match (exact, folded.as_slice()) {
-                    (Some(k), _) => k,
-                    (None, [k]) => *k,
-                    _ => {
-                        return Err(crate::Error::Attribute {
-                            path: path.to_path_buf(),
-                            attribute: name.clone(),
-                            message: if available.is_empty() {
-                                "the input holds no point attributes".into()
-                            } else {
-                                format!("not in the input, which has: {}", available.join(", "))
-                            },
-                        })
-                    }
-                };
-                if wanted.contains(&k) {
-                    return Err(crate::Error::Attribute {
-                        path: path.to_path_buf(),
-                        attribute: name.clone(),
-                        message: "selected twice".into(),
-                    });
-                }
-                wanted.push(k);
-            }
-            wanted
-        }
-    })
-}
-
-/// Keeps the attributes of `particles` that `selection` asks for, in its order, after
-/// checking each: `components × particles` values, all finite. `path` names the input in
-/// errors. A name the input lacks is an error listing the names it has
-/// ([`resolve_selection`]).
-pub fn select_attributes(
-    path: &std::path::Path,
-    mut particles: crate::io::particles::Particles,
-    selection: &AttributeSelection,
-) -> crate::Result<crate::io::particles::Particles> {
-    let available: Vec<&str> = particles
-        .attributes
-        .iter()
-        .map(|a| a.name.as_str())
-        .collect();
-    let wanted = resolve_selection(path, &available, selection)?;
-    let count = particles.positions.len();
-    let mut columns: Vec<Option<Attribute>> = std::mem::take(&mut particles.attributes)
-        .into_iter()
-        .map(Some)
-        .collect();
-    for k in wanted {
-        let a = columns[k].take().expect("each selected once");
-        check_attribute(path, &a, count)?;
-        particles.attributes.push(a);
-    }
-    Ok(particles)
-}
-
 /// The error for the non-finite `value` of `attribute` at `particle` of `path`, as
 /// [`check_attribute`] reports it.
-pub fn non_finite_attribute(
-    path: &std::path::Path,
+pub(crate) fn non_finite_attribute(
+    path: &Path,
     attribute: &str,
     particle: usize,
     value: f32,
-) -> crate::Error {
-    crate::Error::Attribute {
+) -> Error {
+    Error::Attribute {
         path: path.to_path_buf(),
         attribute: attribute.to_string(),
         message: format!("particle {particle} has a non-finite value {value}"),
@@ -219,8 +173,8 @@ pub fn non_finite_attribute(
 }
 
 /// Checks that `a` holds `count` items of at least one component, all finite.
-pub fn check_attribute(path: &std::path::Path, a: &Attribute, count: usize) -> crate::Result<()> {
-    let fail = |message: String| crate::Error::Attribute {
+pub(crate) fn check_attribute(path: &Path, a: &Attribute, count: usize) -> Result<()> {
+    let fail = |message: String| Error::Attribute {
         path: path.to_path_buf(),
         attribute: a.name.clone(),
         message,

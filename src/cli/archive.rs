@@ -5,7 +5,7 @@ use crate::{Failure, FarmArgs};
 use clap::Subcommand;
 use meniscus::archive::{ArchiveOptions, ArchiveReader, ArchiveWriter};
 use meniscus::io::mesh::{read_mesh, MeshWriteOptions};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(Subcommand)]
 pub(crate) enum ArchiveCommand {
@@ -69,130 +69,16 @@ pub(crate) fn archive(
     command: ArchiveCommand,
     cancel: &meniscus::CancelToken,
 ) -> Result<(), Failure> {
-    let text = Failure::from;
     match command {
-        ArchiveCommand::Info { file } => {
-            let r = ArchiveReader::open(&file).map_err(text)?;
-            let bytes = std::fs::metadata(&file)
-                .map_err(|e| text(meniscus::Error::io(&file, e)))?
-                .len();
-            let triangles: u64 = r.frames().iter().map(|f| f.triangles as u64).sum();
-            println!(
-                "{}: {} frames, {} triangles, {} bytes, {:.3} bytes/triangle{}",
-                file.display(),
-                r.frames().len(),
-                triangles,
-                bytes,
-                bytes as f64 / triangles.max(1) as f64,
-                if r.recovered_by_scan() {
-                    " (no index: recovered by scanning)"
-                } else {
-                    ""
-                }
-            );
-            if let (Some(first), Some(last)) = (r.frames().first(), r.frames().last()) {
-                println!(
-                    "frames {} .. {}, error bound {} (world units)",
-                    first.number,
-                    last.number,
-                    first.step / 2.0
-                );
-            }
-            for f in r.frames().iter().filter(|f| !f.attributes.is_empty()) {
-                let names: Vec<String> = f
-                    .attributes
-                    .iter()
-                    .map(|a| format!("{} ({} × {:?})", a.name, a.components, a.target))
-                    .collect();
-                println!(
-                    "frame {}: attributes {}, error bound {}",
-                    f.number,
-                    names.join(", "),
-                    f.attribute_error_bound.unwrap_or(0.0)
-                );
-            }
-        }
-        ArchiveCommand::List { file } => {
-            let r = ArchiveReader::open(&file).map_err(text)?;
-            println!(
-                "{:>8} {:>10} {:>10} {:>12}",
-                "frame", "vertices", "triangles", "bytes"
-            );
-            for f in r.frames() {
-                println!(
-                    "{:>8} {:>10} {:>10} {:>12}",
-                    f.number,
-                    f.vertices,
-                    f.triangles,
-                    f.payload_bytes + 48
-                );
-            }
-        }
-        ArchiveCommand::Verify { file } => {
-            let r = ArchiveReader::open(&file).map_err(text)?;
-            let v = r.verify();
-            for (n, why) in &v.damaged {
-                println!("frame {n}: DAMAGED: {why}");
-            }
-            for why in &v.damage {
-                println!("DAMAGED: {why}");
-            }
-            println!(
-                "{} frames good, {} damaged{}{}",
-                v.good.len(),
-                v.damaged.len(),
-                if v.recovered_by_scan {
-                    ", index missing (interrupted write): recovered by scanning"
-                } else {
-                    ""
-                },
-                if v.trailing_bytes > 0 {
-                    format!(
-                        ", {} trailing bytes of an incomplete frame",
-                        v.trailing_bytes
-                    )
-                } else {
-                    String::new()
-                }
-            );
-            if !v.is_clean() {
-                return Err(Failure::Run(format!(
-                    "{}: damaged: {} damaged frame(s), {} other problem(s)",
-                    file.display(),
-                    v.damaged.len(),
-                    v.damage.len()
-                )));
-            }
-        }
+        ArchiveCommand::Info { file } => info(&file),
+        ArchiveCommand::List { file } => list(&file),
+        ArchiveCommand::Verify { file } => verify(&file),
         ArchiveCommand::Extract {
             file,
             frame,
             output,
-        } => {
-            let r = ArchiveReader::open(&file).map_err(text)?;
-            let numbers = frame.map(|n| vec![n]);
-            let written = r
-                .extract(
-                    numbers.as_deref(),
-                    &output,
-                    &MeshWriteOptions::default(),
-                    cancel,
-                )
-                .map_err(text)?;
-            if frame.is_none() {
-                eprintln!("{} frame(s) written", written.len());
-            }
-        }
-        ArchiveCommand::Merge { inputs, output } => {
-            let stats = meniscus::archive::merge(&inputs, &output).map_err(text)?;
-            eprintln!(
-                "{} frame(s) from {} archive(s) merged into {} ({} bytes)",
-                stats.frames,
-                stats.inputs,
-                output.display(),
-                stats.bytes
-            );
-        }
+        } => extract(&file, frame, &output, cancel),
+        ArchiveCommand::Merge { inputs, output } => merge(&inputs, &output),
         ArchiveCommand::Pack {
             input,
             output,
@@ -200,32 +86,177 @@ pub(crate) fn archive(
             attribute_error_bound,
             farm,
         } => {
-            let frames = meniscus::sequence::choose(&input, &farm.choice()).map_err(text)?;
             let options = ArchiveOptions {
                 attribute_error_bound,
                 ..ArchiveOptions::new(error_bound)
             };
-            let mut w = if output.exists() {
-                // Frames it holds are refused before it is touched.
-                let numbers: Vec<i64> = frames.iter().map(|f| f.number).collect();
-                ArchiveReader::open(&output)
-                    .and_then(|r| r.check_new_frames(&numbers))
-                    .map_err(text)?;
-                ArchiveWriter::open_append(&output, &options)
-            } else {
-                ArchiveWriter::create(&output, &options)
-            }
-            .map_err(text)?;
-            // On an error or a Ctrl-C (checked between frames) the writer, dropped, still
-            // writes the index of the frames packed so far.
-            for f in &frames {
-                cancel.check().map_err(text)?;
-                let mesh = read_mesh(&f.input).map_err(text)?;
-                w.append(f.number, &mesh).map_err(text)?;
-            }
-            w.finish().map_err(text)?;
-            eprintln!("{} frame(s) packed into {}", frames.len(), output.display());
+            pack(&input, &output, &options, &farm, cancel)
         }
     }
+}
+
+/// `archive info`: frames, triangles, bytes, the error bounds and attributes.
+fn info(file: &Path) -> Result<(), Failure> {
+    let r = ArchiveReader::open(file)?;
+    let bytes = std::fs::metadata(file)
+        .map_err(|e| meniscus::Error::io(file, e))?
+        .len();
+    let triangles: u64 = r.frames().iter().map(|f| f.triangles as u64).sum();
+    println!(
+        "{}: {} frames, {} triangles, {} bytes, {:.3} bytes/triangle{}",
+        file.display(),
+        r.frames().len(),
+        triangles,
+        bytes,
+        bytes as f64 / triangles.max(1) as f64,
+        if r.recovered_by_scan() {
+            " (no index: recovered by scanning)"
+        } else {
+            ""
+        }
+    );
+    if let (Some(first), Some(last)) = (r.frames().first(), r.frames().last()) {
+        println!(
+            "frames {} .. {}, error bound {} (world units)",
+            first.number,
+            last.number,
+            first.step / 2.0
+        );
+    }
+    for f in r.frames().iter().filter(|f| !f.attributes.is_empty()) {
+        let names: Vec<String> = f
+            .attributes
+            .iter()
+            .map(|a| format!("{} ({} × {:?})", a.name, a.components, a.target))
+            .collect();
+        println!(
+            "frame {}: attributes {}, error bound {}",
+            f.number,
+            names.join(", "),
+            f.attribute_error_bound.unwrap_or(0.0)
+        );
+    }
+    Ok(())
+}
+
+/// `archive list`: one line per frame, its record's bytes.
+fn list(file: &Path) -> Result<(), Failure> {
+    let r = ArchiveReader::open(file)?;
+    println!(
+        "{:>8} {:>10} {:>10} {:>12}",
+        "frame", "vertices", "triangles", "bytes"
+    );
+    for f in r.frames() {
+        println!(
+            "{:>8} {:>10} {:>10} {:>12}",
+            f.number,
+            f.vertices,
+            f.triangles,
+            f.record_bytes()
+        );
+    }
+    Ok(())
+}
+
+/// `archive verify`: every frame decoded; a failure when anything is damaged.
+fn verify(file: &Path) -> Result<(), Failure> {
+    let r = ArchiveReader::open(file)?;
+    let v = r.verify();
+    for (n, why) in &v.damaged {
+        println!("frame {n}: DAMAGED: {why}");
+    }
+    for why in &v.damage {
+        println!("DAMAGED: {why}");
+    }
+    println!(
+        "{} frames good, {} damaged{}{}",
+        v.good.len(),
+        v.damaged.len(),
+        if v.recovered_by_scan {
+            ", index missing (interrupted write): recovered by scanning"
+        } else {
+            ""
+        },
+        if v.trailing_bytes > 0 {
+            format!(
+                ", {} trailing bytes of an incomplete frame",
+                v.trailing_bytes
+            )
+        } else {
+            String::new()
+        }
+    );
+    if !v.is_clean() {
+        return Err(Failure::Run(format!(
+            "{}: damaged: {} damaged frame(s), {} other problem(s)",
+            file.display(),
+            v.damaged.len(),
+            v.damage.len()
+        )));
+    }
+    Ok(())
+}
+
+/// `archive extract`: frame `frame`, or every frame, to `output`.
+fn extract(
+    file: &Path,
+    frame: Option<i64>,
+    output: &str,
+    cancel: &meniscus::CancelToken,
+) -> Result<(), Failure> {
+    let r = ArchiveReader::open(file)?;
+    let numbers = frame.map(|n| vec![n]);
+    let written = r.extract(
+        numbers.as_deref(),
+        output,
+        &MeshWriteOptions::default(),
+        cancel,
+    )?;
+    if frame.is_none() {
+        eprintln!("{} frame(s) written", written.len());
+    }
+    Ok(())
+}
+
+/// `archive merge`: `inputs` joined into `output`.
+fn merge(inputs: &[PathBuf], output: &Path) -> Result<(), Failure> {
+    let stats = meniscus::archive::merge(inputs, output)?;
+    eprintln!(
+        "{} frame(s) from {} archive(s) merged into {} ({} bytes)",
+        stats.frames,
+        stats.inputs,
+        output.display(),
+        stats.bytes
+    );
+    Ok(())
+}
+
+/// `archive pack`: the mesh files `input` names appended to `output`, a new archive or
+/// an existing one.
+fn pack(
+    input: &str,
+    output: &Path,
+    options: &ArchiveOptions,
+    farm: &FarmArgs,
+    cancel: &meniscus::CancelToken,
+) -> Result<(), Failure> {
+    let frames = meniscus::sequence::choose(input, &farm.choice())?;
+    let mut w = if output.exists() {
+        // Frames it holds are refused before it is touched.
+        let numbers: Vec<i64> = frames.iter().map(|f| f.number).collect();
+        ArchiveReader::open(output).and_then(|r| r.check_new_frames(&numbers))?;
+        ArchiveWriter::open_append(output, options)
+    } else {
+        ArchiveWriter::create(output, options)
+    }?;
+    // On an error or a Ctrl-C (checked between frames) the writer, dropped, still
+    // writes the index of the frames packed so far.
+    for f in &frames {
+        cancel.check()?;
+        let mesh = read_mesh(&f.input)?;
+        w.append(f.number, &mesh)?;
+    }
+    w.finish()?;
+    eprintln!("{} frame(s) packed into {}", frames.len(), output.display());
     Ok(())
 }

@@ -30,7 +30,7 @@
 //! computed from the control mesh, and its triangles are the four children of each
 //! control triangle. It is not even computed for the whole mesh at once: the centres are
 //! measured in slabs across the scene, each against the one-step surface of the control
-//! triangles it can reach ([`slabs`]; [`ContainmentOptions::chunk_triangles`] per slab),
+//! triangles it can reach (`slabs`; [`ContainmentOptions::chunk_triangles`] per slab),
 //! so the stage's memory beyond the control mesh follows the slab and stays far under
 //! the subdivision's peak. A centre's nearest points are looked up in a cell hash of
 //! them (cells of `2r`, the 2 × 2 × 2 cells nearest the centre: every point within r of
@@ -69,6 +69,7 @@ use surface::{LoopSurface, Slots};
 
 /// Options of [`contain`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[non_exhaustive]
 pub struct ContainmentOptions {
     /// Least depth of a particle centre under the output surface, multiples of the particle
     /// radius r. Default 0.25.
@@ -84,12 +85,42 @@ pub struct ContainmentOptions {
     pub chunk_triangles: Option<usize>,
 }
 
+/// Peak working set of the containment stage, bytes per decimated (control) triangle,
+/// everything after the tiles included: the control mesh, its vertex → triangle lists
+/// and normals, the slab tables, one slab's one-step Loop surface and cell hash, the
+/// centres watched. Measured on the 32M scene under a 2 GiB budget: 1315 MiB at the stage
+/// (17.2 M control triangles, 17 slabs), 70 bytes per triangle over the process and the
+/// tiles' leftovers; 80 kept as margin. (Before the slabs, 2026-11-26: 2685 MiB, 154 B.)
+/// Below the subdivision's, so the stage never sets a run's estimate.
+pub(crate) const BYTES_PER_INPUT_TRIANGLE: f64 = 80.0;
+
 /// Working set of a slab, bytes per control triangle in it: its triangle and vertex
 /// lists, the one-step surface's points (3.5 per triangle), their cell hash and what
 /// building it takes.
 const SLAB_BYTES_PER_TRIANGLE: u64 = 96;
 
 impl ContainmentOptions {
+    /// Every centre at least `min_depth` (multiples of `r`) deep, the other options
+    /// default.
+    pub fn depth(min_depth: f32) -> Self {
+        ContainmentOptions {
+            min_depth,
+            ..Default::default()
+        }
+    }
+
+    /// Checks the depth: in `[0, 1]`, multiples of `r`.
+    pub fn validate(&self) -> crate::Result<()> {
+        let d = self.min_depth;
+        if !(d.is_finite() && (0.0..=1.0).contains(&d)) {
+            return Err(crate::Error::InvalidOption {
+                option: "containment.min_depth",
+                message: format!("takes a depth in [0, 1] (multiples of r), got {d}"),
+            });
+        }
+        Ok(())
+    }
+
     /// Control triangles per slab under a memory budget of `budget` bytes (`None`: no
     /// limit): [`Self::chunk_triangles`] when given, else as many as an eighth of the
     /// budget holds, at least 2¹⁸.
@@ -160,18 +191,6 @@ impl Centres for [Vec3] {
     }
 }
 
-impl<S: crate::io::particles::ParticleSource> Centres for crate::tiles::ParticleStore<S> {
-    fn visit_between(
-        &self,
-        axis: usize,
-        lo: f32,
-        hi: f32,
-        visit: &mut VisitChunk<'_>,
-    ) -> Result<()> {
-        self.for_each_stored_between(axis, lo, hi, visit)
-    }
-}
-
 /// Moves the vertices of `control` (a closed surface, world units) so that every centre
 /// of `centres` that lies near it ends at least `options.min_depth · particle_radius`
 /// under the surface `control` becomes after `levels` Loop subdivision steps (measured
@@ -183,151 +202,60 @@ pub fn contain(
     particle_radius: f32,
     options: &ContainmentOptions,
 ) -> ContainmentStats {
-    contain_centres(
-        control,
+    let input = ContainmentInput {
         levels,
         centres,
-        &[],
+        isolated: &[],
         particle_radius,
-        options,
-        options.slab_triangles(None),
-        &CancelToken::new(),
-    )
-    .expect("centres in memory cannot fail")
+        slab_triangles: options.slab_triangles(None),
+    };
+    contain_centres(control, &input, options, &CancelToken::new())
+        .expect("centres in memory cannot fail")
 }
 
-/// [`contain`] over any [`Centres`], skipping the centres at the positions of
-/// `isolated` (the particles that have spheres of their own), in slabs of about
-/// `slab_triangles` control triangles ([`ContainmentOptions::slab_triangles`]).
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn contain_centres(
+/// What [`contain_centres`] measures the surface against.
+pub(crate) struct ContainmentInput<'a, C: Centres + ?Sized> {
+    /// Loop steps the surface will get (here or by whoever decodes it): the surface is
+    /// measured as one step makes it.
+    pub levels: u32,
+    /// The particle centres.
+    pub centres: &'a C,
+    /// Centres skipped: the isolated particles, which have spheres of their own.
+    pub isolated: &'a [Vec3],
+    /// Particle radius `r`, world units.
+    pub particle_radius: f32,
+    /// Control triangles per slab, about ([`ContainmentOptions::slab_triangles`]).
+    pub slab_triangles: usize,
+}
+
+/// [`contain`] over any [`Centres`] (see [`ContainmentInput`]): rounds of measuring every
+/// centre near the surface and pushing the control vertices over the shallow ones out,
+/// until none is shallow or the rounds run out.
+pub(crate) fn contain_centres<C: Centres + ?Sized>(
     control: &mut TriMesh,
-    levels: u32,
-    centres: &(impl Centres + ?Sized),
-    isolated: &[Vec3],
-    particle_radius: f32,
+    input: &ContainmentInput<'_, C>,
     options: &ContainmentOptions,
-    slab_triangles: usize,
     cancel: &CancelToken,
 ) -> Result<ContainmentStats> {
     let mut stats = ContainmentStats::default();
-    let r = particle_radius as f64;
-    let depth = options.min_depth.max(0.0) as f64 * r;
-    // Pushes aim a little deeper than required, so that rounding cannot leave a centre
-    // a hair short of the depth for another round.
-    let aim = depth + AIM_BEYOND * r;
-    let isolated: HashSet<[u32; 3]> = isolated.iter().map(|p| bits(*p)).collect();
-    // Loop averages a push of a control triangle over its neighbours: the surface over
-    // the triangle moves by 3/4 to 7/8 of it for one step; push more so that one round
-    // usually suffices.
-    let gain = if levels == 0 { 1.0 } else { 1.4 };
     if control.triangles.is_empty() {
         stats.rounds = 1;
         return Ok(stats);
     }
-    let clock = Instant::now();
-    let tris = VertexTriangles::new(control);
-    // The tangent-plane shortcut reads the control mesh's normals.
-    control.compute_normals();
-    let slabs = Slabs::new(control, &tris, slab_triangles, r);
-    stats.slabs = slabs.count() as u32;
-    stats.surface_seconds += clock.elapsed().as_secs_f64();
-    let mut slots = Slots::new(control);
-    // Centres within r of being too shallow in the last full round.
-    let mut watch: Vec<Watched> = Vec::new();
-    // Control vertices whose one-ring holds a moved vertex (Loop's masks reach that far).
-    let mut reached = vec![false; control.positions.len()];
-    let mut full_round = true;
+    let r = input.particle_radius as f64;
+    let depth = options.min_depth.max(0.0) as f64 * r;
+    let mut rounds = Rounds::new(control, input, depth, &mut stats);
     loop {
         stats.rounds += 1;
-        // Pushes of less than r: only the watched centres whose nearest surface lay over
-        // a control triangle the pushes reached can be too close now.
-        let again: Vec<Watched> = if full_round {
-            Vec::new()
-        } else {
-            watch
-                .iter()
-                .filter(|w| {
-                    control.triangles[w.parent as usize]
-                        .iter()
-                        .any(|&v| reached[v as usize])
-                })
-                .copied()
-                .collect()
-        };
-        let near_again = (!full_round).then(|| {
-            let ps: Vec<Vec3> = again.iter().map(|w| w.position).collect();
-            slabs.near(&ps)
-        });
-        let mut found = Found::default();
-        for slab in 0..slabs.count() {
-            let again: Vec<&Watched> = again
-                .iter()
-                .filter(|w| slabs.of(w.position) == slab)
-                .collect();
-            if !full_round && again.is_empty() {
-                continue;
-            }
-            cancel.check()?;
-            // The one-step surface over the slab (where the centres measured again are).
-            let clock = Instant::now();
-            let ids = slabs.triangles(control, slab, near_again.as_ref());
-            let slots_here = std::mem::take(&mut slots);
-            let surface = LoopSurface::new(control, &tris, ids, levels > 0, slots_here);
-            let cells = CellIndex::new(&surface.points, 2.0 * r);
-            stats.surface_seconds += clock.elapsed().as_secs_f64();
-            let index = SurfaceIndex {
-                cells: &cells,
-                surface: &surface,
-                control,
-                control_tris: &tris,
-                // The tangent-plane shortcut needs normals, which are the control mesh's
-                // only as it was when last measured whole.
-                fast_depth: if full_round {
-                    depth + FAST_MARGIN * r
-                } else {
-                    f64::INFINITY
-                },
-            };
-            let mut gather = |ps: &[Vec3], is: &[u32]| {
-                found.extend(measure_centres(&index, &isolated, depth, r, ps, is));
-            };
-            if full_round {
-                // Every centre of the slab.
-                let whole = slabs.count() == 1;
-                let (axis, lo, hi) = slabs.range(slab);
-                centres.visit_between(axis, lo, hi, &mut |positions, indices| {
-                    cancel.check()?;
-                    if whole {
-                        gather(positions, indices);
-                    } else {
-                        let (ps, is): (Vec<Vec3>, Vec<u32>) = positions
-                            .iter()
-                            .zip(indices)
-                            .filter(|(p, _)| (lo..hi).contains(&p[axis]))
-                            .map(|(p, i)| (*p, *i))
-                            .unzip();
-                        gather(&ps, &is);
-                    }
-                    Ok(())
-                })?;
-            } else {
-                let (is, ps): (Vec<u32>, Vec<Vec3>) =
-                    again.iter().map(|w| (w.particle, w.position)).unzip();
-                gather(&ps, &is);
-            }
-            settle(&index, &mut found, depth, r, aim);
-            slots = surface.into_slots();
-        }
         let Found {
             near,
             mut shallow,
             watched,
             ..
-        } = found;
-        if full_round {
+        } = rounds.measure(control, input, cancel, &mut stats)?;
+        if rounds.full_round {
             // Those that a push could bring too close are watched after.
-            watch = watched;
+            rounds.watch = watched;
         }
         if stats.rounds == 1 {
             stats.near_centres = near;
@@ -338,12 +266,189 @@ pub(crate) fn contain_centres(
             stats.remaining = shallow.len();
             break;
         }
-        // The largest push per control vertex (ties: the lowest particle index).
+        let (moved, largest) = rounds.push_out(control, &mut shallow);
+        stats.moved_vertices += moved;
+        // A push of more than r may reach centres nobody watched: measure every centre
+        // again.
+        rounds.full_round = largest > r;
+        if rounds.full_round {
+            control.compute_normals();
+        }
+    }
+    control.normals = Vec::new();
+    Ok(stats)
+}
+
+/// The state of containment's rounds.
+struct Rounds {
+    /// Least depth, world units.
+    depth: f64,
+    /// Pushes aim a little deeper than required, so that rounding cannot leave a centre
+    /// a hair short of the depth for another round.
+    aim: f64,
+    /// Particle radius, world units.
+    r: f64,
+    /// How much more than the surface must move a control vertex is pushed: Loop averages
+    /// a push of a control triangle over its neighbours, so the surface over the triangle
+    /// moves by 3/4 to 7/8 of it for one step; push more so that one round usually
+    /// suffices.
+    gain: f64,
+    /// The positions of the isolated centres, skipped.
+    isolated: HashSet<[u32; 3]>,
+    /// The control mesh's vertex → triangle lists.
+    tris: VertexTriangles,
+    /// The control mesh cut into slabs.
+    slabs: Slabs,
+    /// Scratch of the one-step surface, reused from slab to slab.
+    slots: Slots,
+    /// Centres within r of being too shallow in the last full round.
+    watch: Vec<Watched>,
+    /// Control vertices whose one-ring holds a moved vertex (Loop's masks reach that far).
+    reached: Vec<bool>,
+    /// Whether the next round measures every centre, or only the watched ones.
+    full_round: bool,
+}
+
+impl Rounds {
+    fn new<C: Centres + ?Sized>(
+        control: &mut TriMesh,
+        input: &ContainmentInput<'_, C>,
+        depth: f64,
+        stats: &mut ContainmentStats,
+    ) -> Self {
+        let r = input.particle_radius as f64;
+        let clock = Instant::now();
+        let tris = VertexTriangles::new(control);
+        // The tangent-plane shortcut reads the control mesh's normals.
+        control.compute_normals();
+        let slabs = Slabs::new(control, &tris, input.slab_triangles, r);
+        stats.slabs = slabs.count() as u32;
+        stats.surface_seconds += clock.elapsed().as_secs_f64();
+        Rounds {
+            depth,
+            aim: depth + AIM_BEYOND * r,
+            r,
+            gain: if input.levels == 0 { 1.0 } else { 1.4 },
+            isolated: input.isolated.iter().map(|p| bits(*p)).collect(),
+            slots: Slots::new(control),
+            tris,
+            slabs,
+            watch: Vec::new(),
+            reached: vec![false; control.positions.len()],
+            full_round: true,
+        }
+    }
+
+    /// One round of measuring, slab by slab: every centre in a full round, else only the
+    /// watched centres whose nearest surface lay over a control triangle the last pushes
+    /// reached (pushes of less than r cannot bring any other one too close).
+    fn measure<C: Centres + ?Sized>(
+        &mut self,
+        control: &TriMesh,
+        input: &ContainmentInput<'_, C>,
+        cancel: &CancelToken,
+        stats: &mut ContainmentStats,
+    ) -> Result<Found> {
+        let again: Vec<Watched> = if self.full_round {
+            Vec::new()
+        } else {
+            self.watch
+                .iter()
+                .filter(|w| {
+                    control.triangles[w.parent as usize]
+                        .iter()
+                        .any(|&v| self.reached[v as usize])
+                })
+                .copied()
+                .collect()
+        };
+        let near_again = (!self.full_round).then(|| {
+            let ps: Vec<Vec3> = again.iter().map(|w| w.position).collect();
+            self.slabs.near(&ps)
+        });
+        let mut found = Found::default();
+        for slab in 0..self.slabs.count() {
+            let again: Vec<&Watched> = again
+                .iter()
+                .filter(|w| self.slabs.of(w.position) == slab)
+                .collect();
+            if !self.full_round && again.is_empty() {
+                continue;
+            }
+            cancel.check()?;
+            // The one-step surface over the slab (where the centres measured again are).
+            let clock = Instant::now();
+            let ids = self.slabs.triangles(control, slab, near_again.as_ref());
+            let slots_here = std::mem::take(&mut self.slots);
+            let surface = LoopSurface::new(control, &self.tris, ids, input.levels > 0, slots_here);
+            let cells = CellIndex::new(&surface.points, 2.0 * self.r);
+            stats.surface_seconds += clock.elapsed().as_secs_f64();
+            let index = SurfaceIndex {
+                cells: &cells,
+                surface: &surface,
+                control,
+                control_tris: &self.tris,
+                // The tangent-plane shortcut needs normals, which are the control mesh's
+                // only as it was when last measured whole.
+                fast_depth: if self.full_round {
+                    self.depth + FAST_MARGIN * self.r
+                } else {
+                    f64::INFINITY
+                },
+            };
+            let (isolated, depth, r) = (&self.isolated, self.depth, self.r);
+            let mut gather = |ps: &[Vec3], is: &[u32]| {
+                found.extend(measure_centres(&index, isolated, depth, r, ps, is));
+            };
+            if self.full_round {
+                self.visit_slab(slab, input.centres, cancel, &mut gather)?;
+            } else {
+                let (is, ps): (Vec<u32>, Vec<Vec3>) =
+                    again.iter().map(|w| (w.particle, w.position)).unzip();
+                gather(&ps, &is);
+            }
+            settle(&index, &mut found, self.depth, self.r, self.aim);
+            self.slots = surface.into_slots();
+        }
+        Ok(found)
+    }
+
+    /// Hands `gather` every centre of slab `slab`, chunk by chunk.
+    fn visit_slab<C: Centres + ?Sized>(
+        &self,
+        slab: usize,
+        centres: &C,
+        cancel: &CancelToken,
+        gather: &mut dyn FnMut(&[Vec3], &[u32]),
+    ) -> Result<()> {
+        let whole = self.slabs.count() == 1;
+        let (axis, lo, hi) = self.slabs.range(slab);
+        centres.visit_between(axis, lo, hi, &mut |positions, indices| {
+            cancel.check()?;
+            if whole {
+                gather(positions, indices);
+            } else {
+                let (ps, is): (Vec<Vec3>, Vec<u32>) = positions
+                    .iter()
+                    .zip(indices)
+                    .filter(|(p, _)| (lo..hi).contains(&p[axis]))
+                    .map(|(p, i)| (*p, *i))
+                    .unzip();
+                gather(&ps, &is);
+            }
+            Ok(())
+        })
+    }
+
+    /// Pushes the control vertices over the `shallow` centres out (the largest push per
+    /// vertex; ties: the lowest particle index) and marks the vertices their pushes
+    /// reach; returns how many vertices moved and the largest push, world units.
+    fn push_out(&mut self, control: &mut TriMesh, shallow: &mut [Shallow]) -> (usize, f64) {
         shallow.sort_unstable_by_key(|s| s.particle);
         let mut push: HashMap<u32, (f64, u32, DVec3)> = HashMap::new();
         let mut largest = 0.0f64;
-        for s in &shallow {
-            let d = s.push * gain;
+        for s in shallow.iter() {
+            let d = s.push * self.gain;
             let amount = d.length();
             largest = largest.max(amount);
             for v in control.triangles[s.control_triangle as usize] {
@@ -357,25 +462,17 @@ pub(crate) fn contain_centres(
         }
         let mut push: Vec<(u32, DVec3)> = push.into_iter().map(|(v, (_, _, d))| (v, d)).collect();
         push.sort_unstable_by_key(|&(v, _)| v);
-        stats.moved_vertices += push.len();
-        apply_pushes(control, &tris, &mut push);
-        reached.fill(false);
+        apply_pushes(control, &self.tris, &mut push);
+        self.reached.fill(false);
         for &(v, _) in &push {
-            for &t in tris.of(v) {
+            for &t in self.tris.of(v) {
                 for w in control.triangles[t as usize] {
-                    reached[w as usize] = true;
+                    self.reached[w as usize] = true;
                 }
             }
         }
-        // A push of more than r may reach centres nobody watched: measure every centre
-        // again.
-        full_round = largest > r;
-        if full_round {
-            control.compute_normals();
-        }
+        (push.len(), largest)
     }
-    control.normals = Vec::new();
-    Ok(stats)
 }
 
 /// What measuring some centres found.

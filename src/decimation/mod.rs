@@ -12,7 +12,7 @@
 //! greedy order of a heap, without the heap's cache misses) → compact.
 //!
 //! **Parallel walk** (meshes decimated whole, not region by region). The triangles are
-//! cut into fixed chunks of [`CHUNK_TRIANGLES`] in mesh order (spatially coherent:
+//! cut into fixed chunks of `CHUNK_TRIANGLES` in mesh order (spatially coherent:
 //! marching cubes emits them block by block). At the start of a pass every vertex is
 //! owned by the chunk of its lowest-numbered triangle. The chunks
 //! then walk their own candidates in parallel, each taking only collapses whose two closed
@@ -32,7 +32,7 @@
 //! walk alone: with the cores busy on other regions, the parallel walk's ownership tests
 //! were pure cost (4M scene: decimation 4.0 → 3.5 s, 2026-11-24), and walking each region
 //! in plain mesh order is closer to the greedy order (1M scene: flat bumpiness 0.0080 r
-//! instead of 0.0083 r). Then the band around the seams ([`decimate_band`]: the seam
+//! instead of 0.0083 r). Then the band around the seams (`decimate_band`: the seam
 //! vertices and two rings around them) is decimated to the overall target, the rest of
 //! the mesh left as the regions made it. Seam vertices keep their exact input positions until that
 //! pass. (A final pass over the whole mesh instead took 0.90 s of 5.8 s on the 4M scene
@@ -74,7 +74,6 @@ mod collapse;
 mod pieces;
 mod placement;
 mod quadric;
-mod tiles;
 mod tri_list;
 
 use crate::mesh::TriMesh;
@@ -85,11 +84,11 @@ pub(crate) use pieces::place_survivors;
 use placement::place_candidates;
 use quadric::{Plane, Quadric};
 use rayon::prelude::*;
-pub(crate) use tiles::TileDecimation;
 use tri_list::TriList;
 
 /// Options of [`decimate`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[non_exhaustive]
 pub struct DecimateOptions {
     /// Fraction of the triangles to remove, in `[0, 1)`, or `None` to stop on the error
     /// bound only. Default `Some(0.8)` (the paper's).
@@ -110,6 +109,61 @@ fn default_region_triangles() -> usize {
 }
 
 impl DecimateOptions {
+    /// Checks the target: a fraction in `[0, 1)` and an error bound `> 0` (world units),
+    /// at least one of them.
+    pub fn validate(&self) -> crate::Result<()> {
+        let bad = |option: &'static str, message: String| {
+            Err(crate::Error::InvalidOption { option, message })
+        };
+        match (self.target_reduction, self.max_error) {
+            (Some(f), _) if !(0.0..1.0).contains(&f) => bad(
+                "decimate.target_reduction",
+                format!("takes a fraction in [0, 1), got {f}"),
+            ),
+            (_, Some(e)) if !(e.is_finite() && e > 0.0) => bad(
+                "decimate.max_error",
+                format!("must be > 0 (world units), got {e}"),
+            ),
+            (None, None) => bad(
+                "decimate",
+                "needs a fraction to remove or an error bound, or no decimation".into(),
+            ),
+            _ => Ok(()),
+        }
+    }
+
+    /// Removing the fraction `target_reduction` of the triangles, without an error bound.
+    pub fn fraction(target_reduction: f32) -> Self {
+        DecimateOptions {
+            target_reduction: Some(target_reduction),
+            max_error: None,
+            region_triangles: default_region_triangles(),
+        }
+    }
+
+    /// Collapsing while no collapse moves the surface by more than `max_error` (world
+    /// units), whatever the number of triangles.
+    pub fn error_bound(max_error: f32) -> Self {
+        DecimateOptions {
+            target_reduction: None,
+            max_error: Some(max_error),
+            region_triangles: default_region_triangles(),
+        }
+    }
+
+    /// The same options with the error bound `max_error` (world units, `None`: none).
+    pub fn with_max_error(self, max_error: Option<f32>) -> Self {
+        DecimateOptions { max_error, ..self }
+    }
+
+    /// The same options with regions of `region_triangles` (0: never split).
+    pub fn with_region_triangles(self, region_triangles: usize) -> Self {
+        DecimateOptions {
+            region_triangles,
+            ..self
+        }
+    }
+
     /// Triangles to keep out of `triangles`: the fraction's share, rounded up, or 0 when
     /// only the error bound stops the decimation.
     pub fn target_triangles(&self, triangles: usize) -> usize {

@@ -1,4 +1,4 @@
-//! The field of anisotropic kernels ([`crate::anisotropy`]): the same sparse lattice,
+//! The field of anisotropic kernels ([`super::kernels`]): the same sparse lattice,
 //! blocks and evaluation order as the isotropic field (`super`), each particle weighted
 //! by its own ellipsoid.
 //!
@@ -8,7 +8,7 @@
 //! * `n(v)` the unit vector along `−∇Σ w_i = 6 Σ (1 − s_i²)² M_i (v − c_i)`, the direction
 //!   in which the particles thin out,
 //! * `phi(v) = (v − vbar(v))·n(v) − ρ_s·r`, `ρ_s` =
-//!   [`crate::anisotropy::AnisotropyOptions::surface_distance`] (`|v − vbar(v)| − ρ_s·r`
+//!   [`super::AnisotropyOptions::surface_distance`] (`|v − vbar(v)| − ρ_s·r`
 //!   where the gradient vanishes).
 //!
 //! This is the field of Zhu and Bridson 2005 that Solenthaler et al. build on, with Yu and
@@ -29,12 +29,13 @@
 //! the isotropic field does; sums in f32 on block-local coordinates.
 
 use super::candidates::candidate_blocks;
+use super::evaluate::{evaluate_blocks, BlockEvaluator, ROW, ROWS};
+use super::kernels::ParticleKernel;
 use super::rows::{transpose_bits, HalfRowIndex};
-use super::{
-    home_half_block, kernel_reach, BlockRange, FieldOptions, FieldStats, HALF_BLOCK_EDGE, ROW, ROWS,
+use super::{kernel_reach, FieldOptions, FieldStats};
+use crate::grid::{
+    home_half_block, BlockKey, BlockRange, BlockValues, SparseField, BLOCK_EDGE, HALF_BLOCK_EDGE,
 };
-use crate::anisotropy::ParticleKernel;
-use crate::grid::{BlockKey, BlockValues, SparseField, BLOCK_EDGE};
 use rayon::prelude::*;
 
 /// A kernel ready for the lattice: centre, quadratic form and bounding box in cells.
@@ -106,15 +107,8 @@ fn compute_blocks_with(
         h,
         outside: options.outside_value(),
         surface: options.anisotropy.surface_distance as f64 * options.particle_radius as f64,
-        simd,
     };
-    super::evaluate_candidates(
-        &candidates,
-        kernels.len(),
-        options,
-        Scratch::default,
-        |scratch, key, out| evaluator.evaluate(key, scratch, out),
-    )
+    evaluate_blocks(&evaluator, &candidates, kernels.len(), options, simd)
 }
 
 /// Per-thread scratch of one block.
@@ -136,46 +130,20 @@ struct Evaluator<'a> {
     outside: f32,
     /// `ρ_s·r`, world units.
     surface: f64,
-    simd: bool,
 }
 
-impl Evaluator<'_> {
-    /// Accumulates and finalises one block; `None` when no kernel reaches it. As the
-    /// isotropic kernel, compiled a second time with AVX2 and FMA and picked at run time;
-    /// products that are fused are written as `mul_add`, so both round identically.
-    fn evaluate(
-        &self,
-        key: BlockKey,
-        scratch: &mut Scratch,
-        values: &mut BlockValues,
-    ) -> Option<usize> {
-        #[cfg(target_arch = "x86_64")]
-        if self.simd
-            && std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("fma")
-        {
-            // SAFETY: the CPU supports the features the function is compiled for.
-            return unsafe { self.evaluate_avx2(key, scratch, values) };
-        }
-        self.evaluate_portable(key, scratch, values)
-    }
+impl BlockEvaluator for Evaluator<'_> {
+    type Scratch = Scratch;
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    unsafe fn evaluate_avx2(
-        &self,
-        key: BlockKey,
-        scratch: &mut Scratch,
-        values: &mut BlockValues,
-    ) -> Option<usize> {
-        self.evaluate_portable(key, scratch, values)
+    fn scratch(&self) -> Scratch {
+        Scratch::default()
     }
 
     /// The kernels whose bounding boxes meet the block, with the rows each one meets as a
     /// bit mask, transposed into per-row sets; then each row sums its kernels in scan
     /// order and is finalised.
     #[inline(always)]
-    fn evaluate_portable(
+    fn evaluate_block(
         &self,
         key: BlockKey,
         scratch: &mut Scratch,
@@ -238,7 +206,9 @@ impl Evaluator<'_> {
         }
         Some(in_band)
     }
+}
 
+impl Evaluator<'_> {
     /// Turns one row's sums into field values; returns how many of its vertices are in
     /// the band (`Σw > 0`).
     #[allow(clippy::needless_range_loop)]
@@ -327,7 +297,7 @@ mod tests {
             kernel: Kernel::Anisotropic,
             ..FieldOptions::new(r)
         };
-        let (kernels, stats) = crate::anisotropy::compute_kernels(&positions, &options).unwrap();
+        let (kernels, stats) = crate::field::compute_kernels(&positions, &options).unwrap();
         assert!(stats.mean_stretch > 1.05, "{stats:?}");
         let (portable, _) = compute_blocks_with(&kernels, &options, None, false);
         let (vector, _) = compute_blocks_with(&kernels, &options, None, true);

@@ -1,10 +1,8 @@
 //! Which blocks the field evaluates: every block with a vertex within reach of a
-//! populated home half-block (`super::compute_blocks`), found from the half-blocks alone
+//! populated home half-block (`super::isotropic`, `super::anisotropic`), found from the half-blocks alone
 //! before any particle is read.
 
-use super::block_of_half;
-use crate::field::BlockRange;
-use crate::grid::BlockKey;
+use crate::grid::{block_of_half, BlockKey, BlockRange};
 use hashbrown::HashMap;
 use rayon::prelude::*;
 
@@ -68,8 +66,8 @@ pub(super) fn candidate_blocks(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::{home_half_block, HALF_BLOCK_EDGE};
     use crate::grid::BLOCK_EDGE;
+    use crate::grid::{home_half_block, HALF_BLOCK_EDGE};
     use glam::Vec3;
     use hashbrown::HashSet;
 

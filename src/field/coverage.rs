@@ -7,7 +7,7 @@
 //! does not depend on order, so neither the thread count nor the tiling changes it.
 
 use super::FieldOptions;
-use crate::field::BlockRange;
+use crate::grid::BlockRange;
 use crate::grid::{local_index, split_coordinate, SparseField, BLOCK_EDGE};
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;

@@ -25,26 +25,28 @@
 //! coordinates, never on the thread count or on how the domain is cut. Sums are accumulated in f32 on block-local
 //! coordinates (in cells), which keeps them exact enough far from the origin.
 
-pub use crate::anisotropy::AnisotropyOptions;
 use crate::error::{Error, Result};
-use crate::grid::{zeroed_blocks, BlockKey, BlockValues, SparseField, BLOCK_EDGE, BLOCK_VOLUME};
+use crate::grid::{
+    check_positions, home_half_block, BlockKey, BlockRange, SparseField, BLOCK_EDGE,
+};
 use glam::Vec3;
 use rayon::prelude::*;
-use std::borrow::Cow;
+use std::time::Instant;
 
-pub mod anisotropic;
+mod anisotropic;
 mod candidates;
 mod concavity;
 mod coverage;
+mod evaluate;
+mod isotropic;
+mod kernels;
 mod rows;
-use candidates::candidate_blocks;
-pub(crate) use concavity::concavity_factor;
-use concavity::largest_eigenvalue_real_part_lanes;
 pub(crate) use coverage::apply_coverage;
-use rows::{row_mask, transpose_bits, HalfRowIndex, RowLists};
+pub use kernels::{compute_kernels, AnisotropyOptions, AnisotropyStats, ParticleKernel};
 
 /// Parameters of the field. Lengths other than the particle radius are multiples of `r`.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[non_exhaustive]
 pub struct FieldOptions {
     /// Particle radius `r`, world units (half the rest spacing). Required, > 0.
     pub particle_radius: f32,
@@ -95,8 +97,8 @@ pub enum Kernel {
     /// The Solenthaler et al. 2007 field with spherical kernels of radius `R` (the paper's).
     #[default]
     Isotropic,
-    /// Yu and Turk 2013 anisotropic kernels ([`crate::anisotropy`]), see
-    /// [`anisotropic`].
+    /// Yu and Turk 2013 anisotropic kernels (`anisotropy`), see
+    /// `anisotropic`.
     Anisotropic,
 }
 
@@ -125,6 +127,15 @@ impl FieldOptions {
     /// Influence radius `R` in world units.
     pub fn influence_radius_world(&self) -> f64 {
         self.influence_radius as f64 * self.particle_radius as f64
+    }
+
+    /// Bytes per particle the kernels add to a tile or an untiled run (0 for the
+    /// isotropic kernel, which needs nothing beyond the positions).
+    pub(crate) fn kernel_bytes_per_particle(&self) -> u64 {
+        match self.kernel {
+            Kernel::Isotropic => 0,
+            Kernel::Anisotropic => kernels::BYTES_PER_PARTICLE,
+        }
     }
 
     /// Value stored for vertices with no particle in range (positive: outside).
@@ -232,33 +243,6 @@ pub struct FieldStats {
     pub block_bytes: usize,
 }
 
-/// Largest coordinate, in cells, the lattice accepts (block keys must pack in 21 bits).
-const MAX_CELL_COORDINATE: f64 = (1u64 << 23) as f64;
-
-/// An inclusive box of block keys.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct BlockRange {
-    /// Lowest block key, per axis.
-    pub lo: BlockKey,
-    /// Highest block key, per axis (inclusive).
-    pub hi: BlockKey,
-}
-
-impl BlockRange {
-    /// True when `key` lies in the range.
-    pub fn contains(&self, key: BlockKey) -> bool {
-        (0..3).all(|a| self.lo[a] <= key[a] && key[a] <= self.hi[a])
-    }
-
-    /// The range grown by `lo` blocks downwards and `hi` blocks upwards on every axis.
-    pub fn grown(&self, lo: i32, hi: i32) -> BlockRange {
-        BlockRange {
-            lo: self.lo.map(|c| c - lo),
-            hi: self.hi.map(|c| c + hi),
-        }
-    }
-}
-
 /// Blocks, per axis, between a block and the farthest block a particle of it can reach
 /// (`⌈R / (8h)⌉`).
 pub(crate) fn block_reach(options: &FieldOptions) -> i32 {
@@ -275,516 +259,117 @@ pub(crate) fn kernel_reach(options: &FieldOptions) -> f32 {
     }
 }
 
-/// Edge of a half-block, in cells.
-pub(crate) const HALF_BLOCK_EDGE: i32 = BLOCK_EDGE / 2;
-
-/// The home half-block of one position (the 4³ cells of its home block's eighth that
-/// contain it), `inv_h` = 1 / cell size (world units). Its home block is
-/// [`block_of_half`].
-#[inline]
-pub(crate) fn home_half_block(p: Vec3, inv_h: f64) -> BlockKey {
-    home_cube(p, inv_h, HALF_BLOCK_EDGE)
-}
-
-/// The block a half-block lies in: its key divided by 2, rounded down.
-#[inline]
-pub(crate) fn block_of_half(half: BlockKey) -> BlockKey {
-    half.map(|c| c.div_euclid(2))
-}
-
-/// The home block of one position, `inv_h` = 1 / cell size (world units).
-#[inline]
-pub(crate) fn home_block(p: Vec3, inv_h: f64) -> BlockKey {
-    home_cube(p, inv_h, BLOCK_EDGE)
-}
-
-/// The cube of `edge`³ cells, on the global lattice, that contains `p`.
-#[inline]
-fn home_cube(p: Vec3, inv_h: f64, edge: i32) -> BlockKey {
-    let c = p.as_dvec3() * inv_h;
-    [c.x, c.y, c.z].map(|v| (v.floor() as i32).div_euclid(edge))
-}
-
-/// Checks that every position is finite and within the lattice's coordinate range.
-pub(crate) fn check_positions(positions: &[Vec3], options: &FieldOptions) -> Result<()> {
-    check_positions_from(0, positions, options)
-}
-
-/// [`check_positions`] for a chunk whose first particle has input index `first`.
-pub(crate) fn check_positions_from(
-    first: usize,
-    positions: &[Vec3],
-    options: &FieldOptions,
-) -> Result<()> {
-    let inv_h = 1.0 / options.cell_size_world();
-    if let Some(i) = positions.par_iter().position_first(|p| {
-        !p.is_finite() || (p.as_dvec3() * inv_h).abs().max_element() > MAX_CELL_COORDINATE
-    }) {
-        let p = positions[i];
-        let i = first + i;
-        let h = options.cell_size_world();
-        return Err(Error::ParticleOutOfRange {
-            path: None,
-            message: if p.is_finite() {
-                format!(
-                    "particle {i} at {p} lies {:.3e} cells of {h:.3e} (the cell size, from the particle radius {}) from the origin; the lattice reaches 2^23 cells: the particle radius is too small for these coordinates, or the coordinates are not in the radius's units",
-                    (p.as_dvec3() * inv_h).abs().max_element(),
-                    options.particle_radius
-                )
-            } else {
-                format!("particle {i} has a non-finite coordinate {p}")
-            },
-        });
-    }
-    Ok(())
-}
-
-/// Computes the field of `positions` (world units) on the whole sparse lattice.
+/// Computes the field of `positions` (world units, any order) on the whole sparse
+/// lattice: every particle enters the field (the pipeline first splits off the isolated
+/// ones). The same computation as a tile's (`compute_tile`) over one tile holding every
+/// particle.
 pub fn compute_field(
     positions: &[Vec3],
     options: &FieldOptions,
 ) -> Result<(SparseField, FieldStats)> {
     options.validate()?;
-    check_positions(positions, options)?;
-    let (mut field, mut stats) = match options.kernel {
-        Kernel::Isotropic => compute_blocks(positions, options, None),
-        Kernel::Anisotropic => {
-            let (kernels, _) = crate::anisotropy::compute_kernels(positions, options)?;
-            anisotropic::compute_blocks(&kernels, options, None)
-        }
-    };
-    stats.uncovered_particles = apply_coverage(&mut field, positions, options, None);
-    apply_iso_offset(&mut field, options);
-    Ok((field, stats))
-}
-
-/// Moves the zero level set outwards by [`FieldOptions::iso_offset`]: every value, and
-/// the value of vertices not stored, minus `δ·r`. Applied last, after coverage.
-pub(crate) fn apply_iso_offset(field: &mut SparseField, options: &FieldOptions) {
-    let delta = options.iso_offset * options.particle_radius;
-    if delta != 0.0 {
-        field.shift_values(-delta);
-    }
-}
-
-/// Computes the blocks of the pure Solenthaler field within `range` (all blocks when
-/// `None`) from `positions`, which must include every particle within `R` of those blocks,
-/// in a canonical order (the same relative order in every tiling). Coverage is applied
-/// afterwards by [`apply_coverage`]. Options must be valid.
-pub(crate) fn compute_blocks(
-    positions: &[Vec3],
-    options: &FieldOptions,
-    range: Option<BlockRange>,
-) -> (SparseField, FieldStats) {
-    compute_blocks_with(positions, options, range, true)
-}
-
-/// [`compute_blocks`]; `simd`: the AVX2 copy of the kernel may be used (the values are the
-/// same either way, which the tests check).
-fn compute_blocks_with(
-    positions: &[Vec3],
-    options: &FieldOptions,
-    range: Option<BlockRange>,
-    simd: bool,
-) -> (SparseField, FieldStats) {
-    let h = options.cell_size_world();
-    let inv_h = 1.0 / h;
-    let radius_cells = options.influence_radius / options.cell_size;
-
-    // Particles sorted by (home half-block, index) in (z, y, x) order, copied into that
-    // order: a block then scans the particles of the half-blocks within reach, not of whole
-    // neighbour blocks (with R = 4 h, 512 particle slots instead of 1728, most of which
-    // would be out of reach), and the half-blocks of one (y, z) half-row within reach are
-    // one contiguous run of the copy. Particles already in that order (a tile's) are
-    // taken as they are: sorting them would not move any.
+    check_positions(
+        0,
+        positions,
+        options.cell_size_world(),
+        options.particle_radius,
+    )?;
+    let inv_h = 1.0 / options.cell_size_world();
     let halves: Vec<BlockKey> = positions
         .par_iter()
         .map(|p| home_half_block(*p, inv_h))
         .collect();
-    let zyx = |k: &BlockKey| [k[2], k[1], k[0]];
-    let (runs, sorted) = if halves.par_windows(2).all(|w| zyx(&w[0]) <= zyx(&w[1])) {
-        let runs = crate::grid::key_runs(halves.iter().copied());
-        (runs, Cow::Borrowed(positions))
-    } else {
-        let order = crate::grid::sort_by_key_zyx(&halves);
-        let runs = crate::grid::key_runs(order.iter().map(|&i| halves[i as usize]));
-        let sorted: Vec<Vec3> = order.par_iter().map(|&i| positions[i as usize]).collect();
-        (runs, Cow::Owned(sorted))
+    let order = crate::grid::sort_by_key_zyx(&halves);
+    let sorted: Vec<Vec3> = order.par_iter().map(|&i| positions[i as usize]).collect();
+    let sorted_halves: Vec<BlockKey> = order.iter().map(|&i| halves[i as usize]).collect();
+    let in_field = vec![true; sorted.len()];
+    let particles = TileParticles {
+        positions: sorted,
+        halves: sorted_halves,
+        in_field,
     };
-    drop(halves);
-    let half_reach = (radius_cells / HALF_BLOCK_EDGE as f32).ceil() as i32;
-    let candidates = candidate_blocks(runs.iter().map(|r| r.0), half_reach, range);
-    let index = HalfRowIndex::new(&runs);
-    drop(runs);
-
-    let kernel = BlockKernel {
-        sorted: &sorted,
-        index: &index,
-        half_reach,
-        inv_h,
-        radius_cells,
-        h,
-        options,
-        simd,
-    };
-    evaluate_candidates(
-        &candidates,
-        positions.len(),
-        options,
-        RowLists::new,
-        |lists, key, out| kernel.evaluate(key, lists, out),
-    )
+    let tile = compute_tile(particles, options, None, None);
+    Ok((tile.field, tile.stats))
 }
 
-/// Evaluates every candidate block into one contiguous array with `evaluate` (per-thread
-/// scratch from `scratch`; `None` when no particle reaches the block), then compacts
-/// away the candidates no particle reaches: the field and its figures. Shared by the
-/// isotropic and the anisotropic kernel.
-pub(super) fn evaluate_candidates<T: Send>(
-    candidates: &[BlockKey],
-    particles: usize,
+/// The particles one tile's field is computed from, in the canonical order (home
+/// half-block in (z, y, x) order, then input index; see the module docs).
+pub(crate) struct TileParticles {
+    /// Positions, world units: the particles of the field and, for the anisotropic
+    /// kernels, every particle within `R` of them.
+    pub positions: Vec<Vec3>,
+    /// The home half-block of each ([`crate::grid::home_half_block`]).
+    pub halves: Vec<BlockKey>,
+    /// Whether each one enters the field (not isolated, and near enough to the tile).
+    pub in_field: Vec<bool>,
+}
+
+/// One tile's field and what it took.
+pub(crate) struct TileField {
+    /// The field blocks, coverage and iso offset applied.
+    pub field: SparseField,
+    /// Its figures (`uncovered_particles` counts those of the counted blocks).
+    pub stats: FieldStats,
+    /// Seconds spent on the anisotropic kernels (0 with isotropic ones).
+    pub kernel_seconds: f64,
+    /// Seconds spent on the field blocks, coverage and the iso offset.
+    pub field_seconds: f64,
+}
+
+/// The field of one tile, the path of every reconstruction: the anisotropic kernels of
+/// the particles `in_field` (from all their neighbours among `particles`), the field
+/// blocks within `blocks` (all when `None`), particle coverage ([`apply_coverage`];
+/// uncovered particles counted when their home block lies in `counted`, all when
+/// `None`), and the iso offset. `particles` must hold every particle within reach of
+/// those blocks (and for the kernels every neighbour within `R` of those), and the blocks
+/// used must lie `c·r + 2h` inside `blocks` (coverage). Options must be valid.
+pub(crate) fn compute_tile(
+    particles: TileParticles,
     options: &FieldOptions,
-    scratch: impl Fn() -> T + Sync + Send,
-    evaluate: impl Fn(&mut T, BlockKey, &mut BlockValues) -> Option<usize> + Sync + Send,
-) -> (SparseField, FieldStats) {
-    let mut values: Vec<BlockValues> = zeroed_blocks(candidates.len());
-    let in_band: Vec<Option<usize>> = candidates
-        .par_iter()
-        .zip(values.par_iter_mut())
-        .map_init(scratch, |t, (&key, out)| evaluate(t, key, out))
+    blocks: Option<BlockRange>,
+    counted: Option<BlockRange>,
+) -> TileField {
+    let clock = Instant::now();
+    let kernels = (options.kernel == Kernel::Anisotropic).then(|| {
+        kernels::kernels_sorted(
+            &particles.positions,
+            &particles.halves,
+            options,
+            &particles.in_field,
+        )
+    });
+    let kernel_seconds = clock.elapsed().as_secs_f64();
+    let clock = Instant::now();
+    let field_particles: Vec<Vec3> = particles
+        .positions
+        .iter()
+        .zip(&particles.in_field)
+        .filter(|(_, &wanted)| wanted)
+        .map(|(p, _)| *p)
         .collect();
-    let mut stats = FieldStats {
-        particles,
-        ..FieldStats::default()
+    // The particles are held only until the field has its own (`field_particles`, and the
+    // kernels sorted by centre).
+    drop(particles);
+    let (mut field, mut stats) = match &kernels {
+        None => isotropic::compute_blocks(&field_particles, options, blocks),
+        Some(kernels) => anisotropic::compute_blocks(kernels, options, blocks),
     };
-    let mut kept = 0;
-    let mut keys = Vec::with_capacity(candidates.len());
-    for (slot, (key, n)) in candidates.iter().zip(&in_band).enumerate() {
-        if let Some(n) = n {
-            stats.vertices_in_band += n;
-            if slot != kept {
-                // A move, not a swap: the block left behind is dropped.
-                values.copy_within(slot..=slot, kept);
-            }
-            keys.push(*key);
-            kept += 1;
-        }
-    }
-    values.truncate(kept);
-    values.shrink_to_fit();
-    stats.blocks = kept;
-    let field = SparseField::from_parts(
-        options.cell_size_world(),
-        options.outside_value(),
-        &keys,
-        values,
-    );
-    stats.block_bytes = field.memory_bytes();
-    (field, stats)
-}
-
-/// Rows of vertices in a block.
-const ROWS: usize = BLOCK_VOLUME / ROW;
-
-struct BlockKernel<'a> {
-    /// Particle positions (world units) sorted by home half-block (see [`HalfRowIndex`]).
-    sorted: &'a [Vec3],
-    index: &'a HalfRowIndex,
-    /// Half-blocks, per axis, beyond a block's own two whose particles can reach it
-    /// (`⌈R / 4h⌉`).
-    half_reach: i32,
-    inv_h: f64,
-    radius_cells: f32,
-    h: f64,
-    options: &'a FieldOptions,
-    /// May use the AVX2 copy of the kernel.
-    simd: bool,
-}
-
-impl BlockKernel<'_> {
-    /// Accumulates and finalises one block; `None` when no particle reaches it.
-    ///
-    /// On x86-64 CPUs with AVX2 the same code is compiled a second time with AVX2 and FMA
-    /// enabled and picked at run time: one row of eight vertices is then one vector
-    /// instruction instead of two. The fused products are written as `mul_add` (one
-    /// rounding, in hardware or in libm) and Rust never contracts other `a * b + c`, so
-    /// both versions round identically and give bit-identical fields.
-    fn evaluate(
-        &self,
-        key: BlockKey,
-        lists: &mut RowLists,
-        values: &mut BlockValues,
-    ) -> Option<usize> {
-        #[cfg(target_arch = "x86_64")]
-        if self.simd
-            && std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("fma")
-        {
-            // SAFETY: the CPU supports the features the function is compiled for.
-            return unsafe { self.evaluate_avx2(key, lists, values) };
-        }
-        self.evaluate_portable(key, lists, values)
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    unsafe fn evaluate_avx2(
-        &self,
-        key: BlockKey,
-        lists: &mut RowLists,
-        values: &mut BlockValues,
-    ) -> Option<usize> {
-        self.evaluate_portable(key, lists, values)
-    }
-
-    /// Two steps: the particles within reach are listed (in scan order) with the set of
-    /// rows of vertices each one meets, a 64-bit mask, and the masks of every 64 particles
-    /// are transposed into per-row sets of particles; then each row sums its particles
-    /// with its running sums in registers and is finalised at once. Each vertex adds its
-    /// particles in scan order, whatever the steps.
-    // Index loops over lanes on purpose: they inline into (and vectorize within) the AVX2
-    // copy, where iterator adaptors' closures may not.
-    #[allow(clippy::needless_range_loop)]
-    #[inline(always)]
-    fn evaluate_portable(
-        &self,
-        key: BlockKey,
-        lists: &mut RowLists,
-        values: &mut BlockValues,
-    ) -> Option<usize> {
-        lists.particles.clear();
-        lists.rows.clear();
-        let origin = [0, 1, 2].map(|a| key[a] as f64 * BLOCK_EDGE as f64);
-        let rc = self.radius_cells;
-        let rc2 = rc * rc;
-        let inv_rc2 = 1.0 / rc2;
-        // A particle of half-block j lies in cells [4j, 4j + 4): it reaches the block's
-        // vertices [8k, 8k + 7] only for 2k − ⌈R/4h⌉ ≤ j ≤ 2k + 1 + ⌈R/4h⌉.
-        let (first, last) = (
-            key.map(|k| 2 * k - self.half_reach),
-            key.map(|k| 2 * k + 1 + self.half_reach),
-        );
-        for hz in first[2]..=last[2] {
-            for hy in first[1]..=last[1] {
-                for p in &self.sorted[self.index.run(hy, hz, first[0], last[0])] {
-                    let p = p.as_dvec3() * self.inv_h;
-                    // Particle in block-local cell units.
-                    let x = [
-                        (p.x - origin[0]) as f32,
-                        (p.y - origin[1]) as f32,
-                        (p.z - origin[2]) as f32,
-                    ];
-                    let lo = x.map(|c| ((c - rc).ceil() as i32).max(0));
-                    let hi = x.map(|c| ((c + rc).floor() as i32).min(BLOCK_EDGE - 1));
-                    if lo[0] > hi[0] || lo[1] > hi[1] || lo[2] > hi[2] {
-                        continue;
-                    }
-                    let index = lists.particles.len();
-                    if index % 64 == 0 {
-                        lists.rows.push([0; ROWS]);
-                    }
-                    let group = lists.rows.last_mut().expect("a group");
-                    group[index % 64] = row_mask(x, lo, hi, inv_rc2);
-                    lists.particles.push(x);
-                }
-            }
-        }
-        let n = lists.particles.len();
-        if n == 0 {
-            return None;
-        }
-        for group in &mut lists.rows {
-            transpose_bits(group);
-        }
-        let mut in_band = 0;
-        for row in 0..ROWS {
-            if lists.rows.iter().all(|group| group[row] == 0) {
-                // No particle within reach of the row: outside the band.
-                values[row * ROW..][..ROW].fill(self.options.outside_value());
-                continue;
-            }
-            let (b, c) = ((row % ROW) as f32, (row / ROW) as f32);
-            let mut sums = [[0.0f32; ROW]; SUMS];
-            for (group, members) in lists.particles.chunks(64).zip(&lists.rows) {
-                let mut bits = members[row];
-                while bits != 0 {
-                    let x = group[bits.trailing_zeros() as usize];
-                    accumulate_row(&mut sums, x[0], b - x[1], c - x[2], inv_rc2);
-                    bits &= bits - 1;
-                }
-            }
-            in_band += self.finalize_row(&sums, row, values);
-        }
-        Some(in_band)
-    }
-
-    /// Turns one row's running sums into field values; returns how many of its vertices
-    /// are in the band (`Σw > 0`).
-    #[allow(clippy::needless_range_loop)]
-    #[inline(always)]
-    fn finalize_row(
-        &self,
-        row_sums: &[[f32; ROW]; SUMS],
-        row: usize,
-        values: &mut BlockValues,
-    ) -> usize {
-        let r = self.options.particle_radius as f64;
-        let (t_low, t_high) = (self.options.t_low as f64, self.options.t_high as f64);
-        // Each quantity as a lane array, so that the Jacobians and their eigenvalues run
-        // as vector instructions. Lanes outside the band (Σw = 0) compute garbage that is
-        // not stored. (Plain loops rather than closures: they stay inside the AVX2 copy of
-        // the kernel.)
-        let mut sums = [[0.0f64; ROW]; SUMS];
-        for k in 0..SUMS {
-            for i in 0..ROW {
-                sums[k][i] = row_sums[k][i] as f64;
-            }
-        }
-        let w = sums[0];
-        // One division per vertex, then products, instead of twelve f64 divisions (4M
-        // scene: field 2.02–2.07 → 1.99–2.00 s; the outputs of the eight reference runs
-        // and of the 4M scene stayed byte for byte the same).
-        let mut inv_w = [0.0f64; ROW];
-        for i in 0..ROW {
-            inv_w[i] = 1.0 / w[i];
-        }
-        // v − vbar = Σ w r / Σ w.
-        let mut d = [[0.0f64; ROW]; 3];
-        for a in 0..3 {
-            for i in 0..ROW {
-                d[a][i] = sums[1 + a][i] * inv_w[i];
-            }
-        }
-        // x_i = v − r_i gives J_ab = ((v − vbar)_a Σ∂_b w − Σ g r_a r_b) / Σ w, with
-        // Σ∂_b w = sums[4 + b] and the symmetric Σ g r_a r_b in sums[7..13].
-        const SYMMETRIC: [usize; 9] = [7, 8, 9, 8, 10, 11, 9, 11, 12];
-        let mut jac = [[0.0f64; ROW]; 9];
-        for a in 0..3 {
-            for b in 0..3 {
-                for i in 0..ROW {
-                    jac[a * 3 + b][i] =
-                        (d[a][i] * sums[4 + b][i] - sums[SYMMETRIC[a * 3 + b]][i]) * inv_w[i];
-                }
-            }
-        }
-        let ev = largest_eigenvalue_real_part_lanes(&jac);
-        let mut in_band = 0;
-        for i in 0..ROW {
-            let idx = row * ROW + i;
-            if w[i] <= 0.0 {
-                values[idx] = self.options.outside_value();
-                continue;
-            }
-            in_band += 1;
-            let f = concavity_factor(ev[i], t_low, t_high);
-            let dist_cells = (d[0][i] * d[0][i] + d[1][i] * d[1][i] + d[2][i] * d[2][i]).sqrt();
-            values[idx] = (dist_cells * self.h - r * f) as f32;
-        }
-        in_band
+    drop(kernels);
+    stats.uncovered_particles = apply_coverage(&mut field, &field_particles, options, counted);
+    apply_iso_offset(&mut field, options);
+    TileField {
+        field,
+        stats,
+        kernel_seconds,
+        field_seconds: clock.elapsed().as_secs_f64(),
     }
 }
 
-/// Number of running sums per vertex: Σw, Σw·r (3), Σ∇w (3), Σ g·r⊗r (6, symmetric),
-/// with `r = v − x_i` (cells) and `∇w_i = g·r`, `g = −6 (1 − s²)² / R²`.
-const SUMS: usize = 13;
-/// Row length: one block row of vertices along x.
-const ROW: usize = BLOCK_EDGE as usize;
-
-/// Adds one particle's terms to one row of vertices' running sums (`x`: the particle's
-/// block-local x (cells), `ry`, `rz`: the row's offsets from it, `inv_rc2 = 1 / R²` in
-/// cells). Lanes outside the influence sphere get `q = 0`, hence
-/// zero weight and zero gradient: adding them leaves every sum as it was.
-#[allow(clippy::needless_range_loop)]
-#[inline(always)]
-fn accumulate_row(sums: &mut [[f32; ROW]; SUMS], x: f32, ry: f32, rz: f32, inv_rc2: f32) {
-    let ryz2 = ry * ry + rz * rz;
-    let g_scale = -6.0 * inv_rc2;
-    let [s0, s1, s2, s3, s4, s5, s6, s7, s8, s9, s10, s11, s12] = sums;
-    for i in 0..ROW {
-        let rx = i as f32 - x;
-        let q = (1.0 - (rx * rx + ryz2) * inv_rc2).max(0.0);
-        let q2 = q * q;
-        let w = q2 * q;
-        let g = q2 * g_scale;
-        let (gx, gy, gz) = (g * rx, g * ry, g * rz);
-        s0[i] += w;
-        s1[i] = w.mul_add(rx, s1[i]);
-        s2[i] = w.mul_add(ry, s2[i]);
-        s3[i] = w.mul_add(rz, s3[i]);
-        s4[i] += gx;
-        s5[i] += gy;
-        s6[i] += gz;
-        s7[i] = gx.mul_add(rx, s7[i]);
-        s8[i] = gx.mul_add(ry, s8[i]);
-        s9[i] = gx.mul_add(rz, s9[i]);
-        s10[i] = gy.mul_add(ry, s10[i]);
-        s11[i] = gy.mul_add(rz, s11[i]);
-        s12[i] = gz.mul_add(rz, s12[i]);
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_vector_kernel_gives_the_portable_kernel_values_bit_for_bit() {
-        // A jittered block of particles with a loose film and a few strays: every branch
-        // of the eigenvalue (one or three real roots, flat and sharp neighbourhoods).
-        let r = 0.01f32;
-        let mut rng = crate::test_rng::TestRng::new(5);
-        let mut jitter = || (rng.unit_f32() - 0.5) * r;
-        let mut positions = Vec::new();
-        for z in 0..10 {
-            for y in 0..14 {
-                for x in 0..12 {
-                    let p = Vec3::new(x as f32, y as f32, z as f32) * 2.0 * r;
-                    positions.push(p + Vec3::new(jitter(), jitter(), jitter()));
-                }
-            }
-        }
-        for k in 0..40 {
-            let t = k as f32 * 0.7;
-            positions.push(Vec3::new(t.sin(), 0.3 * t.cos(), 0.6) * 0.3 + Vec3::splat(0.12));
-        }
-        let options = FieldOptions::new(r);
-        let (portable, _) = compute_blocks_with(&positions, &options, None, false);
-        let (vector, _) = compute_blocks_with(&positions, &options, None, true);
-        assert_same_blocks_bit_for_bit(&portable, &vector);
-    }
-
-    /// Both fields hold the same blocks (more than 10) with bit-identical values.
-    fn assert_same_blocks_bit_for_bit(a: &SparseField, b: &SparseField) {
-        assert!(a.blocks().count() > 10);
-        assert_eq!(a.blocks().count(), b.blocks().count());
-        for (key, values) in a.blocks() {
-            let other = b.block(key).expect("same blocks");
-            for (x, y) in values.iter().zip(other.iter()) {
-                assert_eq!(x.to_bits(), y.to_bits(), "block {key:?}");
-            }
-        }
-    }
-
-    #[test]
-    fn particles_already_in_half_block_order_give_the_sorted_values() {
-        // A shuffled cloud, and the same cloud sorted as the field sorts it (home
-        // half-block, then index): the second is taken as it is, the first is sorted
-        // into the second, and the values must agree bit for bit.
-        let r = 0.01f32;
-        let mut rng = crate::test_rng::TestRng::new(17);
-        let shuffled: Vec<Vec3> = (0..3000)
-            .map(|_| Vec3::new(rng.unit_f32(), rng.unit_f32(), rng.unit_f32()) * 0.3 - 0.1)
-            .collect();
-        let options = FieldOptions::new(r);
-        let inv_h = 1.0 / options.cell_size_world();
-        let mut order: Vec<usize> = (0..shuffled.len()).collect();
-        order.sort_by_key(|&i| {
-            let k = home_half_block(shuffled[i], inv_h);
-            (k[2], k[1], k[0], i)
-        });
-        let sorted: Vec<Vec3> = order.iter().map(|&i| shuffled[i]).collect();
-        let (from_shuffled, _) = compute_blocks(&shuffled, &options, None);
-        let (from_sorted, _) = compute_blocks(&sorted, &options, None);
-        assert_same_blocks_bit_for_bit(&from_shuffled, &from_sorted);
+/// Moves the zero level set outwards by [`FieldOptions::iso_offset`]: every value, and
+/// the value of vertices not stored, minus `δ·r`. Applied last, after coverage.
+fn apply_iso_offset(field: &mut SparseField, options: &FieldOptions) {
+    let delta = options.iso_offset * options.particle_radius;
+    if delta != 0.0 {
+        field.shift_values(-delta);
     }
 }

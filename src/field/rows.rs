@@ -1,9 +1,9 @@
 //! Which particles reach which rows of vertices of one block, for the field kernel
-//! (`super::BlockKernel`): the sorted particles indexed by half-row of home half-blocks,
+//! (`super::isotropic`): the sorted particles indexed by half-row of home half-blocks,
 //! and per block the particles within reach with the set of rows each one meets, as bit
 //! masks transposed into per-row particle sets.
 
-use super::{ROW, ROWS};
+use super::evaluate::{ROW, ROWS};
 use crate::grid::{BlockKey, BLOCK_EDGE};
 use hashbrown::HashMap;
 

@@ -6,6 +6,7 @@
 //!   [`mesh::write_surface`]; every write is atomic (temporary file + rename).
 
 pub(crate) mod atomic;
+pub(crate) mod base64;
 pub mod mesh;
 pub mod particles;
 pub(crate) mod ply_header;

@@ -20,7 +20,7 @@
 
 mod table;
 
-use crate::field::BlockRange;
+use crate::grid::BlockRange;
 use crate::grid::{local_index, BlockKey, BlockValues, SparseField, BLOCK_EDGE};
 use crate::mesh::TriMesh;
 use glam::{DVec3, Vec3};
@@ -75,6 +75,10 @@ impl BlockSurface {
         self.owned.capacity() * 16 + self.triangles.capacity() * 12 + 64
     }
 }
+
+/// Bytes per triangle while block surfaces are stitched into one mesh: the block surfaces
+/// (≈ 20 B per triangle) and the stitched mesh (≈ 18 B) exist together.
+pub(crate) const STITCH_BYTES_PER_TRIANGLE: f64 = 38.0;
 
 /// Extracts the zero level set of `field` as a triangle mesh.
 pub fn extract_surface(field: &SparseField) -> (TriMesh, MarchingCubesStats) {
@@ -368,10 +372,40 @@ fn march_block(
     slots: &mut [u16],
     owned_edges: &mut [u64; EDGE_ID_WORDS],
 ) -> BlockSurface {
-    // Gather the (E+1)³ values: this block plus the +x/+y/+z neighbours' first layers.
+    gather_cube(field, key, cube);
+    let Some(cell_rows) = cell_rows(cube) else {
+        // All outside or all inside (most blocks of the band): no cell changes sign.
+        return BlockSurface {
+            key,
+            owned: Vec::new(),
+            triangles: Vec::new(),
+        };
+    };
+    let (mut triangles, centers) = march_cells(cube, &cell_rows, key, field.cell_size, owned_edges);
+    let owned = owned_vertices(cube, key, field.cell_size, owned_edges, centers);
+    // References to the block's own vertices become their positions in `owned` (the
+    // stitcher then looks up only the references into neighbour blocks).
+    for (k, &(id, _)) in owned.iter().enumerate() {
+        slots[id as usize] = k as u16;
+    }
+    for r in triangles.iter_mut().flatten() {
+        if *r >> 16 == 0 {
+            *r = OWN_INDEX | slots[*r as usize] as u32;
+        }
+    }
+    BlockSurface {
+        key,
+        owned,
+        triangles,
+    }
+}
+
+/// Gathers the (E+1)³ values of block `key`'s cells into `cube`: this block plus the
+/// +x/+y/+z neighbours' first layers, row by row (eight values of a block row, then the
+/// first of the +x neighbour's).
+fn gather_cube(field: &SparseField, key: BlockKey, cube: &mut [f32]) {
     let neighbours: [Option<&BlockValues>; 8] =
         std::array::from_fn(|o| field.block(&upper_neighbour(key, o)));
-    // Row by row: eight values of a block row, then the first of the +x neighbour's.
     let outside = field.outside_value;
     for c in 0..=E {
         for b in 0..=E {
@@ -386,14 +420,18 @@ fn march_block(
             row[E as usize] = neighbours[o | 1].map_or(outside, |block| block[src]);
         }
     }
-    let Some(cell_rows) = cell_rows(cube) else {
-        // All outside or all inside (most blocks of the band): no cell changes sign.
-        return BlockSurface {
-            key,
-            owned: Vec::new(),
-            triangles: Vec::new(),
-        };
-    };
+}
+
+/// The triangles of every cell with a sign change (vertex references: owner block and
+/// local id) and the centre vertices of loops triangulated around one; marks the
+/// block's own edge vertices in `owned_edges`.
+fn march_cells(
+    cube: &[f32],
+    cell_rows: &[([u16; 4], u16)],
+    key: BlockKey,
+    h: f64,
+    owned_edges: &mut [u64; EDGE_ID_WORDS],
+) -> (Vec<[u32; 3]>, Vec<(u16, Vec3)>) {
     // Two triangles per cell with a sign change on average (4M scene: 2.00), reserved
     // at once so that most blocks' lists are never grown by copying.
     let mixed_cells: usize = cell_rows.iter().map(|r| r.1.count_ones() as usize).sum();
@@ -402,7 +440,6 @@ fn march_block(
     let mut triangles = Vec::with_capacity(2 * mixed_cells);
     owned_edges.fill(0);
     let mut centers: Vec<(u16, Vec3)> = Vec::new();
-    let h = field.cell_size;
     let corner_offset = |k: u8| ((k & 1) as i32, ((k >> 1) & 1) as i32, ((k >> 2) & 1) as i32);
     for c in 0..E {
         for b in 0..E {
@@ -419,19 +456,7 @@ fn march_block(
                     let (x, y, z) = corner_offset(k);
                     values[k as usize] = cube[cube_index(a + x, b + y, c + z)];
                 }
-                let mut connect = 0u8;
-                for face in 0..6 {
-                    if table::face_is_ambiguous(case, face) {
-                        let [p, q, r, s] = table::face_corners(face).map(|k| values[k as usize]);
-                        let saddle = (p * r - q * s) / (p + r - q - s);
-                        // The saddle is the bilinear interpolant's value where the two
-                        // diagonals' regions meet: negative means the inside corners meet.
-                        if saddle < 0.0 {
-                            connect |= 1 << face;
-                        }
-                    }
-                }
-                let entry = table.entry(case, connect);
+                let entry = table.entry(case, connected_faces(case, &values));
                 let edge_key = |e: u8| {
                     let edge = edges[e as usize];
                     let (x, y, z) = corner_offset(edge.lo);
@@ -466,8 +491,35 @@ fn march_block(
             }
         }
     }
-    // Edge ids (< CENTER_ID_BASE) first, in ascending order from the bit set, then
-    // centres in cell order: ascending ids.
+    (triangles, centers)
+}
+
+/// The faces of a cell of `case` whose inside corners meet (asymptotic decider), as a
+/// bit per face: the saddle of the bilinear interpolant, where the two diagonals'
+/// regions meet, is negative.
+fn connected_faces(case: u8, values: &[f32; 8]) -> u8 {
+    let mut connect = 0u8;
+    for face in 0..6 {
+        if table::face_is_ambiguous(case, face) {
+            let [p, q, r, s] = table::face_corners(face).map(|k| values[k as usize]);
+            let saddle = (p * r - q * s) / (p + r - q - s);
+            if saddle < 0.0 {
+                connect |= 1 << face;
+            }
+        }
+    }
+    connect
+}
+
+/// The block's own vertices: edge ids (< `CENTER_ID_BASE`) first, in ascending order
+/// from the bit set, then the centres in cell order: ascending ids.
+fn owned_vertices(
+    cube: &[f32],
+    key: BlockKey,
+    h: f64,
+    owned_edges: &[u64; EDGE_ID_WORDS],
+    centers: Vec<(u16, Vec3)>,
+) -> Vec<(u16, Vec3)> {
     let owned_count: u32 = owned_edges.iter().map(|bits| bits.count_ones()).sum();
     let mut owned: Vec<(u16, Vec3)> = Vec::with_capacity(owned_count as usize + centers.len());
     let ids = owned_edges.iter().enumerate().flat_map(|(word, &bits)| {
@@ -489,19 +541,5 @@ fn march_block(
         )
     }));
     owned.extend(centers);
-    // References to the block's own vertices become their positions in `owned` (the
-    // stitcher then looks up only the references into neighbour blocks).
-    for (k, &(id, _)) in owned.iter().enumerate() {
-        slots[id as usize] = k as u16;
-    }
-    for r in triangles.iter_mut().flatten() {
-        if *r >> 16 == 0 {
-            *r = OWN_INDEX | slots[*r as usize] as u32;
-        }
-    }
-    BlockSurface {
-        key,
-        owned,
-        triangles,
-    }
+    owned
 }

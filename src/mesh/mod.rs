@@ -59,6 +59,10 @@ impl VertexTriangles {
     }
 }
 
+/// Bytes per triangle of a finished mesh with normals (12 for indices, half a vertex of
+/// 24 for position and normal).
+pub(crate) const MESH_BYTES_PER_TRIANGLE: f64 = 24.0;
+
 /// An indexed triangle mesh. Positions are world units.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TriMesh {

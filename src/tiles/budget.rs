@@ -7,7 +7,6 @@
 //! `benches/scale.sh`) and on the same frame thrown into a splash (`tile_scene … splash`):
 //! within about 10 % there, above the measured peaks.
 
-use super::plan::tile_origin;
 use crate::error::{Error, Result};
 use crate::grid::{BlockKey, BLOCK_EDGE};
 use hashbrown::HashMap;
@@ -35,26 +34,6 @@ pub(crate) const PARTICLES_PER_SURFACE_BLOCK: f64 = 50.0;
 /// Marching-cubes triangles per populated block on the fluid's surface (one with an
 /// unpopulated block among its 26 neighbours): 134 in the 4M scene, 129 in its splash.
 pub(crate) const MC_TRIANGLES_PER_SURFACE_BLOCK: f64 = 140.0;
-/// Peak working set of one Loop step, bytes per input triangle (the input's triangles,
-/// side → edge indices, the output mesh; measured 104 on 32M particles, 134 on 4M where
-/// heap left over from the tiles counts more). 110 put the 32M scene's whole-run estimate
-/// (1906 MiB) within 1 % of its measured peaks (1863–1922 MiB over three sessions) and
-/// under a 2 GiB budget; 120 refused that run. Since the step frees the input positions
-/// before writing the triangles (2026-11-24) that run peaks at 1762 MiB: the estimate is
-/// now 8 % high, kept as margin.
-pub(crate) const SUBDIVISION_BYTES_PER_INPUT_TRIANGLE: f64 = 110.0;
-/// Peak working set of the containment stage, bytes per decimated (control) triangle,
-/// everything after the tiles included: the control mesh, its vertex → triangle lists
-/// and normals, the slab tables, one slab's one-step Loop surface and cell hash, the
-/// centres watched. Measured on the 32M scene under a 2 GiB budget: 1315 MiB at the stage
-/// (17.2 M control triangles, 17 slabs), 70 bytes per triangle over the process and the
-/// tiles' leftovers; 80 kept as margin. (Before the slabs, 2026-11-26: 2685 MiB, 154 B.)
-/// Below the subdivision's, so the stage never sets a run's estimate.
-pub(crate) const CONTAINMENT_BYTES_PER_INPUT_TRIANGLE: f64 = 80.0;
-/// Peak of Taubin smoothing per control-mesh triangle: the mesh (24 B), the vertices'
-/// neighbour lists (≈ 14 B, and ≈ 14 B of vertex → triangle lists while they are built)
-/// and two f64 copies of the positions (≈ 24 B), bytes.
-pub(crate) const SMOOTHING_BYTES_PER_INPUT_TRIANGLE: f64 = 72.0;
 /// Memory of the process before any particle (code, thread stacks, allocator), bytes.
 pub(crate) const BASE_BYTES: u64 = 64 << 20;
 /// What the tiles leave in memory under the post-processing, beyond the surface (mostly
@@ -68,13 +47,6 @@ pub(crate) const POST_TILES_MAX_BYTES: u64 = 96 << 20;
 /// attribute stage, on top of `4·w` (records and rows read back, positions and indices,
 /// home half-blocks, the sort order, the sorted copy).
 pub(crate) const ATTRIBUTE_TILE_BYTES_PER_PARTICLE: u64 = 76;
-/// Bytes per particle that anisotropic kernels add to a tile or an untiled run: the
-/// kernel of every loaded particle (64), then for the field particles the kernels kept
-/// (64), the prepared copy (64) and the sort by centre (16).
-pub(crate) const ANISOTROPIC_BYTES_PER_PARTICLE: u64 = 208;
-/// Bytes per triangle of a finished mesh with normals (12 for indices, half a vertex of
-/// 24 for position and normal).
-pub(crate) const MESH_BYTES_PER_TRIANGLE: f64 = 24.0;
 
 /// What the counting pass knows of a frame's surface before any field value.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -124,13 +96,14 @@ impl SceneShape {
 }
 
 /// Memory the surface needs after the tiles (the post-processing's peak), per
-/// marching-cubes triangle, and the stage whose peak it is.
+/// marching-cubes triangle, and the stage whose peak it is (the pipeline adds up its
+/// stages' own figures: [`crate::pipeline::ReconstructOptions`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct OutputCost {
     /// Bytes per marching-cubes triangle.
     pub(crate) bytes_per_triangle: f64,
-    /// What a smaller setting of would lower the peak, as the message advises it.
-    advice: &'static str,
+    /// What would lower the peak, as the message advises it ("fewer subdivision steps").
+    pub(crate) advice: &'static str,
 }
 
 impl OutputCost {
@@ -142,102 +115,49 @@ impl OutputCost {
     };
 }
 
-/// The [`OutputCost`] of decimation removing `reduction` of the triangles (`None`: no
-/// decimation; an error-bounded run counts as 0.8), smoothing when `smoothing`, the
-/// containment stage when `containment`, and `subdivide_levels` Loop steps.
-pub(crate) fn output_bytes_per_triangle(
-    reduction: Option<f32>,
-    smoothing: bool,
-    containment: bool,
-    subdivide_levels: u32,
-) -> OutputCost {
-    let mut triangles = 1.0;
-    // Without decimation the block surfaces (≈ 20 B per triangle) and the stitched mesh
-    // (≈ 18 B) exist together.
-    let mut peak = match reduction {
-        None => (triangles * 38.0, "decimation (decimate)"),
-        Some(f) => {
-            triangles *= 1.0 - f.clamp(0.0, 1.0) as f64;
-            (
-                triangles * MESH_BYTES_PER_TRIANGLE,
-                "more decimation (decimate)",
-            )
-        }
-    };
-    let mut raise = |bytes: f64, advice| {
-        if bytes > peak.0 {
-            peak = (bytes, advice);
-        }
-    };
-    if smoothing {
-        raise(
-            triangles * SMOOTHING_BYTES_PER_INPUT_TRIANGLE,
-            "no smoothing (smooth)",
-        );
-    }
-    if containment {
-        raise(
-            triangles * CONTAINMENT_BYTES_PER_INPUT_TRIANGLE,
-            "containment off (keep_inside)",
-        );
-    }
-    for _ in 0..subdivide_levels {
-        raise(
-            triangles * SUBDIVISION_BYTES_PER_INPUT_TRIANGLE,
-            "fewer subdivision steps (subdivide)",
-        );
-        triangles *= 4.0;
-    }
-    raise(
-        triangles * MESH_BYTES_PER_TRIANGLE,
-        "fewer subdivision steps (subdivide)",
-    );
-    OutputCost {
-        bytes_per_triangle: peak.0,
-        advice: peak.1,
-    }
+/// What a run will hold, from the particles counted per home block: the estimates of
+/// the module docs for an untiled run, one tile, and a tiled run.
+struct Model<'a> {
+    block_counts: &'a HashMap<BlockKey, u64>,
+    /// Lowest block any tile processes.
+    origin: BlockKey,
+    /// Blocks a particle reaches.
+    reach: i32,
+    shape: SceneShape,
+    /// After the tiles: the process and the post-processing's peak, bytes.
+    output: u64,
+    /// During the tiles: the process and what the tiles have produced so far (decimated
+    /// pieces, or the raw block surfaces), bytes.
+    produced: u64,
+    /// Payload bytes per particle (4 per float).
+    payload: u64,
+    /// Bytes per particle the kernels add.
+    kernel_bytes_per_particle: u64,
 }
 
-/// Picks the tile edge in blocks (`None`: one tile) and estimates the run's peak memory.
-pub(super) fn choose_tile_blocks(
-    block_counts: &HashMap<BlockKey, u64>,
-    reach: i32,
-    output_cost: OutputCost,
-    payload_width: usize,
-    kernel_bytes_per_particle: u64,
-    decimated_in_tiles: bool,
-    options: &super::TileOptions,
-) -> Result<(Option<i32>, u64)> {
-    // After the tiles: the post-processing's peak. During the tiles: one tile plus what
-    // the tiles have produced so far (decimated pieces, or the raw block surfaces).
-    // A payload costs, untiled, the particles kept in memory to the attribute stage (12
-    // bytes of position and 4 per float); tiled, the densest tile's particles loaded with
-    // their payload next to the finished surface.
-    let shape = SceneShape::of(block_counts);
-    let particles = shape.particles;
-    let triangles = shape.marching_cubes_triangles();
-    let payload = 4 * payload_width as u64;
-    let kept = if payload > 0 { 12 + 2 * payload } else { 0 };
-    let output = BASE_BYTES
-        + (particles * POST_TILES_BYTES_PER_PARTICLE).min(POST_TILES_MAX_BYTES)
-        + (triangles * output_cost.bytes_per_triangle) as u64;
-    let produced = BASE_BYTES
-        + (triangles
-            * if decimated_in_tiles {
-                0.2 * MESH_BYTES_PER_TRIANGLE
-            } else {
-                20.0
-            }) as u64;
-    let untiled = (shape.untiled_bytes() + particles * kernel_bytes_per_particle).max(output)
-        + particles * kept;
-    // Zone 2 of a tile reaches 2·reach + 1 blocks below its own blocks and 2·reach + 2
-    // above (see the module docs). Exact particle count of the fullest zone 2: every
-    // populated block adds its count to each tile whose zone 2 holds it.
-    let (below, above) = (2 * reach + 1, 2 * reach + 2);
-    let origin = tile_origin(block_counts, reach);
-    let densest_zone = |t: i32| -> u64 {
+impl Model<'_> {
+    /// Peak of an untiled run. A payload costs the particles kept in memory to the
+    /// attribute stage (12 bytes of position and 4 per float, and one sorted copy).
+    fn untiled(&self) -> u64 {
+        let particles = self.shape.particles;
+        let kept = if self.payload > 0 {
+            12 + 2 * self.payload
+        } else {
+            0
+        };
+        (self.shape.untiled_bytes() + particles * self.kernel_bytes_per_particle).max(self.output)
+            + particles * kept
+    }
+
+    /// Exact particle count of the fullest zone 2 of tiles of `t` blocks: every populated
+    /// block adds its count to each tile whose zone 2 holds it. Zone 2 of a tile reaches
+    /// 2·reach + 1 blocks below its own blocks and 2·reach + 2 above (see the module
+    /// docs).
+    fn densest_zone(&self, t: i32) -> u64 {
+        let (below, above) = (2 * self.reach + 1, 2 * self.reach + 2);
+        let origin = self.origin;
         let mut zone: HashMap<BlockKey, u64> = HashMap::new();
-        for (b, n) in block_counts {
+        for (b, n) in self.block_counts {
             let lo = [0, 1, 2].map(|a| (b[a] - origin[a] - above).div_euclid(t));
             let hi = [0, 1, 2].map(|a| (b[a] - origin[a] + below).div_euclid(t));
             for tz in lo[2]..=hi[2] {
@@ -249,79 +169,145 @@ pub(super) fn choose_tile_blocks(
             }
         }
         zone.values().copied().max().unwrap_or(0)
-    };
-    let surface_factor = (shape.surface_blocks as f64 * PARTICLES_PER_SURFACE_BLOCK
-        / particles.max(1) as f64)
-        .max(1.0);
-    let tile_bytes_per_particle =
-        (TILE_BYTES_PER_PARTICLE as f64 * surface_factor) as u64 + kernel_bytes_per_particle;
-    let tile_estimate = |t: i32| densest_zone(t) * tile_bytes_per_particle;
-    // The whole tiled run: tiles over what they produced, or the surface after them with
-    // the attribute stage's tile.
-    let tiled_estimate = |t: i32| -> u64 {
-        let attribute_tile = if payload > 0 {
-            densest_zone(t) * (ATTRIBUTE_TILE_BYTES_PER_PARTICLE + 2 * payload)
+    }
+
+    /// Peak of the densest tile of `t` blocks, scaled up where the scene has more surface
+    /// per particle than the one [`TILE_BYTES_PER_PARTICLE`] was measured on.
+    fn tile(&self, t: i32) -> u64 {
+        let surface_factor = (self.shape.surface_blocks as f64 * PARTICLES_PER_SURFACE_BLOCK
+            / self.shape.particles.max(1) as f64)
+            .max(1.0);
+        let per_particle = (TILE_BYTES_PER_PARTICLE as f64 * surface_factor) as u64
+            + self.kernel_bytes_per_particle;
+        self.densest_zone(t) * per_particle
+    }
+
+    /// Peak of a tiled run: the tiles over what they produced, or the surface after them
+    /// with the attribute stage's tile (the densest tile's particles loaded with their
+    /// payload).
+    fn tiled(&self, t: i32) -> u64 {
+        let attribute_tile = if self.payload > 0 {
+            self.densest_zone(t) * (ATTRIBUTE_TILE_BYTES_PER_PARTICLE + 2 * self.payload)
         } else {
             0
         };
-        (tile_estimate(t) + produced).max(output + attribute_tile)
+        (self.tile(t) + self.produced).max(self.output + attribute_tile)
+    }
+}
+
+/// MiB, rounded up.
+fn mib(bytes: u64) -> u64 {
+    bytes.div_ceil(1 << 20)
+}
+
+/// How the memory budget cuts a frame.
+pub(super) struct BudgetInput<'a> {
+    /// Particles per home block.
+    pub block_counts: &'a HashMap<BlockKey, u64>,
+    /// Lowest block any tile processes.
+    pub origin: BlockKey,
+    /// Blocks a particle reaches.
+    pub reach: i32,
+    /// The post-processing's memory per marching-cubes triangle.
+    pub output_cost: OutputCost,
+    /// Floats of payload per particle.
+    pub payload_width: usize,
+    /// Bytes per particle the kernels add.
+    pub kernel_bytes_per_particle: u64,
+    /// Whether the tiles decimate their pieces (else the raw surface accumulates).
+    pub decimated_in_tiles: bool,
+}
+
+/// Picks the tile edge in blocks (`None`: one tile) and estimates the run's peak memory;
+/// refuses, before any work, a budget that the surface after the tiles or the smallest
+/// tile cannot fit.
+pub(super) fn choose_tile_blocks(
+    input: &BudgetInput,
+    options: &super::TileOptions,
+) -> Result<(Option<i32>, u64)> {
+    let shape = SceneShape::of(input.block_counts);
+    let triangles = shape.marching_cubes_triangles();
+    let particles = shape.particles;
+    let model = Model {
+        block_counts: input.block_counts,
+        origin: input.origin,
+        reach: input.reach,
+        shape,
+        output: BASE_BYTES
+            + (particles * POST_TILES_BYTES_PER_PARTICLE).min(POST_TILES_MAX_BYTES)
+            + (triangles * input.output_cost.bytes_per_triangle) as u64,
+        produced: BASE_BYTES
+            + (triangles
+                * if input.decimated_in_tiles {
+                    0.2 * crate::mesh::MESH_BYTES_PER_TRIANGLE
+                } else {
+                    20.0
+                }) as u64,
+        payload: 4 * input.payload_width as u64,
+        kernel_bytes_per_particle: input.kernel_bytes_per_particle,
     };
-    let mib = |b: u64| b.div_ceil(1 << 20);
     if let Some(budget) = options.memory_budget_bytes {
-        if output > budget {
+        if model.output > budget {
             return Err(Error::MemoryBudget {
                 budget_mib: mib(budget),
                 message: format!(
                     "the process and the surface of {particles} particles (≈ {:.1} M triangles before decimation) need ≈ {} MiB after the tiles (post-processing): a larger budget or {} would fit",
                     triangles / 1e6,
-                    mib(output),
-                    output_cost.advice
+                    mib(model.output),
+                    input.output_cost.advice
                 ),
             });
         }
     }
     match (options.tile_size_cells, options.memory_budget_bytes) {
-        (Some(cells), budget) => {
-            let t = (cells.max(1) as i32 + BLOCK_EDGE - 1) / BLOCK_EDGE;
-            let estimate = tiled_estimate(t);
-            if let Some(budget) = budget {
-                if estimate > budget {
-                    return Err(Error::MemoryBudget {
-                        budget_mib: mib(budget),
-                        message: format!(
-                            "tiles of {cells} cells need ≈ {} MiB (densest tile ≈ {} MiB, the process and the surface so far ≈ {} MiB): smaller tiles or a larger budget would fit",
-                            mib(estimate),
-                            mib(tile_estimate(t)),
-                            mib(produced)
-                        ),
-                    });
-                }
-            }
-            Ok((Some(t), estimate))
-        }
-        (None, None) => Ok((None, untiled)),
-        (None, Some(budget)) => {
-            if untiled <= budget {
-                return Ok((None, untiled));
-            }
-            let mut smallest = 0;
-            for t in [64, 32, 16, 8, 4, 2, 1] {
-                let estimate = tiled_estimate(t);
-                smallest = estimate;
-                if estimate <= budget {
-                    return Ok((Some(t), estimate));
-                }
-            }
-            Err(Error::MemoryBudget {
-                budget_mib: mib(budget),
-                message: format!(
-                    "even one-block tiles need ≈ {} MiB for {particles} particles (the process and the surface so far ≈ {} MiB)",
-                    mib(smallest),
-                    mib(produced)
-                ),
-            })
+        (Some(cells), budget) => given_tile_size(&model, cells, budget),
+        (None, None) => Ok((None, model.untiled())),
+        (None, Some(budget)) => largest_tile_under(&model, budget),
+    }
+}
+
+/// Tiles of `cells` cells, checked against the budget when there is one.
+fn given_tile_size(model: &Model, cells: u32, budget: Option<u64>) -> Result<(Option<i32>, u64)> {
+    let t = (cells.max(1) as i32 + BLOCK_EDGE - 1) / BLOCK_EDGE;
+    let estimate = model.tiled(t);
+    match budget {
+        Some(budget) if estimate > budget => Err(Error::MemoryBudget {
+            budget_mib: mib(budget),
+            message: format!(
+                "tiles of {cells} cells need ≈ {} MiB (densest tile ≈ {} MiB, the process and the surface so far ≈ {} MiB): smaller tiles or a larger budget would fit",
+                mib(estimate),
+                mib(model.tile(t)),
+                mib(model.produced)
+            ),
+        }),
+        _ => Ok((Some(t), estimate)),
+    }
+}
+
+/// One tile if the run fits `budget` untiled, else the largest power-of-two tile that
+/// does.
+fn largest_tile_under(model: &Model, budget: u64) -> Result<(Option<i32>, u64)> {
+    let untiled = model.untiled();
+    if untiled <= budget {
+        return Ok((None, untiled));
+    }
+    let mut smallest = 0;
+    for t in [64, 32, 16, 8, 4, 2, 1] {
+        let estimate = model.tiled(t);
+        smallest = estimate;
+        if estimate <= budget {
+            return Ok((Some(t), estimate));
         }
     }
+    Err(Error::MemoryBudget {
+        budget_mib: mib(budget),
+        message: format!(
+            "even one-block tiles need ≈ {} MiB for {} particles (the process and the surface so far ≈ {} MiB)",
+            mib(smallest),
+            model.shape.particles,
+            mib(model.produced)
+        ),
+    })
 }
 
 /// Parses a memory size: a number (digits, optionally a fraction) with an optional
@@ -419,21 +405,6 @@ mod tests {
         assert!(spray.marching_cubes_triangles() > solid.marching_cubes_triangles());
     }
 
-    /// The budget message advises the setting of the stage that sets the peak.
-    #[test]
-    fn the_advice_names_the_stage_with_the_peak() {
-        let advice = |r, s, c, l| output_bytes_per_triangle(r, s, c, l).advice;
-        assert!(advice(Some(0.81), true, true, 1).contains("subdivi"));
-        assert!(advice(Some(0.81), true, true, 0).contains("containment"));
-        assert!(advice(Some(0.81), true, false, 0).contains("smooth"));
-        assert!(advice(Some(0.81), false, false, 0).contains("decimat"));
-        assert!(advice(None, false, false, 0).contains("decimat"));
-        // Containment below subdivision: turning it off would not help a subdivided run.
-        let with = output_bytes_per_triangle(Some(0.81), true, true, 1);
-        let without = output_bytes_per_triangle(Some(0.81), true, false, 1);
-        assert_eq!(with.bytes_per_triangle, without.bytes_per_triangle);
-    }
-
     #[test]
     fn a_scene_with_more_surface_per_particle_is_planned_with_more_memory() {
         // The same particles as one solid body and as spray: the spray has every block on
@@ -441,13 +412,26 @@ mod tests {
         // body runs untiled in.
         let body = lattice(24, 1, 64);
         let spray = lattice(24, 3, 64);
-        let output = output_bytes_per_triangle(Some(0.8), false, false, 0);
+        // Decimation by 0.8, nothing after it: the decimated mesh.
+        let output = OutputCost {
+            bytes_per_triangle: 0.2 * crate::mesh::MESH_BYTES_PER_TRIANGLE,
+            advice: "more decimation",
+        };
         let plan = |counts: &HashMap<BlockKey, u64>, budget: Option<u64>| {
             let options = TileOptions {
                 memory_budget_bytes: budget,
                 ..TileOptions::default()
             };
-            choose_tile_blocks(counts, 1, output, 0, 0, true, &options)
+            let input = BudgetInput {
+                block_counts: counts,
+                origin: super::super::plan::tile_origin(counts, 1),
+                reach: 1,
+                output_cost: output,
+                payload_width: 0,
+                kernel_bytes_per_particle: 0,
+                decimated_in_tiles: true,
+            };
+            choose_tile_blocks(&input, &options)
         };
         let (body_tiles, body_bytes) = plan(&body, None).unwrap();
         let (spray_tiles, spray_bytes) = plan(&spray, None).unwrap();

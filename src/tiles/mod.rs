@@ -13,66 +13,64 @@
 //!   blocks only (reading the field one block further up), and every mesh vertex is owned
 //!   by exactly one block;
 //! * a field block sums over particles whose home block is within `reach` blocks
-//!   ([`crate::field::block_reach`]), in (home half-block, global index) order — the
+//!   (`field::block_reach`), in (home half-block, global index) order — the
 //!   tile loads every particle within `reach` of its field blocks ("zone 1") sorted in
 //!   that order, which is also the order the tile's isolation search sees, and the field
 //!   takes them without sorting again;
 //! * the isolation flag of a zone-1 particle depends on the particles within `R` of it, so
 //!   the tile also loads a second ghost ring of `reach` blocks ("zone 2");
-//! * coverage ([`crate::field::apply_coverage`]) reads the field around particles within
+//! * coverage (`field::apply_coverage`) reads the field around particles within
 //!   `c·r + 2h` of the used blocks, so field blocks are computed one block further all
 //!   round;
-//! * [`crate::marching_cubes::stitch`] numbers vertices in global block order.
+//! * `marching_cubes::stitch` numbers vertices in global block order.
 //!
 //! **The engine: plan → store → run → sink.**
-//! * [`plan_tiles`] ([`plan`]): a first pass over the [`ParticleSource`] checks the
+//! * `plan_tiles` (`plan`): a first pass over the [`ParticleSource`] checks the
 //!   positions and counts particles per block; the memory budget picks the tile size.
-//! * [`store`]: where a tile's particles come from, in the canonical order: the source in
-//!   memory, or (tiled, out of core) a spill file on disk ([`spill`]) that a second pass
+//! * `store`: where a tile's particles come from, in the canonical order: the source in
+//!   memory, or (tiled, out of core) a spill file on disk (`spill`) that a second pass
 //!   fills, after which the source is dropped; each tile reads back the spill cells its
 //!   zones overlap. The payload (selected attributes) travels with the positions in the
-//!   spill records and stays there until the attribute stage ([`crate::attributes`]).
-//! * [`run_tiles`]: the loop only: load → isolate → field → marching cubes → hand the
-//!   tile's block surfaces to a [`TileSink`]. Tiles run one after another, each parallel
+//!   spill records and stays there until the attribute stage (`transfer`).
+//! * `run_tiles`: the loop only: load → isolate → field → marching cubes → hand the
+//!   tile's block surfaces to a `TileSink`. Tiles run one after another, each parallel
 //!   inside.
-//! * sinks: [`StitchSink`] stitches the block surfaces into one mesh;
-//!   [`crate::decimation::TileDecimation`] decimates each tile's piece with its border
+//! * sinks: `StitchSink` stitches the block surfaces into one mesh;
+//!   `TileDecimation` decimates each tile's piece with its border
 //!   locked (the locked-seam contract is written down there).
 //!
 //! **Memory budget.** [`TileOptions::memory_budget_bytes`] picks the tile size (the largest
 //! power-of-two number of blocks whose densest tile fits next to the expected output) or
 //! refuses, before any work, a run whose smallest tile cannot fit. The estimate counts the
 //! particles, the blocks they populate and the triangles the populated blocks on the
-//! fluid's surface will carry, calibrated on a real frame and a splash of it ([`budget`]). An untiled run whose
+//! fluid's surface will carry, calibrated on a real frame and a splash of it (`budget`). An untiled run whose
 //! estimate leaves a quarter of it spare keeps the buffers it frees for reuse, in a
 //! program that allows it ([`TileStats::kept_freed_memory`]): 9–11 % more peak memory,
 //! fewer fresh pages.
 //!
 //! **Decimation in tiles.** With decimation requested and more than one tile, the
-//! pipeline runs the tiles into [`crate::decimation::TileDecimation`]: the raw surface is
+//! pipeline runs the tiles into `TileDecimation`: the raw surface is
 //! then never whole in memory, memory follows the output. The result is deterministic
 //! and independent of the thread count, but depends on the tile size; without decimation
 //! the stitched marching-cubes mesh is bit-identical for every tiling.
 
-pub mod budget;
+mod budget;
+mod decimating;
 pub(crate) mod plan;
 pub(crate) mod spill;
 pub(crate) mod store;
 
-use crate::anisotropy::kernels_sorted;
 use crate::cancel::CancelToken;
 use crate::error::Result;
-use crate::field::{
-    apply_coverage, apply_iso_offset, block_of_half, compute_blocks, BlockRange, FieldOptions,
-    FieldStats, Kernel, HALF_BLOCK_EDGE,
-};
-use crate::grid::BlockKey;
+use crate::field::{compute_tile, FieldOptions, FieldStats, TileParticles};
+use crate::grid::{block_of_half, BlockKey, BlockRange, HALF_BLOCK_EDGE};
 use crate::io::particles::ParticleSource;
 use crate::marching_cubes::{march_blocks, stitch, BlockSurface, MarchingCubesStats};
 use crate::mesh::TriMesh;
 use crate::neighbors::find_isolated_sorted;
+pub(crate) use budget::OutputCost;
 pub use budget::{default_memory_budget, parse_memory_size};
-pub(crate) use budget::{output_bytes_per_triangle, OutputCost};
+pub(crate) use decimating::TileDecimation;
 use glam::Vec3;
 pub(crate) use plan::{plan_tiles, TilePlan};
 use std::path::PathBuf;
@@ -81,6 +79,7 @@ pub(crate) use store::ParticleStore;
 
 /// How the lattice is cut.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[non_exhaustive]
 pub struct TileOptions {
     /// Tile edge in marching-cubes cells, rounded up to whole 8-cell blocks. `None`: chosen
     /// from the memory budget, or one tile when there is no budget. Default `None`.
@@ -93,6 +92,24 @@ pub struct TileOptions {
     /// directory. Default `None`.
     #[serde(default)]
     pub temp_dir: Option<PathBuf>,
+}
+
+impl TileOptions {
+    /// Tiles of `cells` marching-cubes cells per edge (rounded up to whole blocks).
+    pub fn tile_size(cells: u32) -> Self {
+        TileOptions {
+            tile_size_cells: Some(cells),
+            ..Default::default()
+        }
+    }
+
+    /// Tiles chosen under a memory budget of `bytes`.
+    pub fn memory_budget(bytes: u64) -> Self {
+        TileOptions {
+            memory_budget_bytes: Some(bytes),
+            ..Default::default()
+        }
+    }
 }
 
 /// What the tiled run did.
@@ -133,6 +150,30 @@ pub struct TileStats {
     pub stitch_seconds: f64,
     /// Seconds spent decimating tiles and the seam band (0 unless decimated in tiles).
     pub decimation_seconds: f64,
+}
+
+impl TileStats {
+    /// The tiles' time as the stages of the paper's Table 1: neighbours (the passes over
+    /// the input, loading the tiles' particles, isolation, and whatever `elapsed` seconds
+    /// hold beyond the timed parts), kernels (with anisotropic ones), field, and marching
+    /// cubes with the stitching; decimation in tiles is its own stage.
+    pub(crate) fn stage_seconds(&self, elapsed: f64, kernels: bool) -> Vec<(&'static str, f64)> {
+        let timed = self.kernel_seconds
+            + self.field_seconds
+            + self.marching_seconds
+            + self.stitch_seconds
+            + self.decimation_seconds;
+        let mut stages = vec![("neighbours", elapsed - timed)];
+        if kernels {
+            stages.push(("kernels", self.kernel_seconds));
+        }
+        stages.push(("field", self.field_seconds));
+        stages.push((
+            "marching cubes",
+            self.marching_seconds + self.stitch_seconds,
+        ));
+        stages
+    }
 }
 
 /// Where the tile loop hands each tile's marching-cubes output.
@@ -229,46 +270,32 @@ pub(crate) fn run_tiles<S: ParticleSource>(
             }
             None => vec![false; local.len()],
         };
-        let mut field_particles = Vec::new();
+        let in_field: Vec<bool> = (0..loaded.len())
+            .map(|k| in_zone1[k] && !lonely[k])
+            .collect();
         for (k, &(h, gi, p)) in loaded.iter().enumerate() {
-            if lonely[k] {
-                if own.contains(block_of_half(h)) {
-                    isolated.push((gi, p));
-                }
-            } else if in_zone1[k] {
-                field_particles.push(p);
+            if lonely[k] && own.contains(block_of_half(h)) {
+                isolated.push((gi, p));
             }
         }
-        // Anisotropic kernels of the field particles, from all their neighbours (zone 2
-        // holds every particle within R of zone 1).
+        let halves: Vec<BlockKey> = loaded.iter().map(|r| r.0).collect();
         stats.neighbour_seconds += clock.elapsed().as_secs_f64();
-        let clock = Instant::now();
-        let kernels = (field_options.kernel == Kernel::Anisotropic).then(|| {
-            let halves: Vec<BlockKey> = loaded.iter().map(|r| r.0).collect();
-            let wanted: Vec<bool> = (0..loaded.len())
-                .map(|k| in_zone1[k] && !lonely[k])
-                .collect();
-            kernels_sorted(&local, &halves, field_options, &wanted)
-        });
-        drop(local);
-        stats.kernel_seconds += clock.elapsed().as_secs_f64();
-        let clock = Instant::now();
-        let (mut field, fs) = match &kernels {
-            None => compute_blocks(&field_particles, field_options, Some(field_range)),
-            Some(kernels) => {
-                crate::field::anisotropic::compute_blocks(kernels, field_options, Some(field_range))
-            }
+        // The field of the particles that enter it; the anisotropic kernels from all their
+        // neighbours (zone 2 holds every particle within R of zone 1).
+        let particles = TileParticles {
+            positions: local,
+            halves,
+            in_field,
         };
-        drop(kernels);
-        field_stats.uncovered_particles +=
-            apply_coverage(&mut field, &field_particles, field_options, Some(own));
-        apply_iso_offset(&mut field, field_options);
+        let tile_field = compute_tile(particles, field_options, Some(field_range), Some(own));
+        stats.kernel_seconds += tile_field.kernel_seconds;
+        stats.field_seconds += tile_field.field_seconds;
+        let (field, fs) = (tile_field.field, tile_field.stats);
         stats.max_tile_field_bytes = stats.max_tile_field_bytes.max(fs.block_bytes);
+        field_stats.uncovered_particles += fs.uncovered_particles;
         field_stats.blocks += fs.blocks;
         field_stats.vertices_in_band += fs.vertices_in_band;
         field_stats.block_bytes = field_stats.block_bytes.max(fs.block_bytes);
-        drop(field_particles);
-        stats.field_seconds += clock.elapsed().as_secs_f64();
         let clock = Instant::now();
         let surfaces = march_blocks(&field, Some(sink.march_range(own)));
         drop(field);
@@ -288,7 +315,7 @@ pub(crate) fn run_tiles<S: ParticleSource>(
 mod tests {
     use super::store::load_in_canonical_order;
     use super::*;
-    use crate::field::home_half_block;
+    use crate::grid::home_half_block;
     #[test]
     fn particles_load_by_home_half_block_then_input_index_in_any_record_order() {
         let mut rng = crate::test_rng::TestRng::new(11);

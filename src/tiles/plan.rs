@@ -2,12 +2,13 @@
 //! particles per home block, then the memory model ([`super::budget`]) picks the tile
 //! size and the tiles to process.
 
-use super::budget::choose_tile_blocks;
+use super::budget::{choose_tile_blocks, BudgetInput};
 use super::TileOptions;
 use crate::cancel::CancelToken;
 use crate::error::{Error, Result};
-use crate::field::{block_reach, check_positions_from, home_block, BlockRange, FieldOptions};
+use crate::field::{block_reach, FieldOptions};
 use crate::grid::BlockKey;
+use crate::grid::{check_positions, home_block, BlockRange};
 use crate::io::particles::ParticleSource;
 use hashbrown::{HashMap, HashSet};
 use rayon::prelude::*;
@@ -84,8 +85,8 @@ const COUNT_PIECE: usize = 1 << 14;
 
 /// Checks every position of `source`, counts particles per home block and plans the
 /// tiles: the memory budget of `tile_options` picks their size, counting
-/// `output_cost` for the surface after the tiles ([`super::output_bytes_per_triangle`])
-/// and the payload the source carries.
+/// `output_cost` for the surface after the tiles and the payload the source carries.
+/// Options must be valid.
 pub(crate) fn plan_tiles<S: ParticleSource + ?Sized>(
     source: &S,
     field_options: &FieldOptions,
@@ -94,7 +95,6 @@ pub(crate) fn plan_tiles<S: ParticleSource + ?Sized>(
     decimated_in_tiles: bool,
     cancel: &CancelToken,
 ) -> Result<TilePlan> {
-    field_options.validate()?;
     let reach = block_reach(field_options);
     let inv_h = 1.0 / field_options.cell_size_world();
     let particles = source.particle_count();
@@ -105,12 +105,84 @@ pub(crate) fn plan_tiles<S: ParticleSource + ?Sized>(
         });
     }
     let payload_width = crate::attributes::payload_width(&source.attribute_layout());
+    let block_counts = count_home_blocks(source, field_options, cancel)?;
+    let origin = tile_origin(&block_counts, reach);
+    let budget = BudgetInput {
+        block_counts: &block_counts,
+        origin,
+        reach,
+        output_cost,
+        payload_width,
+        kernel_bytes_per_particle: field_options.kernel_bytes_per_particle(),
+        decimated_in_tiles,
+    };
+    let (tile_blocks, estimated_peak_bytes) = choose_tile_blocks(&budget, tile_options)?;
+    let kept_freed_memory =
+        crate::allocator::keep_freed_memory(crate::allocator::may_keep_freed_memory(
+            estimated_peak_bytes,
+            tile_options.memory_budget_bytes,
+            tile_blocks.is_some(),
+        ));
+    // Tiles are counted from the lowest block the field reaches, so a tile larger than
+    // the scene is one tile wherever the scene lies.
+    let mut plan = TilePlan {
+        particles,
+        payload_width,
+        tile_blocks,
+        estimated_peak_bytes,
+        kept_freed_memory,
+        reach,
+        inv_h,
+        origin,
+        tiles: Vec::new(),
+        spill_cells: HashMap::new(),
+    };
+    plan.list_tiles(&block_counts);
+    Ok(plan)
+}
 
+impl TilePlan {
+    /// Lists the tiles to process: those holding a block within reach (+1 for the
+    /// marching layer) of a populated home block; counts the particles per spill cell.
+    fn list_tiles(&mut self, block_counts: &HashMap<BlockKey, u64>) {
+        let reach = self.reach;
+        let mut tiles: HashSet<BlockKey> = HashSet::new();
+        if self.is_tiled() {
+            for (b, n) in block_counts {
+                *self.spill_cells.entry(cell_of(*b)).or_default() += n;
+                for dz in -reach - 1..=reach {
+                    for dy in -reach - 1..=reach {
+                        for dx in -reach - 1..=reach {
+                            tiles.insert(self.tile_of([b[0] + dx, b[1] + dy, b[2] + dz]));
+                        }
+                    }
+                }
+            }
+        } else if self.particles > 0 {
+            tiles.insert([0, 0, 0]);
+        }
+        self.tiles = tiles.into_iter().collect();
+        self.tiles.sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
+    }
+}
+
+/// One pass over `source`: checks every position and counts the particles per home
+/// block, in parallel pieces (runs of equal home blocks, then one map per piece), the maps
+/// added up after: counts do not depend on the order of the additions.
+fn count_home_blocks<S: ParticleSource + ?Sized>(
+    source: &S,
+    field_options: &FieldOptions,
+    cancel: &CancelToken,
+) -> Result<HashMap<BlockKey, u64>> {
+    let inv_h = 1.0 / field_options.cell_size_world();
     let mut block_counts: HashMap<BlockKey, u64> = HashMap::new();
     source.visit_chunks(&mut |chunk| {
-        check_positions_from(chunk.first, chunk.positions, field_options)?;
-        // Counted in parallel pieces (runs of equal home blocks, then one map per piece),
-        // the maps added up after: counts do not depend on the order of the additions.
+        check_positions(
+            chunk.first,
+            chunk.positions,
+            field_options.cell_size_world(),
+            field_options.particle_radius,
+        )?;
         let counts = chunk
             .positions
             .par_chunks(COUNT_PIECE)
@@ -135,59 +207,7 @@ pub(crate) fn plan_tiles<S: ParticleSource + ?Sized>(
         block_counts = add_counts(std::mem::take(&mut block_counts), counts);
         cancel.check()
     })?;
-    let (tile_blocks, estimated_peak_bytes) = choose_tile_blocks(
-        &block_counts,
-        reach,
-        output_cost,
-        payload_width,
-        match field_options.kernel {
-            crate::field::Kernel::Isotropic => 0,
-            crate::field::Kernel::Anisotropic => super::budget::ANISOTROPIC_BYTES_PER_PARTICLE,
-        },
-        decimated_in_tiles,
-        tile_options,
-    )?;
-    let kept_freed_memory =
-        crate::allocator::keep_freed_memory(crate::allocator::may_keep_freed_memory(
-            estimated_peak_bytes,
-            tile_options.memory_budget_bytes,
-            tile_blocks.is_some(),
-        ));
-    // Tiles are counted from the lowest block the field reaches, so a tile larger than
-    // the scene is one tile wherever the scene lies.
-    let mut plan = TilePlan {
-        particles,
-        payload_width,
-        tile_blocks,
-        estimated_peak_bytes,
-        kept_freed_memory,
-        reach,
-        inv_h,
-        origin: tile_origin(&block_counts, reach),
-        tiles: Vec::new(),
-        spill_cells: HashMap::new(),
-    };
-
-    // Tiles to process: those holding a block within reach (+1 for the marching layer)
-    // of a populated home block.
-    let mut tiles: HashSet<BlockKey> = HashSet::new();
-    if plan.is_tiled() {
-        for (b, n) in &block_counts {
-            *plan.spill_cells.entry(cell_of(*b)).or_default() += n;
-            for dz in -reach - 1..=reach {
-                for dy in -reach - 1..=reach {
-                    for dx in -reach - 1..=reach {
-                        tiles.insert(plan.tile_of([b[0] + dx, b[1] + dy, b[2] + dz]));
-                    }
-                }
-            }
-        }
-    } else if particles > 0 {
-        tiles.insert([0, 0, 0]);
-    }
-    plan.tiles = tiles.into_iter().collect();
-    plan.tiles.sort_unstable_by_key(|k| [k[2], k[1], k[0]]);
-    Ok(plan)
+    Ok(block_counts)
 }
 
 /// The sum of two maps of counts (the larger one is kept and the other added to it).

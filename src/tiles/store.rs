@@ -7,7 +7,7 @@ use super::plan::{cell_of, TilePlan, SPILL_CELL_BLOCKS};
 use super::spill::SpillFile;
 use crate::cancel::CancelToken;
 use crate::error::Result;
-use crate::field::{block_of_half, home_block, home_half_block, BlockRange};
+use crate::grid::{block_of_half, home_block, home_half_block, BlockRange};
 use crate::grid::{BlockKey, BLOCK_EDGE};
 use crate::io::particles::ParticleSource;
 use glam::Vec3;
@@ -285,4 +285,16 @@ pub(crate) fn load_in_canonical_order(
         .par_chunk_by_mut(|a, b| a.0 == b.0)
         .filter(|run| !run.is_sorted_by_key(|r| r.1))
         .for_each(|run| run.sort_unstable_by_key(|r| r.1));
+}
+/// The stored particles are the centres containment measures, read back cell by cell.
+impl<S: ParticleSource> crate::containment::Centres for ParticleStore<S> {
+    fn visit_between(
+        &self,
+        axis: usize,
+        lo: f32,
+        hi: f32,
+        visit: &mut crate::containment::VisitChunk<'_>,
+    ) -> Result<()> {
+        self.for_each_stored_between(axis, lo, hi, visit)
+    }
 }

@@ -1,4 +1,5 @@
-//! Mesh writers (and readers for round trips and for meshes from other tools).
+//! Mesh writers (and readers for round trips and for meshes from other tools), one file
+//! per format: `gltf.rs`, `ply.rs`, `obj.rs`, `vtk.rs`, each with its reader and writer.
 //!
 //! | format | extension | what is written | attributes |
 //! |---|---|---|---|
@@ -18,12 +19,12 @@
 //! write leaves no partial file and keeps an existing target.
 
 mod columns;
+mod gltf;
 mod gltf_check;
-mod gltf_writer;
-mod read;
-mod simple;
-
-pub use read::read_mesh;
+mod obj;
+mod parts;
+mod ply;
+mod vtk;
 
 use crate::error::{Error, Result};
 use crate::io::atomic::write_atomically;
@@ -74,6 +75,53 @@ impl std::str::FromStr for MeshFormat {
             other => Err(format!("unknown mesh format {other:?}; {SUPPORTED}")),
         }
     }
+}
+
+/// Reads a triangle mesh; the format comes from the extension.
+///
+/// PLY (ASCII, binary LE / BE, any scalar types, polygon faces fan-triangulated), OBJ
+/// (`v`, `f` with `v`, `v/t`, `v//n`, `v/t/n` and negative indices, polygons
+/// fan-triangulated), glTF (`.glb`, `.gltf` with embedded buffers: every triangle
+/// primitive of the default scene, node transforms applied) and legacy VTK (ASCII or
+/// BINARY, `POINTS` and `POLYGONS`, polygons fan-triangulated). Attributes come back as
+/// `columns.rs` names them (each format's file says which); OBJ has none.
+pub fn read_mesh(path: &Path) -> Result<TriMesh> {
+    let input = path.display().to_string();
+    crate::error::guard(move || input, || read_mesh_unguarded(path))
+}
+
+fn read_mesh_unguarded(path: &Path) -> Result<TriMesh> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or_default()
+        .to_ascii_lowercase();
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let mesh = match ext.as_str() {
+        "ply" => ply::read(path, &bytes)?,
+        "obj" => obj::read(path, &bytes)?,
+        "glb" | "gltf" => gltf::read(path, &bytes)?,
+        "vtk" => vtk::read(path, &bytes)?,
+        _ => {
+            return Err(Error::UnsupportedFormat {
+                path: path.to_path_buf(),
+                message: "mesh input must be .ply, .obj, .glb, .gltf or .vtk".into(),
+            })
+        }
+    };
+    let n = mesh.positions.len() as u32;
+    if let Some(t) = mesh
+        .triangles
+        .iter()
+        .position(|t| t.iter().any(|&i| i >= n))
+    {
+        return Err(Error::parse(
+            path,
+            format!("face {t}"),
+            format!("vertex index out of range (the mesh has {n} vertices)"),
+        ));
+    }
+    Ok(mesh)
 }
 
 /// Options of [`write_surface`].
@@ -131,7 +179,7 @@ pub fn write_sequence_gltf(
         });
     }
     columns::check_frames(path, frames)?;
-    let doc = gltf_writer::build_sequence(frames, fps, options.normals);
+    let doc = gltf::build_sequence(frames, fps, options.normals);
     Ok(MeshWriteStats {
         bytes: write_document(path, &doc, format)?,
         vertices: doc.vertices,
@@ -141,7 +189,7 @@ pub fn write_sequence_gltf(
 }
 
 /// Writes a glTF document as `.glb` or `.gltf`, atomically; returns the bytes written.
-fn write_document(path: &Path, doc: &gltf_writer::Document, format: MeshFormat) -> Result<u64> {
+fn write_document(path: &Path, doc: &gltf::Document, format: MeshFormat) -> Result<u64> {
     write_atomically(path, |w| {
         if format == MeshFormat::Glb {
             doc.write_glb(w)
@@ -173,27 +221,27 @@ pub fn write_surface(
     let mut dropped_attributes = Vec::new();
     let (bytes, vertices) = match format {
         MeshFormat::Glb | MeshFormat::Gltf => {
-            let doc = gltf_writer::build(surface, options.normals);
+            let doc = gltf::build(surface, options.normals);
             (write_document(path, &doc, format)?, doc.vertices)
         }
         other => {
             // The fluid as it is, then the spheres instance after instance (instancing is
             // glTF's only); nothing is merged in memory.
-            let mut parts = vec![simple::Part::Mesh(&surface.fluid)];
+            let mut parts = vec![parts::Part::Mesh(&surface.fluid)];
             if !surface.spheres.centers.is_empty() {
-                parts.push(simple::Part::Spheres(&surface.spheres));
+                parts.push(parts::Part::Spheres(&surface.spheres));
             }
             let normals = options.normals && parts.iter().all(|p| p.has_normals());
             let shared = if other == MeshFormat::Obj {
                 dropped_attributes = columns::all_names(surface);
-                simple::Shared::new(&[], &mut Vec::new())
+                parts::Shared::new(&[], &mut Vec::new())
             } else {
-                simple::Shared::new(&parts, &mut dropped_attributes)
+                parts::Shared::new(&parts, &mut dropped_attributes)
             };
             let bytes = write_atomically(path, |w| match other {
-                MeshFormat::Ply => simple::write_ply(w, &parts, normals, &shared),
-                MeshFormat::Obj => simple::write_obj(w, &parts, normals),
-                MeshFormat::Vtk => simple::write_vtk(w, &parts, normals, &shared),
+                MeshFormat::Ply => ply::write(w, &parts, normals, &shared),
+                MeshFormat::Obj => obj::write(w, &parts, normals),
+                MeshFormat::Vtk => vtk::write(w, &parts, normals, &shared),
                 MeshFormat::Glb | MeshFormat::Gltf => unreachable!(),
             })?;
             (

@@ -8,7 +8,8 @@
 //! values), then per point `P[4]` (x, y, z, w) as f32 followed by every attribute's values.
 //! Attribute types kept: 0 float, 1 int (as f32), 5 vector. Others are rejected.
 
-use super::{Attribute, Particles, RecordSink};
+use super::records::{non_finite, open_buffered};
+use super::{read_bytes, Attribute, ParticleCodec, Particles, StreamSink};
 use crate::attributes::AttributeLayout;
 use crate::error::{Error, Result};
 use glam::Vec3;
@@ -90,26 +91,120 @@ impl Stream<'_> {
     }
 }
 
-/// Chooses, from the attributes a header declares (in file order), the indices of those
-/// to stream, in payload order; told first the point count the header announces.
-pub(super) type Select<'a> = dyn FnMut(usize, &[AttributeLayout]) -> Result<Vec<usize>> + 'a;
-
 /// Most bytes a BGEO stream may hold after its point records (primitives, detail
 /// attributes, the two-byte extra block partio writes) before it counts as data the
 /// header did not announce.
 const MAX_TRAILER_BYTES: u64 = 1 << 20;
 
+/// The BGEO format.
+pub(super) struct Bgeo;
+
+impl ParticleCodec for Bgeo {
+    /// Reads a whole BGEO file (gzip-compressed or plain) into memory first.
+    fn read(&self, path: &Path) -> Result<Particles> {
+        let raw = read_bytes(path)?;
+        let mut all = Collect::default();
+        parse(path, &raw[..], &mut all)?;
+        Ok(all.particles)
+    }
+
+    /// Every BGEO file streams, decompressing as it goes.
+    fn stream(&self, path: &Path, sink: &mut dyn StreamSink) -> Result<Option<usize>> {
+        parse(path, open_buffered(path)?, sink).map(Some)
+    }
+
+    fn write(&self, path: &Path, _particles: &Particles) -> Result<()> {
+        Err(Error::UnsupportedFormat {
+            path: path.to_path_buf(),
+            message: "writing BGEO is not supported; write .xyz, .vtk or .ply".into(),
+        })
+    }
+}
+
+/// The whole-file reader's sink: every attribute, values gathered as the records come
+/// (no reservation from the header's count).
+#[derive(Default)]
+struct Collect {
+    particles: Particles,
+}
+
+impl StreamSink for Collect {
+    fn wants_attributes(&self) -> bool {
+        true
+    }
+    fn select(&mut self, _: usize, declared: &[AttributeLayout]) -> Result<Vec<usize>> {
+        self.particles.attributes = declared
+            .iter()
+            .map(|l| Attribute {
+                name: l.name.clone(),
+                components: l.components,
+                values: Vec::new(),
+            })
+            .collect();
+        Ok((0..declared.len()).collect())
+    }
+    fn records(&mut self, positions: &[Vec3], rows: &[f32]) -> Result<()> {
+        self.particles.positions.extend_from_slice(positions);
+        let attributes = &mut self.particles.attributes;
+        let width: usize = attributes.iter().map(|a| a.components).sum();
+        for row in rows.chunks_exact(width.max(1)).take(positions.len()) {
+            let mut o = 0;
+            for a in attributes.iter_mut() {
+                a.values.extend_from_slice(&row[o..o + a.components]);
+                o += a.components;
+            }
+        }
+        Ok(())
+    }
+    fn array(&mut self, _: usize, _: &[f32]) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// A point attribute as the header defines it.
+struct Definition {
+    name: String,
+    /// Components (4-byte values).
+    size: usize,
+    /// 0 float, 1 int, 5 vector.
+    ty: i32,
+}
+
 /// Parses a BGEO stream (gzip detected by its magic bytes) chunk by chunk: once the
-/// header is read, `select` picks the attributes to carry; then positions and the
-/// selected attributes' payload rows (in `select`'s order) go to `sink` in chunks of at
-/// most [`CHUNK_POINTS`]. Returns the point count and the selected layout. Memory: one
-/// chunk of records.
+/// header is read, [`StreamSink::select`] picks the attributes to carry; then positions
+/// and the selected attributes' payload rows (in the selection's order) go to `sink` in
+/// chunks of at most [`CHUNK_POINTS`]. Returns the point count. Memory: one chunk of
+/// records.
 fn parse<'a, R: BufRead + 'a>(
     path: &'a Path,
-    mut source: R,
-    select: &mut Select<'_>,
-    sink: &mut RecordSink<'_>,
-) -> Result<(usize, Vec<AttributeLayout>)> {
+    source: R,
+    sink: &mut dyn StreamSink,
+) -> Result<usize> {
+    let mut r = open(path, source)?;
+    let (npoints, defs) = read_header(&mut r)?;
+    let declared: Vec<AttributeLayout> = defs
+        .iter()
+        .map(|d| AttributeLayout {
+            name: d.name.clone(),
+            components: d.size,
+        })
+        .collect();
+    let chosen = sink.select(npoints, &declared)?;
+    // Byte offset in the record, components and int-ness of each selected attribute.
+    let mut at = Vec::with_capacity(defs.len());
+    let mut stride = 16;
+    for d in &defs {
+        at.push((stride, d.size, d.ty == 1));
+        stride += 4 * d.size;
+    }
+    let fields: Vec<(usize, usize, bool)> = chosen.iter().map(|&k| at[k]).collect();
+    read_points(&mut r, npoints, stride, &fields, sink)?;
+    check_trailer(&mut r, npoints)?;
+    Ok(npoints)
+}
+
+/// The decompressed stream of `source` (gzip detected by its magic bytes).
+fn open<'a, R: BufRead + 'a>(path: &'a Path, mut source: R) -> Result<Stream<'a>> {
     let gzip = source
         .fill_buf()
         .map_err(|e| Error::io(path, e))?
@@ -119,11 +214,17 @@ fn parse<'a, R: BufRead + 'a>(
     } else {
         Box::new(source)
     };
-    let mut r = Stream {
+    Ok(Stream {
         path,
         inner,
         pos: 0,
-    };
+    })
+}
+
+/// The magic, version, counts and point attribute definitions; returns the point count
+/// and the definitions, once the records they describe are known to be addressable.
+fn read_header(r: &mut Stream) -> Result<(usize, Vec<Definition>)> {
+    let path = r.path;
     let magic = r.bytes(5, "the magic number")?;
     if magic != b"BgeoV" {
         return Err(Error::parse(
@@ -154,7 +255,7 @@ fn parse<'a, R: BufRead + 'a>(
             message: "BGEO point or primitive groups are not supported".into(),
         });
     }
-    let mut defs: Vec<(String, usize, i32)> = Vec::new();
+    let mut defs = Vec::new();
     for _ in 0..nattr {
         let len = r.u16("an attribute name length")? as usize;
         let name = String::from_utf8_lossy(&r.bytes(len, "an attribute name")?).into_owned();
@@ -169,30 +270,25 @@ fn parse<'a, R: BufRead + 'a>(
             });
         }
         r.bytes(4 * size, "attribute defaults")?;
-        defs.push((name, size, ty));
+        defs.push(Definition { name, size, ty });
     }
     let npoints = npoints as usize;
-    let stride = 16 + defs.iter().map(|d| 4 * d.1).sum::<usize>();
+    let stride = 16 + defs.iter().map(|d| 4 * d.size).sum::<usize>();
     npoints
         .checked_mul(stride)
         .ok_or_else(|| Error::parse(path, "header", "point count overflows"))?;
-    let declared: Vec<AttributeLayout> = defs
-        .iter()
-        .map(|(name, size, _)| AttributeLayout {
-            name: name.clone(),
-            components: *size,
-        })
-        .collect();
-    let chosen = select(npoints, &declared)?;
-    // Byte offset in the record, components and int-ness of each selected attribute.
-    let mut at = Vec::with_capacity(defs.len());
-    let mut o = 16;
-    for (_, size, ty) in &defs {
-        at.push((o, *size, *ty == 1));
-        o += 4 * size;
-    }
-    let fields: Vec<(usize, usize, bool)> = chosen.iter().map(|&k| at[k]).collect();
-    let layout: Vec<AttributeLayout> = chosen.iter().map(|&k| declared[k].clone()).collect();
+    Ok((npoints, defs))
+}
+
+/// Reads the `npoints` records of `stride` bytes and hands each chunk's positions and the
+/// payload rows of `fields` (byte offset, components, int-ness) to `sink`.
+fn read_points(
+    r: &mut Stream,
+    npoints: usize,
+    stride: usize,
+    fields: &[(usize, usize, bool)],
+    sink: &mut dyn StreamSink,
+) -> Result<()> {
     let f = |b: &[u8]| f32::from_be_bytes(b.try_into().expect("4 bytes"));
     // Nothing is reserved from the header's count: a chunk holds at most `CHUNK_BYTES`
     // (or one record), and the buffers grow only as records arrive.
@@ -210,14 +306,13 @@ fn parse<'a, R: BufRead + 'a>(
             count * stride,
             &format!("points {first}..{} of {stride} bytes", first + count),
         )?;
-        let data = &records[..];
         chunk.clear();
         payload.clear();
-        for (k, rec) in data.chunks_exact(stride).enumerate() {
+        for (k, rec) in records.chunks_exact(stride).enumerate() {
             let p = Vec3::new(f(&rec[0..4]), f(&rec[4..8]), f(&rec[8..12]));
             if !p.is_finite() {
-                return Err(super::non_finite(
-                    path,
+                return Err(non_finite(
+                    r.path,
                     format!(
                         "byte offset {} (decompressed), particle {}",
                         start + (k * stride) as u64,
@@ -227,7 +322,7 @@ fn parse<'a, R: BufRead + 'a>(
                 ));
             }
             chunk.push(p);
-            for &(o, size, int) in &fields {
+            for &(o, size, int) in fields {
                 for b in rec[o..o + 4 * size].chunks_exact(4) {
                     payload.push(if int {
                         i32::from_be_bytes(b.try_into().expect("4 bytes")) as f32
@@ -237,12 +332,16 @@ fn parse<'a, R: BufRead + 'a>(
                 }
             }
         }
-        sink(&chunk, &payload)?;
+        sink.records(&chunk, &payload)?;
         first += count;
     }
-    // The stream ends soon after the announced points: a header that undercounts (a
-    // gzip of a few KiB can decompress to gigabytes) is an error, found after reading at
-    // most `MAX_TRAILER_BYTES` more.
+    Ok(())
+}
+
+/// The stream ends soon after the announced points: a header that undercounts (a gzip of
+/// a few KiB can decompress to gigabytes) is an error, found after reading at most
+/// [`MAX_TRAILER_BYTES`] more.
+fn check_trailer(r: &mut Stream, npoints: usize) -> Result<()> {
     let end = r.pos;
     let trailer = std::io::copy(
         &mut (&mut r.inner).take(MAX_TRAILER_BYTES + 1),
@@ -250,86 +349,19 @@ fn parse<'a, R: BufRead + 'a>(
     )
     .map_err(|e| {
         Error::parse(
-            path,
+            r.path,
             format!("byte offset {end} (decompressed)"),
             format!("cannot read past the points: {e}"),
         )
     })?;
     if trailer > MAX_TRAILER_BYTES {
         return Err(Error::parse(
-            path,
+            r.path,
             format!("byte offset {end} (decompressed)"),
             format!(
                 "the data goes on past the {npoints} points the header announces (more than {MAX_TRAILER_BYTES} bytes follow the last point)"
             ),
         ));
     }
-    Ok((npoints, layout))
-}
-
-/// Reads a whole BGEO file held in memory (gzip-compressed or plain).
-pub(super) fn read(path: &Path, raw: &[u8]) -> Result<Particles> {
-    let mut positions = Vec::new();
-    let attributes = std::cell::RefCell::new(Vec::<Attribute>::new());
-    parse(
-        path,
-        raw,
-        &mut |_, declared| {
-            // Every attribute, values gathered as the records come (no reservation from
-            // the header's count).
-            *attributes.borrow_mut() = declared
-                .iter()
-                .map(|l| Attribute {
-                    name: l.name.clone(),
-                    components: l.components,
-                    values: Vec::new(),
-                })
-                .collect();
-            Ok((0..declared.len()).collect())
-        },
-        &mut |chunk, rows| {
-            positions.extend_from_slice(chunk);
-            let mut attributes = attributes.borrow_mut();
-            let width: usize = attributes.iter().map(|a| a.components).sum();
-            for row in rows.chunks_exact(width.max(1)).take(chunk.len()) {
-                let mut o = 0;
-                for a in attributes.iter_mut() {
-                    a.values.extend_from_slice(&row[o..o + a.components]);
-                    o += a.components;
-                }
-            }
-            Ok(())
-        },
-    )?;
-    Ok(Particles {
-        positions,
-        attributes: attributes.into_inner(),
-    })
-}
-
-/// Streams the positions of a BGEO file from disk in chunks of at most 65 536 particles,
-/// decompressing as it goes; other attributes are skipped. Returns the particle count.
-/// Memory: one chunk, whatever the file size.
-pub fn stream_positions(
-    path: &Path,
-    positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
-) -> Result<usize> {
-    let (count, _) = parse(
-        path,
-        super::open_buffered(path)?,
-        &mut |_, _| Ok(Vec::new()),
-        &mut |chunk, _| positions(chunk),
-    )?;
-    Ok(count)
-}
-
-/// Streams the positions of a BGEO file and the payload rows of the attributes `select`
-/// picks from its header, in chunks of at most 65 536 particles. Returns the particle
-/// count and the selected layout. Memory: one chunk, whatever the file size.
-pub(crate) fn stream(
-    path: &Path,
-    select: &mut Select<'_>,
-    sink: &mut RecordSink<'_>,
-) -> Result<(usize, Vec<AttributeLayout>)> {
-    parse(path, super::open_buffered(path)?, select, sink)
+    Ok(())
 }

@@ -10,24 +10,32 @@
 //! Positions are world units as stored. Every reader rejects empty files
 //! ([`Error::EmptyInput`]), truncated data, non-finite coordinates and malformed headers
 //! with a [`Error::Parse`] naming the file and the line or byte offset.
+//!
+//! One file per format (`xyz.rs`, `vtk.rs`, `ply.rs`, `bgeo.rs`), each implementing
+//! `ParticleCodec`: the whole-file reader, the streaming reader (chunks from disk, for
+//! tiled runs: [`SpooledParticles`], [`stream_positions`]) and the writer. A new format is
+//! such a file plus its lines in [`ParticleFormat`] (variant, extension, name, codec).
+//! `records.rs` holds the chunked decoders the streaming readers share; `source.rs` and
+//! `spool.rs` the particle sources a run reads from.
 
-pub(crate) mod bgeo;
-pub(crate) mod ply;
+mod bgeo;
+mod ply;
+mod records;
 mod source;
-pub(crate) mod vtk;
+mod spool;
+mod vtk;
+mod vtk_scan;
 mod xyz;
 
-pub use source::{MappedXyz, ParticleChunk, ParticleSlices, ParticleSource, SpooledParticles};
-
-pub use bgeo::stream_positions as stream_bgeo_positions;
-pub use ply::stream_positions as stream_ply_positions;
-pub use vtk::stream_positions as stream_vtk_positions;
+pub use source::{MappedXyz, ParticleChunk, ParticleSlices, ParticleSource};
+pub use spool::SpooledParticles;
 
 use crate::error::{Error, Result};
 use glam::Vec3;
 use std::path::Path;
 
 pub use crate::attributes::Attribute;
+use crate::attributes::{check_attribute, AttributeLayout, AttributeSelection};
 
 /// The particles of one frame: positions in world units plus optional attributes.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -36,6 +44,28 @@ pub struct Particles {
     pub positions: Vec<Vec3>,
     /// Other point attributes found in the file, in file order.
     pub attributes: Vec<Attribute>,
+}
+
+impl Particles {
+    /// Keeps the attributes that `selection` asks for, in its order, after checking each:
+    /// `components × particles` values, all finite. `path` names the input in errors. A
+    /// name the input lacks (or selected twice) is an [`Error::Attribute`] listing the
+    /// names it has; the streaming readers select by the same rule.
+    pub fn select(mut self, path: &Path, selection: &AttributeSelection) -> Result<Particles> {
+        let available: Vec<&str> = self.attributes.iter().map(|a| a.name.as_str()).collect();
+        let wanted = selection.resolve(path, &available)?;
+        let count = self.positions.len();
+        let mut columns: Vec<Option<Attribute>> = std::mem::take(&mut self.attributes)
+            .into_iter()
+            .map(Some)
+            .collect();
+        for k in wanted {
+            let a = columns[k].take().expect("each selected once");
+            check_attribute(path, &a, count)?;
+            self.attributes.push(a);
+        }
+        Ok(self)
+    }
 }
 
 /// Particle file formats.
@@ -78,6 +108,16 @@ impl ParticleFormat {
         };
         Ok(format)
     }
+
+    /// The reader and writer of the format.
+    pub(crate) fn codec(self) -> &'static dyn ParticleCodec {
+        match self {
+            ParticleFormat::Xyz => &xyz::Xyz,
+            ParticleFormat::Vtk => &vtk::Vtk,
+            ParticleFormat::Ply => &ply::Ply,
+            ParticleFormat::Bgeo => &bgeo::Bgeo,
+        }
+    }
 }
 
 impl std::str::FromStr for ParticleFormat {
@@ -93,6 +133,63 @@ impl std::str::FromStr for ParticleFormat {
     }
 }
 
+/// What each particle format provides: one implementation per file of this module.
+pub(crate) trait ParticleCodec: Sync {
+    /// Reads the whole file: positions and every point attribute, in file order. The
+    /// caller checks the positions (some, all finite).
+    fn read(&self, path: &Path) -> Result<Particles>;
+
+    /// Streams the file from disk front to back: once the header is read,
+    /// [`StreamSink::select`] picks among the attributes it declares; the positions and the
+    /// selected attributes' values then go to `sink` in chunks of at most 65 536 particles.
+    /// Returns the particle count, or `Ok(None)` when this file's layout does not stream
+    /// (before anything reaches `sink`): the whole-file reader then reads it and reports
+    /// on it. Memory: one chunk (and, for ASCII, one line), whatever the file size.
+    fn stream(&self, path: &Path, sink: &mut dyn StreamSink) -> Result<Option<usize>>;
+
+    /// Writes positions and the attributes the format holds, atomically.
+    fn write(&self, path: &Path, particles: &Particles) -> Result<()>;
+}
+
+/// Receives what a streaming reader ([`ParticleCodec::stream`]) decodes, in file order.
+pub(crate) trait StreamSink {
+    /// Whether any attribute can be selected: when not, a reader may take a path that reads
+    /// the positions alone.
+    fn wants_attributes(&self) -> bool;
+
+    /// The header is read: it announces `count` particles and declares the attributes
+    /// `declared`, in file order. Returns the indices of those to stream, in payload order.
+    fn select(&mut self, count: usize, declared: &[AttributeLayout]) -> Result<Vec<usize>>;
+
+    /// Consecutive particles: positions (checked finite) and their payload rows, the
+    /// selected attributes interleaved in selection order (empty without a selection, or
+    /// when the format sends the attributes as arrays after the positions).
+    fn records(&mut self, positions: &[Vec3], rows: &[f32]) -> Result<()>;
+
+    /// Consecutive values of selected attribute `k` (an index into the selection), from
+    /// the first particle on: for formats whose arrays follow the positions (VTK), each
+    /// attribute whole before the next.
+    fn array(&mut self, k: usize, rows: &[f32]) -> Result<()>;
+}
+
+/// A [`StreamSink`] of positions alone.
+struct PositionsOnly<'a>(&'a mut dyn FnMut(&[Vec3]) -> Result<()>);
+
+impl StreamSink for PositionsOnly<'_> {
+    fn wants_attributes(&self) -> bool {
+        false
+    }
+    fn select(&mut self, _: usize, _: &[AttributeLayout]) -> Result<Vec<usize>> {
+        Ok(Vec::new())
+    }
+    fn records(&mut self, positions: &[Vec3], _: &[f32]) -> Result<()> {
+        (self.0)(positions)
+    }
+    fn array(&mut self, _: usize, _: &[f32]) -> Result<()> {
+        Ok(())
+    }
+}
+
 /// Reads the particles of one file; the format comes from `format` or the extension.
 pub fn read_particles(path: &Path, format: Option<ParticleFormat>) -> Result<Particles> {
     let input = path.display().to_string();
@@ -104,23 +201,7 @@ fn read_particles_unguarded(path: &Path, format: Option<ParticleFormat>) -> Resu
         Some(f) => f,
         None => ParticleFormat::from_path(path)?,
     };
-    let particles = match format {
-        ParticleFormat::Xyz => xyz::read(path)?,
-        other => {
-            let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-            if bytes.is_empty() {
-                return Err(Error::EmptyInput {
-                    path: path.to_path_buf(),
-                });
-            }
-            match other {
-                ParticleFormat::Vtk => vtk::read(path, &bytes)?,
-                ParticleFormat::Ply => ply::read(path, &bytes)?,
-                ParticleFormat::Bgeo => bgeo::read(path, &bytes)?,
-                ParticleFormat::Xyz => unreachable!(),
-            }
-        }
-    };
+    let particles = format.codec().read(path)?;
     if particles.positions.is_empty() {
         return Err(Error::EmptyInput {
             path: path.to_path_buf(),
@@ -132,204 +213,39 @@ fn read_particles_unguarded(path: &Path, format: Option<ParticleFormat>) -> Resu
 
 /// Writes particles (positions and attributes where the format holds them), atomically.
 pub fn write_particles(path: &Path, particles: &Particles, format: ParticleFormat) -> Result<()> {
-    match format {
-        ParticleFormat::Xyz => xyz::write(path, particles),
-        ParticleFormat::Vtk => vtk::write(path, particles),
-        ParticleFormat::Ply => ply::write(path, particles),
-        ParticleFormat::Bgeo => Err(Error::UnsupportedFormat {
+    format.codec().write(path, particles)
+}
+
+/// Streams the positions of a particle file from disk in chunks of at most 65 536
+/// particles, decompressing as it goes; attributes are skipped. The format comes from
+/// `format` or the extension. Streams: BGEO (plain or gzip); PLY, binary or ASCII, whose
+/// first element is `vertex` with scalar properties only (the rest of the file is not
+/// read); legacy VTK, binary or ASCII, whose first data section is `POINTS n float|double`
+/// (what SPlisHSPlasH and DualSPHysics write; the rest of the file is not read). Returns
+/// the particle count, or `Ok(None)` for any other layout, which [`read_particles`]
+/// handles and reports on (and for `.xyz`, which [`MappedXyz`] maps as it is). Memory: one
+/// chunk (and, for ASCII, one line), whatever the file size.
+pub fn stream_positions(
+    path: &Path,
+    format: Option<ParticleFormat>,
+    positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
+) -> Result<Option<usize>> {
+    let format = match format {
+        Some(f) => f,
+        None => ParticleFormat::from_path(path)?,
+    };
+    format.codec().stream(path, &mut PositionsOnly(positions))
+}
+
+/// The bytes of a whole particle file; an empty file is [`Error::EmptyInput`].
+fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    if bytes.is_empty() {
+        return Err(Error::EmptyInput {
             path: path.to_path_buf(),
-            message: "writing BGEO is not supported; write .xyz, .vtk or .ply".into(),
-        }),
+        });
     }
-}
-
-/// Records decoded per chunk by the streaming readers.
-const CHUNK_RECORDS: usize = 1 << 16;
-
-/// Where the fixed-size records of a binary file are, and what they are called in error
-/// messages ("particle"/"points").
-struct Records {
-    /// Byte offset of the first record in the file.
-    offset: u64,
-    count: usize,
-    /// Bytes per record.
-    stride: usize,
-    one: &'static str,
-    many: &'static str,
-}
-
-/// Opens `path` for the streaming readers, with a 1 MiB buffer.
-fn open_buffered(path: &Path) -> Result<std::io::BufReader<std::fs::File>> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    Ok(std::io::BufReader::with_capacity(1 << 20, file))
-}
-
-/// The error of a stream that ends before its `count` `many` (e.g. "points").
-fn truncated(count: usize, many: &str) -> String {
-    format!("truncated while reading the {count} {many}: the file ends first")
-}
-
-/// The error for a non-finite position at `location` of `path`.
-fn non_finite(path: &Path, location: String, p: Vec3) -> Error {
-    Error::parse(path, location, format!("non-finite coordinate {p}"))
-}
-
-/// Takes a record's position (when it holds one) and appends its payload values to the
-/// row buffer: the decoder of [`stream_records`].
-type Decode<'a> = &'a dyn Fn(&[u8], &mut Vec<f32>) -> Option<Vec3>;
-
-/// Receives consecutive records: their positions (empty when the records hold none) and
-/// their payload rows, row-major.
-pub(crate) type RecordSink<'a> = dyn FnMut(&[Vec3], &[f32]) -> Result<()> + 'a;
-
-/// Reads the records from `reader` (positioned at the first one) in chunks of at most
-/// 65 536, decodes each with `decode` (its position, checked finite, and its payload
-/// values) and hands the chunks to `sink`. Memory: one chunk.
-fn stream_records(
-    path: &Path,
-    reader: &mut dyn std::io::Read,
-    records: Records,
-    decode: Decode<'_>,
-    sink: &mut RecordSink<'_>,
-) -> Result<()> {
-    let Records {
-        mut offset,
-        count,
-        stride,
-        one,
-        many,
-    } = records;
-    let mut bytes = vec![0u8; CHUNK_RECORDS.min(count) * stride];
-    let mut chunk: Vec<Vec3> = Vec::with_capacity(CHUNK_RECORDS.min(count));
-    let mut payload: Vec<f32> = Vec::new();
-    let mut first = 0;
-    while first < count {
-        let n = CHUNK_RECORDS.min(count - first);
-        let data = &mut bytes[..n * stride];
-        reader.read_exact(data).map_err(|e| {
-            Error::parse(
-                path,
-                format!("byte offset {offset}, {one} {first}"),
-                if e.kind() == std::io::ErrorKind::UnexpectedEof {
-                    truncated(count, many)
-                } else {
-                    format!("cannot read the {many}: {e}")
-                },
-            )
-        })?;
-        chunk.clear();
-        payload.clear();
-        for (k, record) in data.chunks_exact(stride).enumerate() {
-            if let Some(p) = decode(record, &mut payload) {
-                if !p.is_finite() {
-                    return Err(non_finite(path, format!("{one} {}", first + k), p));
-                }
-                chunk.push(p);
-            }
-        }
-        sink(&chunk, &payload)?;
-        offset += data.len() as u64;
-        first += n;
-    }
-    Ok(())
-}
-
-/// Where the records of an ASCII file are: `count` records of `fields` whitespace-separated
-/// numbers each (a record may span lines or share one), the position taken from the fields
-/// `xyz` (none: the records hold no position) and the payload row from the fields
-/// `payload`, in that order; `line` is the 1-based line number at the reader's position
-/// (for errors).
-struct AsciiRecords<'a> {
-    line: usize,
-    count: usize,
-    fields: usize,
-    xyz: Option<[usize; 3]>,
-    payload: &'a [usize],
-    one: &'static str,
-    many: &'static str,
-}
-
-/// [`stream_records`] for ASCII files: reads line by line from `reader` (positioned at the
-/// first record), parses numbers like the whole-file readers (as f64, then rounded to
-/// f32) and hands chunks of at most 65 536 records to `sink`. Memory: one line and one
-/// chunk. What follows the last record is not read.
-fn stream_ascii_records(
-    path: &Path,
-    reader: &mut dyn std::io::BufRead,
-    records: AsciiRecords,
-    sink: &mut RecordSink<'_>,
-) -> Result<()> {
-    let AsciiRecords {
-        mut line,
-        count,
-        fields,
-        xyz,
-        payload: columns,
-        one,
-        many,
-    } = records;
-    let mut chunk: Vec<Vec3> = Vec::with_capacity(CHUNK_RECORDS.min(count));
-    let mut payload: Vec<f32> = Vec::new();
-    let mut text = Vec::new();
-    // `fields` comes from a header line, so the record is no larger than what was read.
-    let (mut done, mut field, mut record) = (0, 0, vec![0.0f32; fields]);
-    let mut rows = 0;
-    let at = |line: usize, done: usize| format!("line {line}, {one} {done}");
-    while done < count {
-        text.clear();
-        if reader
-            .read_until(b'\n', &mut text)
-            .map_err(|e| Error::io(path, e))?
-            == 0
-        {
-            return Err(Error::parse(path, at(line, done), truncated(count, many)));
-        }
-        let words = std::str::from_utf8(&text).map_err(|_| {
-            Error::parse(
-                path,
-                at(line, done),
-                "expected numbers, found non-text bytes",
-            )
-        })?;
-        for word in words.split_ascii_whitespace() {
-            if done == count {
-                break;
-            }
-            let value: f64 = word.parse().map_err(|_| {
-                Error::parse(
-                    path,
-                    at(line, done),
-                    format!("expected a number, found {word:?}"),
-                )
-            })?;
-            record[field] = value as f32;
-            field += 1;
-            if field == fields {
-                if let Some([x, y, z]) = xyz {
-                    let p = Vec3::new(record[x], record[y], record[z]);
-                    if !p.is_finite() {
-                        return Err(non_finite(path, at(line, done), p));
-                    }
-                    chunk.push(p);
-                }
-                payload.extend(columns.iter().map(|&k| record[k]));
-                field = 0;
-                done += 1;
-                rows += 1;
-                if rows == CHUNK_RECORDS {
-                    sink(&chunk, &payload)?;
-                    chunk.clear();
-                    payload.clear();
-                    rows = 0;
-                }
-            }
-        }
-        line += 1;
-    }
-    if rows > 0 {
-        sink(&chunk, &payload)?;
-    }
-    Ok(())
+    Ok(bytes)
 }
 
 fn check_finite(path: &Path, positions: &[Vec3]) -> Result<()> {

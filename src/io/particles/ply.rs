@@ -3,17 +3,40 @@
 //! property as a 1-component attribute (`vx, vy, vz` or `velocity_x/y/z` become one
 //! 3-component `velocity`). Other elements are skipped, list properties included.
 
-use super::{Attribute, Particles};
+use super::records::{open_buffered, stream_ascii_records, stream_records};
+use super::records::{AsciiRecords, Records};
+use super::{read_bytes, Attribute, ParticleCodec, Particles, StreamSink};
 use crate::attributes::AttributeLayout;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::io::atomic::write_atomically;
-use crate::io::ply_header;
+use crate::io::ply_header::{self, PlyElement, PlyHeader};
 use crate::io::text::Cursor;
 use glam::Vec3;
-use std::io::Write;
+use std::io::{BufRead, Write};
 use std::path::Path;
 
-pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
+/// The PLY format.
+pub(super) struct Ply;
+
+impl ParticleCodec for Ply {
+    fn read(&self, path: &Path) -> Result<Particles> {
+        read(path, &read_bytes(path)?)
+    }
+
+    /// Streams a file (binary or ASCII) whose first element is `vertex` with scalar
+    /// properties only; the rest of the file is not read. `Ok(None)` for any other layout
+    /// (another element first, a list property, an unreadable header).
+    fn stream(&self, path: &Path, sink: &mut dyn StreamSink) -> Result<Option<usize>> {
+        stream(path, sink)
+    }
+
+    fn write(&self, path: &Path, particles: &Particles) -> Result<()> {
+        write(path, particles)
+    }
+}
+
+/// Reads a whole PLY file held in memory.
+fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
     let mut c = Cursor::new(path, bytes);
     let header = ply_header::parse(&mut c)?;
     ply_header::check_counts(&c, &header)?;
@@ -114,7 +137,9 @@ fn group_attributes(names: &[&str], mut columns: Vec<Vec<f32>>, xyz: [usize; 3])
         .collect()
 }
 
-pub(super) fn write(path: &Path, particles: &Particles) -> Result<()> {
+/// Writes binary little-endian PLY: `x y z`, then every attribute as float properties
+/// (`vx vy vz` for a 3-component `velocity`).
+fn write(path: &Path, particles: &Particles) -> Result<()> {
     let n = particles.positions.len();
     write_atomically(path, |w| {
         write!(w, "ply\nformat binary_little_endian 1.0\ncomment meniscus particles\nelement vertex {n}\nproperty float x\nproperty float y\nproperty float z\n")?;
@@ -145,47 +170,13 @@ pub(super) fn write(path: &Path, particles: &Particles) -> Result<()> {
     .map(|_| ())
 }
 
-/// Streams the positions of a PLY file (binary or ASCII) whose first element is `vertex`
-/// (scalar properties only) from disk in chunks of at most 65 536 particles; the rest of
-/// the file is not read. Returns `Ok(None)` for any other layout (another element first, a
-/// list property, an unreadable header), which the whole-file reader handles and reports
-/// on. Memory: one chunk (and, for ASCII, one line), whatever the file size.
-pub fn stream_positions(
-    path: &Path,
-    positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
-) -> Result<Option<usize>> {
-    Ok(stream(path, &mut |_, _| Ok(Vec::new()), &mut |chunk, _| {
-        positions(chunk)
-    })?
-    .map(|(count, _)| count))
-}
-
-/// [`stream_positions`] with payload: once the header is read, `select` picks among the
-/// vertex attributes (named and grouped as the whole-file reader does); their payload rows
-/// go to `sink` with the positions. Returns the count and the selected layout, or
-/// `Ok(None)` for a layout that does not stream.
-pub(crate) fn stream(
-    path: &Path,
-    select: &mut super::bgeo::Select<'_>,
-    sink: &mut super::RecordSink<'_>,
-) -> Result<Option<(usize, Vec<AttributeLayout>)>> {
-    use crate::error::Error;
-    use std::io::BufRead;
-    let mut r = super::open_buffered(path)?;
-    let mut header = Vec::new();
-    loop {
-        let n = r
-            .read_until(b'\n', &mut header)
-            .map_err(|e| Error::io(path, e))?;
-        if n == 0 || header.len() > 1 << 16 {
-            return Ok(None);
-        }
-        if header.ends_with(b"end_header\n") {
-            break;
-        }
-    }
-    let mut c = Cursor::new(path, &header);
-    let Ok(h) = ply_header::parse(&mut c) else {
+/// [`Ply`]'s streaming reader: once the header is read, [`StreamSink::select`] picks
+/// among the vertex attributes (named and grouped as the whole-file reader does); their
+/// payload rows go to `sink` with the positions. Returns the count, or `Ok(None)` for a
+/// layout that does not stream.
+fn stream(path: &Path, sink: &mut dyn StreamSink) -> Result<Option<usize>> {
+    let mut r = open_buffered(path)?;
+    let Some((header_len, header_lines, h)) = read_header(path, &mut r)? else {
         return Ok(None);
     };
     let Some(element) = h.elements.first().filter(|e| e.name == "vertex") else {
@@ -195,9 +186,8 @@ pub(crate) fn stream(
     let file_bytes = std::fs::metadata(path)
         .map_err(|e| Error::io(path, e))?
         .len();
-    let left =
-        usize::try_from(file_bytes.saturating_sub(header.len() as u64)).unwrap_or(usize::MAX);
-    crate::io::ply_header::check_counts_within(path, &h, left)?;
+    let left = usize::try_from(file_bytes.saturating_sub(header_len as u64)).unwrap_or(usize::MAX);
+    ply_header::check_counts_within(path, &h, left)?;
     if element.properties.iter().any(|p| p.list_count.is_some()) {
         return Ok(None);
     }
@@ -214,19 +204,18 @@ pub(crate) fn stream(
             components: ks.len(),
         })
         .collect();
-    let chosen = select(element.count, &layouts)?;
+    let chosen = sink.select(element.count, &layouts)?;
     // The property columns of the payload row, in order.
     let columns: Vec<usize> = chosen
         .iter()
         .flat_map(|&k| declared[k].1.iter().copied())
         .collect();
-    let layout: Vec<AttributeLayout> = chosen.iter().map(|&k| layouts[k].clone()).collect();
-    let Some(big_endian) = h.binary else {
-        super::stream_ascii_records(
+    match h.binary {
+        None => stream_ascii_records(
             path,
             &mut r,
-            super::AsciiRecords {
-                line: header.iter().filter(|&&b| b == b'\n').count() + 1,
+            AsciiRecords {
+                line: header_lines + 1,
                 count: element.count,
                 fields: element.properties.len(),
                 xyz: Some([x, y, z]),
@@ -234,40 +223,99 @@ pub(crate) fn stream(
                 one: "vertex",
                 many: "vertices",
             },
-            sink,
-        )?;
-        return Ok(Some((element.count, layout)));
-    };
-    let mut offsets = Vec::with_capacity(element.properties.len());
-    let mut stride = 0;
-    for p in &element.properties {
-        offsets.push(stride);
-        stride += p.scalar.size();
+            &mut |chunk, rows| sink.records(chunk, rows),
+        )?,
+        Some(big_endian) => {
+            let vertices = Vertices {
+                element,
+                offset: header_len as u64,
+                big_endian,
+                xyz: [x, y, z],
+                columns: &columns,
+            };
+            vertices.stream(path, &mut r, sink)?
+        }
     }
-    let field = |rec: &[u8], k: usize| -> f32 {
-        let p = &element.properties[k];
-        p.scalar
-            .decode(&rec[offsets[k]..offsets[k] + p.scalar.size()], big_endian) as f32
+    Ok(Some(element.count))
+}
+
+/// Reads the header (at most 64 KiB, up to `end_header`) from `r`; returns its length in
+/// bytes and lines, and the parsed header, or `None` when there is no readable one.
+fn read_header(path: &Path, r: &mut impl BufRead) -> Result<Option<(usize, usize, PlyHeader)>> {
+    let mut header = Vec::new();
+    loop {
+        let n = r
+            .read_until(b'\n', &mut header)
+            .map_err(|e| Error::io(path, e))?;
+        if n == 0 || header.len() > 1 << 16 {
+            return Ok(None);
+        }
+        if header.ends_with(b"end_header\n") {
+            break;
+        }
+    }
+    let mut c = Cursor::new(path, &header);
+    let Ok(h) = ply_header::parse(&mut c) else {
+        return Ok(None);
     };
-    super::stream_records(
-        path,
-        &mut r,
-        super::Records {
-            offset: header.len() as u64,
-            count: element.count,
-            stride,
-            one: "vertex",
-            many: "vertices",
-        },
-        &|record, payload| {
-            payload.extend(columns.iter().map(|&k| field(record, k)));
-            Some(Vec3::new(
-                field(record, x),
-                field(record, y),
-                field(record, z),
-            ))
-        },
-        sink,
-    )?;
-    Ok(Some((element.count, layout)))
+    let lines = header.iter().filter(|&&b| b == b'\n').count();
+    Ok(Some((header.len(), lines, h)))
+}
+
+/// The binary vertex records of a streaming read.
+struct Vertices<'a> {
+    element: &'a PlyElement,
+    /// Byte offset of the first record.
+    offset: u64,
+    big_endian: bool,
+    /// The properties holding x, y, z.
+    xyz: [usize; 3],
+    /// The properties of the payload row, in order.
+    columns: &'a [usize],
+}
+
+impl Vertices<'_> {
+    /// Streams the records from `r` (at the first one) to `sink`.
+    fn stream(
+        &self,
+        path: &Path,
+        r: &mut impl std::io::Read,
+        sink: &mut dyn StreamSink,
+    ) -> Result<()> {
+        let properties = &self.element.properties;
+        let mut offsets = Vec::with_capacity(properties.len());
+        let mut stride = 0;
+        for p in properties {
+            offsets.push(stride);
+            stride += p.scalar.size();
+        }
+        let field = |rec: &[u8], k: usize| -> f32 {
+            let p = &properties[k];
+            p.scalar.decode(
+                &rec[offsets[k]..offsets[k] + p.scalar.size()],
+                self.big_endian,
+            ) as f32
+        };
+        let [x, y, z] = self.xyz;
+        stream_records(
+            path,
+            r,
+            Records {
+                offset: self.offset,
+                count: self.element.count,
+                stride,
+                one: "vertex",
+                many: "vertices",
+            },
+            &|record, payload| {
+                payload.extend(self.columns.iter().map(|&k| field(record, k)));
+                Some(Vec3::new(
+                    field(record, x),
+                    field(record, y),
+                    field(record, z),
+                ))
+            },
+            &mut |chunk, rows| sink.records(chunk, rows),
+        )
+    }
 }

@@ -1,122 +1,194 @@
 //! Legacy VTK (`# vtk DataFile Version x.y`): ASCII or BINARY (big-endian), any dataset
 //! whose points come in a `POINTS n type` section. Cell sections are skipped;
 //! `POINT_DATA` SCALARS, VECTORS, NORMALS and FIELD arrays become attributes.
+//!
+//! Streamed two ways: positions alone when the points come first (one pass that stops
+//! after them), or with attributes after `vtk_scan.rs` has found where every array is.
 
-use super::{Attribute, Particles};
-use crate::attributes::AttributeLayout;
+use super::records::{open_buffered, stream_ascii_records, stream_records};
+use super::records::{AsciiRecords, Records};
+use super::vtk_scan;
+use super::{read_bytes, Attribute, ParticleCodec, Particles, StreamSink};
 use crate::error::{Error, Result};
 use crate::io::atomic::write_atomically;
-use crate::io::text::{Cursor, Scalar};
-use crate::io::vtk_legacy::{self, Tokens};
+use crate::io::text::Cursor;
+use crate::io::vtk_legacy;
 use glam::Vec3;
-use std::io::Write;
+use std::io::{BufRead, Write};
 use std::path::Path;
 
-pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
+/// The legacy VTK format.
+pub(super) struct Vtk;
+
+impl ParticleCodec for Vtk {
+    fn read(&self, path: &Path) -> Result<Particles> {
+        read(path, &read_bytes(path)?)
+    }
+
+    /// Without attributes wanted: the positions of a file whose first data section is
+    /// `POINTS n float|double` (what SPlisHSPlasH and DualSPHysics write); the rest of the
+    /// file is not read. With attributes: the points and the `POINT_DATA` arrays, when a
+    /// scan of the sections finds them (one more pass over the file, no value decoded).
+    /// `Ok(None)` for any other layout.
+    fn stream(&self, path: &Path, sink: &mut dyn StreamSink) -> Result<Option<usize>> {
+        if !sink.wants_attributes() {
+            return stream_points_first(path, sink);
+        }
+        let Some(layout) = vtk_scan::scan(path)? else {
+            return Ok(None);
+        };
+        layout.stream(path, sink)?;
+        Ok(Some(layout.count()))
+    }
+
+    fn write(&self, path: &Path, particles: &Particles) -> Result<()> {
+        write(path, particles)
+    }
+}
+
+/// Reads a whole legacy VTK file held in memory.
+fn read(path: &Path, bytes: &[u8]) -> Result<Particles> {
     let mut c = Cursor::new(path, bytes);
     let header = vtk_legacy::header(&mut c)?;
     let new_cells = header.new_cells;
-    let binary = header.binary.then_some(true);
-    let mut positions: Option<Vec<Vec3>> = None;
-    let mut attributes = Vec::new();
-    let mut point_data = false;
-    let mut npoints = 0usize;
-    while !c.at_end() {
-        let keyword = c.token("a section keyword")?.to_ascii_uppercase();
+    let mut r = Reader {
+        c,
+        binary: header.binary.then_some(true),
+        positions: None,
+        attributes: Vec::new(),
+        point_data: false,
+        npoints: 0,
+    };
+    while !r.c.at_end() {
+        let keyword = r.c.token("a section keyword")?.to_ascii_uppercase();
+        let binary = r.binary.is_some();
         match keyword.as_str() {
             "DATASET" => {
-                c.token("a dataset type")?;
+                r.c.token("a dataset type")?;
             }
-            "POINTS" => {
-                let (n, scalar) = vtk_legacy::points(&mut c, "the point type")?;
-                if binary.is_some() {
-                    c.finish_line();
-                }
-                let v = c.values(
-                    n.checked_mul(3)
-                        .ok_or_else(|| c.error(format!("the point count {n} overflows")))?,
-                    scalar,
-                    binary,
-                )?;
-                npoints = n;
-                positions = Some(
-                    v.chunks_exact(3)
-                        .map(|p| Vec3::new(p[0], p[1], p[2]))
-                        .collect(),
-                );
-            }
+            "POINTS" => r.points()?,
             "VERTICES" | "LINES" | "POLYGONS" | "TRIANGLE_STRIPS" | "CELLS" => {
-                vtk_legacy::skip_cells(&mut c, new_cells, binary.is_some())?;
+                vtk_legacy::skip_cells(&mut r.c, new_cells, binary)?;
             }
             "CELL_TYPES" => {
-                vtk_legacy::skip_cell_types(&mut c, binary.is_some())?;
+                vtk_legacy::skip_cell_types(&mut r.c, binary)?;
             }
             "POINT_DATA" => {
-                let n: usize = c.number("the point count")?;
-                if n != npoints {
-                    return Err(c.error(format!("POINT_DATA has {n} values, POINTS has {npoints}")));
+                let n: usize = r.c.number("the point count")?;
+                if n != r.npoints {
+                    return Err(r.c.error(format!(
+                        "POINT_DATA has {n} values, POINTS has {}",
+                        r.npoints
+                    )));
                 }
-                point_data = true;
+                r.point_data = true;
             }
             "CELL_DATA" => {
-                let _n: usize = c.number("the cell count")?;
-                point_data = false;
+                let _n: usize = r.c.number("the cell count")?;
+                r.point_data = false;
             }
-            k if vtk_legacy::is_attribute(k) => {
-                let (name, components, scalar) = vtk_legacy::attribute(&mut c, &keyword)?;
-                if binary.is_some() {
-                    c.finish_line();
-                }
-                if point_data {
-                    let values = c.values(
-                        npoints
-                            .checked_mul(components)
-                            .ok_or_else(|| c.error("value count overflows"))?,
-                        scalar,
-                        binary,
-                    )?;
-                    attributes.push(Attribute {
-                        name,
-                        components,
-                        values,
-                    });
-                } else {
-                    return Err(c.error("CELL_DATA arrays are not supported in particle files"));
-                }
-            }
-            "FIELD" => {
-                let arrays = vtk_legacy::field(&mut c)?;
-                for _ in 0..arrays {
-                    let (name, components, tuples, scalar) =
-                        vtk_legacy::field_array(&mut c, binary.is_some(), "an array type", "type")?;
-                    let values = c.values(
-                        components
-                            .checked_mul(tuples)
-                            .ok_or_else(|| c.error("value count overflows"))?,
-                        scalar,
-                        binary,
-                    )?;
-                    if point_data && tuples == npoints {
-                        attributes.push(Attribute {
-                            name,
-                            components,
-                            values,
-                        });
-                    }
-                }
-            }
-            "METADATA" => vtk_legacy::skip_metadata(&mut c)?,
-            other => return Err(c.error(format!("unknown section {other:?}"))),
+            k if vtk_legacy::is_attribute(k) => r.attribute(&keyword)?,
+            "FIELD" => r.field()?,
+            "METADATA" => vtk_legacy::skip_metadata(&mut r.c)?,
+            other => return Err(r.c.error(format!("unknown section {other:?}"))),
         }
     }
-    let positions = positions.ok_or_else(|| Error::parse(path, "header", "no POINTS section"))?;
+    let positions = r
+        .positions
+        .ok_or_else(|| Error::parse(path, "header", "no POINTS section"))?;
     Ok(Particles {
         positions,
-        attributes,
+        attributes: r.attributes,
     })
 }
 
-pub(super) fn write(path: &Path, particles: &Particles) -> Result<()> {
+/// The whole-file reader between sections.
+struct Reader<'a> {
+    c: Cursor<'a>,
+    /// `Some(true)` for BINARY (big-endian), `None` for ASCII.
+    binary: Option<bool>,
+    positions: Option<Vec<Vec3>>,
+    attributes: Vec<Attribute>,
+    /// Whether the arrays that follow are point data.
+    point_data: bool,
+    npoints: usize,
+}
+
+impl Reader<'_> {
+    /// `POINTS n type`, then the positions.
+    fn points(&mut self) -> Result<()> {
+        let (n, scalar) = vtk_legacy::points(&mut self.c, "the point type")?;
+        if self.binary.is_some() {
+            self.c.finish_line();
+        }
+        let values = n
+            .checked_mul(3)
+            .ok_or_else(|| self.c.error(format!("the point count {n} overflows")))?;
+        let v = self.c.values(values, scalar, self.binary)?;
+        self.npoints = n;
+        self.positions = Some(
+            v.chunks_exact(3)
+                .map(|p| Vec3::new(p[0], p[1], p[2]))
+                .collect(),
+        );
+        Ok(())
+    }
+
+    /// A `SCALARS`, `VECTORS`, `NORMALS`, ... array: an attribute of the points (cell data
+    /// is refused).
+    fn attribute(&mut self, keyword: &str) -> Result<()> {
+        let (name, components, scalar) = vtk_legacy::attribute(&mut self.c, keyword)?;
+        if self.binary.is_some() {
+            self.c.finish_line();
+        }
+        if !self.point_data {
+            return Err(self
+                .c
+                .error("CELL_DATA arrays are not supported in particle files"));
+        }
+        let count = self
+            .npoints
+            .checked_mul(components)
+            .ok_or_else(|| self.c.error("value count overflows"))?;
+        let values = self.c.values(count, scalar, self.binary)?;
+        self.attributes.push(Attribute {
+            name,
+            components,
+            values,
+        });
+        Ok(())
+    }
+
+    /// `FIELD name n` and its arrays: those of as many tuples as points, in point data,
+    /// become attributes.
+    fn field(&mut self) -> Result<()> {
+        let arrays = vtk_legacy::field(&mut self.c)?;
+        for _ in 0..arrays {
+            let (name, components, tuples, scalar) = vtk_legacy::field_array(
+                &mut self.c,
+                self.binary.is_some(),
+                "an array type",
+                "type",
+            )?;
+            let count = components
+                .checked_mul(tuples)
+                .ok_or_else(|| self.c.error("value count overflows"))?;
+            let values = self.c.values(count, scalar, self.binary)?;
+            if self.point_data && tuples == self.npoints {
+                self.attributes.push(Attribute {
+                    name,
+                    components,
+                    values,
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Writes binary POLYDATA: `POINTS`, one `VERTICES` cell per point, and every attribute
+/// as point data (`VECTORS` for 3 components, `SCALARS` otherwise).
+fn write(path: &Path, particles: &Particles) -> Result<()> {
     let n = particles.positions.len();
     write_atomically(path, |w| {
         write!(w, "# vtk DataFile Version 4.2\nmeniscus particles\nBINARY\nDATASET POLYDATA\nPOINTS {n} float\n")?;
@@ -151,56 +223,50 @@ pub(super) fn write(path: &Path, particles: &Particles) -> Result<()> {
     .map(|_| ())
 }
 
-/// Streams the positions of a legacy VTK file (BINARY or ASCII) whose first data section
-/// is `POINTS n float|double` (what SPlisHSPlasH and DualSPHysics write) from disk in
-/// chunks of at most 65 536 particles; the rest of the file is not read. Returns
-/// `Ok(None)` for any other layout (another section first, another point type), which the
-/// whole-file reader handles and reports on. Memory: one chunk (and, for ASCII, one line),
-/// whatever the file size.
-pub fn stream_positions(
-    path: &Path,
-    positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
-) -> Result<Option<usize>> {
-    stream_positions_counted(path, &mut |_| Ok(()), positions)
+/// Where the points of a file whose first data section is `POINTS` start.
+struct PointsFirst {
+    /// Byte offset just past the `POINTS` line.
+    offset: u64,
+    /// Lines up to and including the `POINTS` line.
+    lines: usize,
+    count: usize,
+    /// `double` points, else `float`.
+    double: bool,
+    /// BINARY, else ASCII.
+    binary: bool,
 }
 
-/// [`stream_positions`], telling `announced` the header's point count before the first
-/// chunk.
-pub(crate) fn stream_positions_counted(
-    path: &Path,
-    announced: &mut dyn FnMut(usize) -> Result<()>,
-    positions: &mut dyn FnMut(&[Vec3]) -> Result<()>,
-) -> Result<Option<usize>> {
-    use std::io::BufRead;
-    let mut r = super::open_buffered(path)?;
+/// Reads the header lines from `r` up to the `POINTS` line; `None` when the file is not
+/// laid out that way (another section first, another point type, a line over 4 KiB).
+fn points_first(path: &Path, r: &mut impl BufRead) -> Result<Option<PointsFirst>> {
     let mut offset = 0u64;
     let mut line = Vec::new();
-    let mut next_line =
-        |r: &mut std::io::BufReader<std::fs::File>, offset: &mut u64| -> Result<Option<String>> {
-            line.clear();
-            let n = r
-                .read_until(b'\n', &mut line)
-                .map_err(|e| Error::io(path, e))?;
-            *offset += n as u64;
-            if n == 0 || line.len() > 4096 {
-                return Ok(None);
-            }
-            Ok(Some(String::from_utf8_lossy(&line).trim().to_string()))
-        };
-    let header_ok = matches!(next_line(&mut r, &mut offset)?, Some(l) if l.starts_with("# vtk DataFile Version"));
-    let _title = next_line(&mut r, &mut offset)?;
-    let encoding = next_line(&mut r, &mut offset)?;
+    let mut next_line = |r: &mut dyn BufRead, offset: &mut u64| -> Result<Option<String>> {
+        line.clear();
+        let n = r
+            .read_until(b'\n', &mut line)
+            .map_err(|e| Error::io(path, e))?;
+        *offset += n as u64;
+        if n == 0 || line.len() > 4096 {
+            return Ok(None);
+        }
+        Ok(Some(String::from_utf8_lossy(&line).trim().to_string()))
+    };
+    let header_ok =
+        matches!(next_line(r, &mut offset)?, Some(l) if l.starts_with("# vtk DataFile Version"));
+    let _title = next_line(r, &mut offset)?;
+    let encoding = next_line(r, &mut offset)?;
     let binary = matches!(&encoding, Some(l) if l.eq_ignore_ascii_case("BINARY"));
     let ascii = matches!(&encoding, Some(l) if l.eq_ignore_ascii_case("ASCII"));
     if !(header_ok && (binary || ascii)) {
         return Ok(None);
     }
-    let mut lines_read = 3;
+    let mut lines = 3;
     let (count, double) = loop {
-        let Some(l) = next_line(&mut r, &mut offset)? else {
+        let Some(l) = next_line(r, &mut offset)? else {
             return Ok(None);
         };
-        lines_read += 1;
+        lines += 1;
         let tokens: Vec<&str> = l.split_whitespace().collect();
         match tokens.as_slice() {
             [] => continue,
@@ -218,13 +284,31 @@ pub(crate) fn stream_positions_counted(
             _ => return Ok(None),
         }
     };
-    announced(count)?;
-    if ascii {
-        super::stream_ascii_records(
+    Ok(Some(PointsFirst {
+        offset,
+        lines,
+        count,
+        double,
+        binary,
+    }))
+}
+
+/// Streams the positions of a file whose first data section is `POINTS n float|double`,
+/// telling [`StreamSink::select`] the count (no attributes) before the first chunk; the
+/// rest of the file is not read.
+fn stream_points_first(path: &Path, sink: &mut dyn StreamSink) -> Result<Option<usize>> {
+    let mut r = open_buffered(path)?;
+    let Some(points) = points_first(path, &mut r)? else {
+        return Ok(None);
+    };
+    let count = points.count;
+    sink.select(count, &[])?;
+    if !points.binary {
+        stream_ascii_records(
             path,
             &mut r,
-            super::AsciiRecords {
-                line: lines_read + 1,
+            AsciiRecords {
+                line: points.lines + 1,
                 count,
                 fields: 3,
                 xyz: Some([0, 1, 2]),
@@ -232,10 +316,11 @@ pub(crate) fn stream_positions_counted(
                 one: "particle",
                 many: "points",
             },
-            &mut |chunk, _| positions(chunk),
+            &mut |chunk, _| sink.records(chunk, &[]),
         )?;
         return Ok(Some(count));
     }
+    let double = points.double;
     let size = if double { 24 } else { 12 };
     let coordinate = |record: &[u8], i: usize| -> f32 {
         if double {
@@ -244,11 +329,11 @@ pub(crate) fn stream_positions_counted(
             f32::from_be_bytes(record[4 * i..4 * i + 4].try_into().expect("4 bytes"))
         }
     };
-    super::stream_records(
+    stream_records(
         path,
         &mut r,
-        super::Records {
-            offset,
+        Records {
+            offset: points.offset,
             count,
             stride: size,
             one: "particle",
@@ -261,440 +346,7 @@ pub(crate) fn stream_positions_counted(
                 coordinate(record, 2),
             ))
         },
-        &mut |chunk, _| positions(chunk),
+        &mut |chunk, _| sink.records(chunk, &[]),
     )?;
     Ok(Some(count))
-}
-
-/// Where one data block of a legacy VTK file starts: byte offset (binary: its first byte;
-/// ASCII: just after its header's last token), 1-based line there, value type.
-#[derive(Clone, Copy, Debug)]
-struct Block {
-    offset: u64,
-    line: usize,
-    scalar: Scalar,
-}
-
-/// The layout of a legacy VTK file found by [`scan`]: where its points are and where each
-/// `POINT_DATA` array is, without reading any value.
-pub(crate) struct Layout {
-    /// BINARY (big-endian), else ASCII.
-    binary: bool,
-    count: usize,
-    points: Block,
-    /// The point attributes in file order, named as the whole-file reader names them.
-    arrays: Vec<(AttributeLayout, Block)>,
-}
-
-/// A token reader over a file for [`scan`]: tracks the byte offset and line number, skips
-/// blocks of values without decoding them. Tokens longer than 4 KiB end the scan.
-struct Scanner {
-    path: std::path::PathBuf,
-    r: std::io::BufReader<std::fs::File>,
-    len: u64,
-    pos: u64,
-    line: usize,
-}
-
-/// A layout [`scan`] does not follow (the whole-file reader takes over and reports).
-struct Unstreamable;
-
-/// The scan's outcome: an error, or a layout it does not follow.
-enum ScanError {
-    Error(Error),
-    Unstreamable,
-}
-
-impl From<Error> for ScanError {
-    fn from(e: Error) -> Self {
-        ScanError::Error(e)
-    }
-}
-
-impl From<Unstreamable> for ScanError {
-    fn from(_: Unstreamable) -> Self {
-        ScanError::Unstreamable
-    }
-}
-
-type Scan<T> = std::result::Result<T, ScanError>;
-
-impl Scanner {
-    fn peek(&mut self) -> Scan<Option<u8>> {
-        use std::io::BufRead;
-        let buf = self.r.fill_buf().map_err(|e| Error::io(&self.path, e))?;
-        Ok(buf.first().copied())
-    }
-
-    fn bump(&mut self, b: u8) {
-        use std::io::BufRead;
-        self.r.consume(1);
-        self.pos += 1;
-        if b == b'\n' {
-            self.line += 1;
-        }
-    }
-
-    fn skip_whitespace(&mut self) -> Scan<()> {
-        while let Some(b) = self.peek()? {
-            if !b.is_ascii_whitespace() {
-                break;
-            }
-            self.bump(b);
-        }
-        Ok(())
-    }
-
-    /// The next whitespace-separated token; `None` at the end of the file.
-    fn token(&mut self) -> Scan<Option<String>> {
-        self.skip_whitespace()?;
-        let mut t = Vec::new();
-        while let Some(b) = self.peek()? {
-            if b.is_ascii_whitespace() {
-                break;
-            }
-            if t.len() == 4096 {
-                return Err(Unstreamable.into());
-            }
-            t.push(b);
-            self.bump(b);
-        }
-        if t.is_empty() {
-            return Ok(None);
-        }
-        Ok(Some(String::from_utf8(t).map_err(|_| Unstreamable)?))
-    }
-
-    /// The next token, which must exist.
-    fn word(&mut self) -> Scan<String> {
-        Ok(self.token()?.ok_or(Unstreamable)?)
-    }
-
-    fn number<T: std::str::FromStr>(&mut self) -> Scan<T> {
-        Ok(self.word()?.parse().map_err(|_| Unstreamable)?)
-    }
-
-    /// The rest of the current line, consuming its newline (as [`Cursor::line`]).
-    fn line(&mut self) -> Scan<String> {
-        let mut t = Vec::new();
-        while let Some(b) = self.peek()? {
-            self.bump(b);
-            if b == b'\n' {
-                break;
-            }
-            if t.len() == 4096 {
-                return Err(Unstreamable.into());
-            }
-            t.push(b);
-        }
-        let t = String::from_utf8(t).map_err(|_| Unstreamable)?;
-        Ok(t.trim_end_matches('\r').to_string())
-    }
-
-    /// Skips to just past the next newline (as [`Cursor::finish_line`]).
-    fn finish_line(&mut self) -> Scan<()> {
-        while let Some(b) = self.peek()? {
-            self.bump(b);
-            if b == b'\n' {
-                break;
-            }
-        }
-        Ok(())
-    }
-
-    /// Where the scanner is, as a data block of `scalar`.
-    fn block(&self, scalar: Scalar) -> Block {
-        Block {
-            offset: self.pos,
-            line: self.line,
-            scalar,
-        }
-    }
-
-    fn error(&self, message: String) -> Error {
-        Error::parse(
-            &self.path,
-            format!("line {} (byte offset {})", self.line, self.pos),
-            message,
-        )
-    }
-
-    /// Skips `count` values of `scalar`: binary by seeking (the file must hold them),
-    /// ASCII token by token.
-    fn skip_values(&mut self, count: usize, scalar: Scalar, binary: bool) -> Scan<()> {
-        if binary {
-            let need = (count as u64)
-                .checked_mul(scalar.size() as u64)
-                .ok_or_else(|| self.error("value count overflows".into()))?;
-            if self.len - self.pos < need {
-                return Err(self
-                    .error(format!(
-                        "truncated: {count} values of {} bytes need {need} bytes, {} left",
-                        scalar.size(),
-                        self.len - self.pos
-                    ))
-                    .into());
-            }
-            self.r
-                .seek_relative(need as i64)
-                .map_err(|e| Error::io(&self.path, e))?;
-            self.pos += need;
-        } else {
-            for _ in 0..count {
-                if self.token()?.is_none() {
-                    return Err(self
-                        .error("unexpected end of file, expected a number".into())
-                        .into());
-                }
-            }
-        }
-        Ok(())
-    }
-}
-
-impl Tokens for Scanner {
-    type Error = ScanError;
-
-    fn next_word(&mut self, _expected: &str) -> Scan<String> {
-        self.word()
-    }
-
-    fn next_number<T: std::str::FromStr>(&mut self, _expected: &str) -> Scan<T> {
-        self.number()
-    }
-
-    fn next_line(&mut self) -> Scan<String> {
-        self.line()
-    }
-
-    fn is_eof(&mut self) -> Scan<bool> {
-        Ok(self.peek()?.is_none())
-    }
-
-    fn block_start(&mut self, binary: bool) -> Scan<()> {
-        if binary {
-            self.finish_line()?;
-        }
-        Ok(())
-    }
-
-    fn skip_block(&mut self, count: usize, scalar: Scalar, binary: bool) -> Scan<()> {
-        self.skip_values(count, scalar, binary)
-    }
-
-    fn fail(&self, _message: String) -> ScanError {
-        ScanError::Unstreamable
-    }
-
-    fn not_vtk(&self, _first_line: &str) -> ScanError {
-        ScanError::Unstreamable
-    }
-}
-
-/// Finds where the points and the `POINT_DATA` arrays of a legacy VTK file are, following
-/// the grammar of the whole-file reader but reading no value: binary blocks are seeked
-/// over, ASCII ones skipped token by token. `Ok(None)` for what it does not follow (an
-/// unknown section, `CELL_DATA` arrays, a count that disagrees, ...), which the whole-file
-/// reader then reports on; a truncated block is an error. Memory: one buffer.
-pub(crate) fn scan(path: &Path) -> Result<Option<Layout>> {
-    match scan_layout(path) {
-        Ok(layout) => Ok(Some(layout)),
-        Err(ScanError::Unstreamable) => Ok(None),
-        Err(ScanError::Error(e)) => Err(e),
-    }
-}
-
-fn scan_layout(path: &Path) -> Scan<Layout> {
-    let r = super::open_buffered(path)?;
-    let len = r
-        .get_ref()
-        .metadata()
-        .map_err(|e| Error::io(path, e))?
-        .len();
-    let mut s = Scanner {
-        path: path.to_path_buf(),
-        r,
-        len,
-        pos: 0,
-        line: 1,
-    };
-    let header = vtk_legacy::header(&mut s)?;
-    let (new_cells, binary) = (header.new_cells, header.binary);
-    let mut points: Option<(usize, Block)> = None;
-    let mut arrays = Vec::new();
-    let mut point_data = false;
-    while let Some(keyword) = s.token()? {
-        let keyword = keyword.to_ascii_uppercase();
-        match keyword.as_str() {
-            "DATASET" => {
-                s.word()?;
-            }
-            "POINTS" => {
-                let (n, scalar) = vtk_legacy::points(&mut s, "the point type")?;
-                if points.is_some() {
-                    return Err(Unstreamable.into());
-                }
-                if binary {
-                    s.finish_line()?;
-                }
-                let block = s.block(scalar);
-                let values = n.checked_mul(3).ok_or(Unstreamable)?;
-                s.skip_values(values, scalar, binary)?;
-                points = Some((n, block));
-            }
-            "VERTICES" | "LINES" | "POLYGONS" | "TRIANGLE_STRIPS" | "CELLS" => {
-                vtk_legacy::skip_cells(&mut s, new_cells, binary)?;
-            }
-            "CELL_TYPES" => {
-                vtk_legacy::skip_cell_types(&mut s, binary)?;
-            }
-            "POINT_DATA" => {
-                let n: usize = s.number()?;
-                if points.is_none_or(|(count, _)| count != n) {
-                    return Err(Unstreamable.into());
-                }
-                point_data = true;
-            }
-            "CELL_DATA" => {
-                let _n: usize = s.number()?;
-                point_data = false;
-            }
-            k if vtk_legacy::is_attribute(k) => {
-                let (name, components, scalar) = vtk_legacy::attribute(&mut s, &keyword)?;
-                if !point_data || components == 0 {
-                    return Err(Unstreamable.into());
-                }
-                if binary {
-                    s.finish_line()?;
-                }
-                let count = points.map_or(0, |(n, _)| n);
-                let block = s.block(scalar);
-                let values = count.checked_mul(components).ok_or(Unstreamable)?;
-                s.skip_values(values, scalar, binary)?;
-                arrays.push((AttributeLayout { name, components }, block));
-            }
-            "FIELD" => {
-                let n = vtk_legacy::field(&mut s)?;
-                for _ in 0..n {
-                    let (name, components, tuples, scalar) =
-                        vtk_legacy::field_array(&mut s, binary, "an array type", "type")?;
-                    let block = s.block(scalar);
-                    let values = components.checked_mul(tuples).ok_or(Unstreamable)?;
-                    s.skip_values(values, scalar, binary)?;
-                    if point_data && points.is_some_and(|(count, _)| count == tuples) {
-                        if components == 0 {
-                            return Err(Unstreamable.into());
-                        }
-                        arrays.push((AttributeLayout { name, components }, block));
-                    }
-                }
-            }
-            "METADATA" => vtk_legacy::skip_metadata(&mut s)?,
-            _ => return Err(Unstreamable.into()),
-        }
-    }
-    let (count, points) = points.ok_or(Unstreamable)?;
-    Ok(Layout {
-        binary,
-        count,
-        points,
-        arrays,
-    })
-}
-
-impl Layout {
-    /// Number of points.
-    pub(crate) fn count(&self) -> usize {
-        self.count
-    }
-
-    /// The point attributes, in file order.
-    pub(crate) fn attributes(&self) -> Vec<AttributeLayout> {
-        self.arrays.iter().map(|(a, _)| a.clone()).collect()
-    }
-
-    /// Streams the points to `sink` (positions, no payload) in chunks of at most 65 536.
-    pub(crate) fn stream_points(
-        &self,
-        path: &Path,
-        sink: &mut super::RecordSink<'_>,
-    ) -> Result<()> {
-        self.stream_block(path, self.points, 3, true, sink)
-    }
-
-    /// Streams the values of attribute `k` (of [`Layout::attributes`]) to `sink` as payload
-    /// rows (no positions), in chunks of at most 65 536 points.
-    pub(crate) fn stream_attribute(
-        &self,
-        path: &Path,
-        k: usize,
-        sink: &mut super::RecordSink<'_>,
-    ) -> Result<()> {
-        let (a, block) = &self.arrays[k];
-        self.stream_block(path, *block, a.components, false, sink)
-    }
-
-    fn stream_block(
-        &self,
-        path: &Path,
-        block: Block,
-        fields: usize,
-        position: bool,
-        sink: &mut super::RecordSink<'_>,
-    ) -> Result<()> {
-        use std::io::Seek;
-        let mut r = super::open_buffered(path)?;
-        r.seek(std::io::SeekFrom::Start(block.offset))
-            .map_err(|e| Error::io(path, e))?;
-        let (one, many) = if position {
-            ("particle", "points")
-        } else {
-            ("particle", "point data values")
-        };
-        let all: Vec<usize> = (0..fields).collect();
-        if !self.binary {
-            return super::stream_ascii_records(
-                path,
-                &mut r,
-                super::AsciiRecords {
-                    line: block.line,
-                    count: self.count,
-                    fields,
-                    xyz: position.then_some([0, 1, 2]),
-                    payload: if position { &[] } else { &all },
-                    one,
-                    many,
-                },
-                sink,
-            );
-        }
-        let size = block.scalar.size();
-        let scalar = block.scalar;
-        let value =
-            |record: &[u8], k: usize| scalar.decode(&record[size * k..size * (k + 1)], true) as f32;
-        super::stream_records(
-            path,
-            &mut r,
-            super::Records {
-                offset: block.offset,
-                count: self.count,
-                stride: size * fields,
-                one,
-                many,
-            },
-            &|record, payload| {
-                if position {
-                    Some(Vec3::new(
-                        value(record, 0),
-                        value(record, 1),
-                        value(record, 2),
-                    ))
-                } else {
-                    payload.extend((0..fields).map(|k| value(record, k)));
-                    None
-                }
-            },
-            sink,
-        )
-    }
 }

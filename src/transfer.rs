@@ -1,11 +1,32 @@
-//! The attribute stage: each point's value from the payload of the particles near it,
-//! tile by tile (see the module docs of [`crate::attributes`]).
+//! The attribute stage, after the surface is final: each vertex's value from the payload
+//! of the particles near it, tile by tile.
+//!
+//! **Input:** the particles' selected attributes
+//! (the payload the tile engine carries beside the positions) and the final surface.
+//! **Output:** one value per surface vertex, the normalized kernel-weighted mean of the
+//! particles within the influence radius `R` of the vertex, with the field's kernel
+//! `k(s) = max(0, (1 − s²)³)`, `s = |x − x_i| / R`:
+//!
+//! ```text
+//! a(x) = Σ_i k(|x − x_i| / R) · a_i  /  Σ_i k(|x − x_i| / R)
+//! ```
+//!
+//! evaluated at the **final** vertex positions (after decimation and subdivision), so the
+//! value is a function of the position alone: the particles within `R` are summed in the
+//! engine's canonical order (home half-block, input index) in f64, the same in every
+//! tiling and for every thread count, bit for bit. A vertex with no particle within `R`
+//! takes the value of its nearest particle (the lowest input index on a tie). An isolated
+//! particle's sphere takes its particle's value.
+//!
+//! A constant attribute is reproduced exactly (to f32 rounding); a linear one,
+//! `a(x) = A·x + b`, comes out as `A·x̄ + b` with `x̄` the kernel-weighted mean position,
+//! which lies within `R` of the vertex: the error is at most `‖A‖·R`.
 
-use super::{Attribute, AttributeLayout};
+use crate::attributes::{Attribute, AttributeLayout};
 use crate::cancel::CancelToken;
 use crate::error::Result;
-use crate::field::{home_block, HALF_BLOCK_EDGE};
 use crate::grid::BlockKey;
+use crate::grid::{home_block, HALF_BLOCK_EDGE};
 use crate::tiles::store::{LoadedParticles, ParticleStore};
 use crate::tiles::TilePlan;
 use glam::Vec3;
@@ -31,13 +52,77 @@ pub(crate) fn transfer<S: crate::io::particles::ParticleSource>(
     if width == 0 {
         return Ok(sets.iter().map(|_| Vec::new()).collect());
     }
-    let mut rows = vec![0f32; points.len() * width];
-    let mut resolved = vec![false; points.len()];
-    let points = &points;
+    let mut rows = Rows {
+        width,
+        values: vec![0f32; points.len() * width],
+        resolved: vec![false; points.len()],
+    };
     let search = Search::new(plan, radius);
+    let (order, groups) = points_by_tile(&points, plan);
+    let mut loaded = LoadedParticles::default();
+    for &(tile, start, end) in groups.iter().filter(|g| g.1 < g.2) {
+        cancel.check()?;
+        let own = plan.own_blocks(tile);
+        store.load_with_payload(plan, own.grown(plan.reach, plan.reach), &mut loaded)?;
+        if loaded.positions.is_empty() {
+            continue;
+        }
+        let group = &order[start as usize..end as usize];
+        evaluate_tile(&points, group, &loaded, &search, &mut rows);
+    }
+    drop(loaded);
+    nearest_over_store(&points, store, &mut rows, cancel)?;
+    Ok(rows.into_attributes(sets, layout))
+}
 
-    // The points of each tile, tiles in (z, y, x) order (untiled: one tile of all).
-    let (order, groups): (Vec<u32>, Vec<(BlockKey, u32, u32)>) = if plan.is_tiled() {
+/// The payload rows of every point, and whether each has its value yet.
+struct Rows {
+    /// Floats per row.
+    width: usize,
+    values: Vec<f32>,
+    resolved: Vec<bool>,
+}
+
+impl Rows {
+    /// Sets point `k`'s row.
+    fn set(&mut self, k: usize, value: &[f32]) {
+        self.values[k * self.width..(k + 1) * self.width].copy_from_slice(value);
+        self.resolved[k] = true;
+    }
+
+    /// The rows as one attribute per layout entry, per set.
+    fn into_attributes(self, sets: &[&[Vec3]], layout: &[AttributeLayout]) -> Vec<Vec<Attribute>> {
+        let width = self.width;
+        let mut out = Vec::with_capacity(sets.len());
+        let mut first = 0;
+        for set in sets {
+            let rows = &self.values[first * width..(first + set.len()) * width];
+            first += set.len();
+            let mut attributes: Vec<Attribute> = layout
+                .iter()
+                .map(|l| Attribute {
+                    name: l.name.clone(),
+                    components: l.components,
+                    values: Vec::with_capacity(set.len() * l.components),
+                })
+                .collect();
+            for row in rows.chunks_exact(width) {
+                let mut at = 0;
+                for a in &mut attributes {
+                    a.values.extend_from_slice(&row[at..at + a.components]);
+                    at += a.components;
+                }
+            }
+            out.push(attributes);
+        }
+        out
+    }
+}
+
+/// The points in tile order, and per tile its run of them: tiles in (z, y, x) order
+/// (untiled: one tile of all).
+fn points_by_tile(points: &Points, plan: &TilePlan) -> (Vec<u32>, Vec<(BlockKey, u32, u32)>) {
+    if plan.is_tiled() {
         let tiles: Vec<BlockKey> = (0..points.len())
             .into_par_iter()
             .map(|k| plan.tile_of(home_block(points.get(k), plan.inv_h)))
@@ -48,106 +133,91 @@ pub(crate) fn transfer<S: crate::io::particles::ParticleSource>(
     } else {
         let n = points.len() as u32;
         ((0..n).collect(), vec![([0; 3], 0, n)])
-    };
-    let mut loaded = LoadedParticles::default();
-    for &(tile, start, end) in groups.iter().filter(|g| g.1 < g.2) {
-        let group = &order[start as usize..end as usize];
-        cancel.check()?;
-        let own = plan.own_blocks(tile);
-        store.load_with_payload(plan, own.grown(plan.reach, plan.reach), &mut loaded)?;
-        if loaded.positions.is_empty() {
-            continue;
-        }
-        let rows_of_tile = crate::grid::row_ranges(loaded.halves.iter().copied());
-        // The tile's points in (z, y, x) order of their half-blocks, so that neighbouring
-        // evaluations read the same particles (a mesh's vertex order is not spatial after
-        // subdivision); each point's value is its own, whatever the order.
-        let halves: Vec<BlockKey> = group
-            .par_iter()
-            .map(|&k| search.half_block_of(points.get(k as usize).as_dvec3()))
-            .collect();
-        let order = crate::grid::sort_by_key_zyx(&halves);
-        let group: Vec<u32> = order.iter().map(|&i| group[i as usize]).collect();
-        let halves: Vec<BlockKey> = order.iter().map(|&i| halves[i as usize]).collect();
-        drop(order);
-        // Points of one half-block share the particles they search: gathered once per run
-        // of them (each parallel piece keeps the last half-block's).
-        let mut values = vec![0f32; group.len() * width];
-        let found: Vec<bool> = values
-            .par_chunks_mut(width)
-            .zip(group.par_iter().zip(halves.par_iter()))
-            .map_init(
-                || (Near::with_width(width), None::<BlockKey>),
-                |(near, gathered), (out, (&k, &half))| {
-                    if *gathered != Some(half) {
-                        search.gather_near(half, &loaded, &rows_of_tile, near);
-                        *gathered = Some(half);
-                    }
-                    let p = points.get(k as usize);
-                    search.weighted_mean(p, &loaded, near, out)
-                        || search.nearest_in_window(p, &loaded, &rows_of_tile, out)
-                },
-            )
-            .collect();
-        for ((&k, value), found) in group.iter().zip(values.chunks_exact(width)).zip(found) {
-            if found {
-                let k = k as usize;
-                rows[k * width..(k + 1) * width].copy_from_slice(value);
-                resolved[k] = true;
-            }
-        }
     }
-    drop(loaded);
+}
 
-    // Points far from every particle: the nearest one over the whole store.
-    let far: Vec<usize> = (0..points.len()).filter(|&k| !resolved[k]).collect();
-    if !far.is_empty() {
-        let mut best: Vec<(f64, u32, Vec<f32>)> =
-            vec![(f64::INFINITY, u32::MAX, Vec::new()); far.len()];
-        store.for_each_stored(&mut |positions, indices, payload| {
-            cancel.check()?;
-            best.par_iter_mut().zip(&far).for_each(|(b, &k)| {
-                let p = points.get(k).as_dvec3();
-                for (j, x) in positions.iter().enumerate() {
-                    let d2 = (x.as_dvec3() - p).length_squared();
-                    if (d2, indices[j]) < (b.0, b.1) {
-                        *b = (d2, indices[j], payload[j * width..(j + 1) * width].to_vec());
-                    }
+/// The values of one tile's points (`group`) from its `loaded` particles: the weighted
+/// mean within the radius, or the nearest particle in the tile's window.
+fn evaluate_tile(
+    points: &Points,
+    group: &[u32],
+    loaded: &LoadedParticles,
+    search: &Search,
+    rows: &mut Rows,
+) {
+    let width = rows.width;
+    let rows_of_tile = crate::grid::row_ranges(loaded.halves.iter().copied());
+    // The tile's points in (z, y, x) order of their half-blocks, so that neighbouring
+    // evaluations read the same particles (a mesh's vertex order is not spatial after
+    // subdivision); each point's value is its own, whatever the order.
+    let halves: Vec<BlockKey> = group
+        .par_iter()
+        .map(|&k| search.half_block_of(points.get(k as usize).as_dvec3()))
+        .collect();
+    let order = crate::grid::sort_by_key_zyx(&halves);
+    let group: Vec<u32> = order.iter().map(|&i| group[i as usize]).collect();
+    let halves: Vec<BlockKey> = order.iter().map(|&i| halves[i as usize]).collect();
+    drop(order);
+    // Points of one half-block share the particles they search: gathered once per run
+    // of them (each parallel piece keeps the last half-block's).
+    let mut values = vec![0f32; group.len() * width];
+    let found: Vec<bool> = values
+        .par_chunks_mut(width)
+        .zip(group.par_iter().zip(halves.par_iter()))
+        .map_init(
+            || (Near::with_width(width), None::<BlockKey>),
+            |(near, gathered), (out, (&k, &half))| {
+                if *gathered != Some(half) {
+                    search.gather_near(half, loaded, &rows_of_tile, near);
+                    *gathered = Some(half);
                 }
-            });
-            Ok(())
-        })?;
-        for (&k, (_, _, value)) in far.iter().zip(best) {
-            if value.len() == width {
-                rows[k * width..(k + 1) * width].copy_from_slice(&value);
-            }
+                let p = points.get(k as usize);
+                search.weighted_mean(p, loaded, near, out)
+                    || search.nearest_in_window(p, loaded, &rows_of_tile, out)
+            },
+        )
+        .collect();
+    for ((&k, value), found) in group.iter().zip(values.chunks_exact(width)).zip(found) {
+        if found {
+            rows.set(k as usize, value);
         }
     }
+}
 
-    // Rows into one attribute per layout entry, per set.
-    let mut out = Vec::with_capacity(sets.len());
-    let mut first = 0;
-    for set in sets {
-        let rows = &rows[first * width..(first + set.len()) * width];
-        first += set.len();
-        let mut attributes: Vec<Attribute> = layout
-            .iter()
-            .map(|l| Attribute {
-                name: l.name.clone(),
-                components: l.components,
-                values: Vec::with_capacity(set.len() * l.components),
-            })
-            .collect();
-        for row in rows.chunks_exact(width) {
-            let mut at = 0;
-            for a in &mut attributes {
-                a.values.extend_from_slice(&row[at..at + a.components]);
-                at += a.components;
-            }
-        }
-        out.push(attributes);
+/// Points far from every particle: the nearest one over the whole store (the lowest
+/// input index on a tie).
+fn nearest_over_store<S: crate::io::particles::ParticleSource>(
+    points: &Points,
+    store: &ParticleStore<S>,
+    rows: &mut Rows,
+    cancel: &CancelToken,
+) -> Result<()> {
+    let width = rows.width;
+    let far: Vec<usize> = (0..points.len()).filter(|&k| !rows.resolved[k]).collect();
+    if far.is_empty() {
+        return Ok(());
     }
-    Ok(out)
+    let mut best: Vec<(f64, u32, Vec<f32>)> =
+        vec![(f64::INFINITY, u32::MAX, Vec::new()); far.len()];
+    store.for_each_stored(&mut |positions, indices, payload| {
+        cancel.check()?;
+        best.par_iter_mut().zip(&far).for_each(|(b, &k)| {
+            let p = points.get(k).as_dvec3();
+            for (j, x) in positions.iter().enumerate() {
+                let d2 = (x.as_dvec3() - p).length_squared();
+                if (d2, indices[j]) < (b.0, b.1) {
+                    *b = (d2, indices[j], payload[j * width..(j + 1) * width].to_vec());
+                }
+            }
+        });
+        Ok(())
+    })?;
+    for (&k, (_, _, value)) in far.iter().zip(best) {
+        if value.len() == width {
+            rows.set(k, &value);
+        }
+    }
+    Ok(())
 }
 
 /// The points of several sets, numbered one after the other.

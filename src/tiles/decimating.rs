@@ -11,12 +11,14 @@
 //! former border vertices and rings around them) reaches the overall target. The result
 //! is deterministic and independent of the thread count, but depends on the tile size.
 
-use super::{decimate_band, decimate_locked, place_survivors, DecimateOptions, DecimateStats};
+use super::TileSink;
+use crate::decimation::{
+    decimate_band, decimate_locked, place_survivors, DecimateOptions, DecimateStats,
+};
 use crate::error::Result;
-use crate::field::BlockRange;
+use crate::grid::BlockRange;
 use crate::marching_cubes::{stitch_range, BlockSurface, VertexKey};
 use crate::mesh::TriMesh;
-use crate::tiles::TileSink;
 use glam::Vec3;
 use hashbrown::HashMap;
 use std::time::Instant;

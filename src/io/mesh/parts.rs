@@ -1,15 +1,13 @@
-//! PLY, OBJ and legacy VTK mesh writers.
-//!
-//! A surface is written as a list of parts (the fluid mesh, the instanced isolated
-//! spheres) that share one vertex numbering, so nothing is merged or copied first; binary
-//! data goes out in chunks of [`CHUNK_BYTES`], so writing adds no more than that to the
-//! memory peak.
+//! A surface as a list of parts (the fluid mesh, the instanced isolated spheres) that
+//! share one vertex numbering, for the writers of formats without instancing (PLY, OBJ,
+//! legacy VTK): nothing is merged or copied first. Binary data goes out in chunks of
+//! [`CHUNK_BYTES`] ([`write_chunked`], also used by the glTF writer), so writing adds no
+//! more than that to the memory peak.
 //!
 //! Attributes ([`Shared`]) are written when every non-empty part has them (same name and
 //! components): PLY as float vertex properties, VTK as point-data arrays beside the
 //! normals; OBJ has no place for them.
 
-use super::columns;
 use crate::attributes::Attribute;
 use crate::mesh::{SphereInstances, TriMesh};
 use glam::Vec3;
@@ -25,13 +23,13 @@ pub(super) enum Part<'a> {
 }
 
 impl Part<'_> {
-    fn vertex_count(&self) -> usize {
+    pub(super) fn vertex_count(&self) -> usize {
         match self {
             Part::Mesh(m) => m.vertex_count(),
             Part::Spheres(s) => s.template.vertex_count() * s.centers.len(),
         }
     }
-    fn triangle_count(&self) -> usize {
+    pub(super) fn triangle_count(&self) -> usize {
         match self {
             Part::Mesh(m) => m.triangle_count(),
             Part::Spheres(s) => s.template.triangle_count() * s.centers.len(),
@@ -45,7 +43,7 @@ impl Part<'_> {
         };
         m.normals.len() == m.positions.len()
     }
-    fn position(&self, i: usize) -> Vec3 {
+    pub(super) fn position(&self, i: usize) -> Vec3 {
         match self {
             Part::Mesh(m) => m.positions[i],
             Part::Spheres(s) => {
@@ -54,7 +52,7 @@ impl Part<'_> {
             }
         }
     }
-    fn normal(&self, i: usize) -> Vec3 {
+    pub(super) fn normal(&self, i: usize) -> Vec3 {
         match self {
             Part::Mesh(m) => m.normals[i],
             Part::Spheres(s) => s.template.normals[i % s.template.vertex_count()],
@@ -139,7 +137,7 @@ impl<'a> Shared<'a> {
 
     /// Appends the little-endian or big-endian bytes of every written attribute at vertex
     /// `i` of part `p` (all attributes, item-major), or only attribute `only`.
-    fn encode(
+    pub(super) fn encode(
         &self,
         parts: &[Part],
         p: usize,
@@ -166,7 +164,8 @@ impl<'a> Shared<'a> {
 /// Bytes encoded before each write.
 pub(super) const CHUNK_BYTES: usize = 1 << 20;
 
-fn counts(parts: &[Part]) -> (usize, usize) {
+/// Vertices and triangles of all parts.
+pub(super) fn counts(parts: &[Part]) -> (usize, usize) {
     parts.iter().fold((0, 0), |(v, t), m| {
         (v + m.vertex_count(), t + m.triangle_count())
     })
@@ -190,7 +189,7 @@ pub(super) fn write_chunked<T>(
 }
 
 /// The triangles of all parts, with vertex indices offset to the shared numbering.
-fn all_triangles<'a>(parts: &'a [Part<'a>]) -> impl Iterator<Item = [u32; 3]> + 'a {
+pub(super) fn all_triangles<'a>(parts: &'a [Part<'a>]) -> impl Iterator<Item = [u32; 3]> + 'a {
     let mut base = 0u32;
     parts.iter().flat_map(move |m| {
         let b = base;
@@ -199,132 +198,16 @@ fn all_triangles<'a>(parts: &'a [Part<'a>]) -> impl Iterator<Item = [u32; 3]> + 
     })
 }
 
-fn all_positions<'a>(parts: &'a [Part<'a>]) -> impl Iterator<Item = Vec3> + 'a {
+/// The positions of all parts, in the shared numbering.
+pub(super) fn all_positions<'a>(parts: &'a [Part<'a>]) -> impl Iterator<Item = Vec3> + 'a {
     parts
         .iter()
         .flat_map(|m| (0..m.vertex_count()).map(move |i| m.position(i)))
 }
 
-fn all_normals<'a>(parts: &'a [Part<'a>]) -> impl Iterator<Item = Vec3> + 'a {
+/// The normals of all parts, in the shared numbering.
+pub(super) fn all_normals<'a>(parts: &'a [Part<'a>]) -> impl Iterator<Item = Vec3> + 'a {
     parts
         .iter()
         .flat_map(|m| (0..m.vertex_count()).map(move |i| m.normal(i)))
-}
-
-pub(super) fn write_ply(
-    w: &mut impl Write,
-    parts: &[Part],
-    normals: bool,
-    shared: &Shared,
-) -> Result<()> {
-    let (nv, nt) = counts(parts);
-    write!(
-        w,
-        "ply\nformat binary_little_endian 1.0\ncomment meniscus surface\nelement vertex {nv}\nproperty float x\nproperty float y\nproperty float z\n",
-    )?;
-    if normals {
-        w.write_all(b"property float nx\nproperty float ny\nproperty float nz\n")?;
-    }
-    for a in &shared.list {
-        for name in columns::ply_names(a) {
-            writeln!(w, "property float {name}")?;
-        }
-    }
-    write!(
-        w,
-        "element face {nt}\nproperty list uchar uint vertex_indices\nend_header\n",
-    )?;
-    for (p, m) in parts.iter().enumerate() {
-        write_chunked(w, 0..m.vertex_count(), |buf, i| {
-            for v in m.position(i).to_array() {
-                buf.extend_from_slice(&v.to_le_bytes());
-            }
-            if normals {
-                for v in m.normal(i).to_array() {
-                    buf.extend_from_slice(&v.to_le_bytes());
-                }
-            }
-            shared.encode(parts, p, i, None, false, buf);
-        })?;
-    }
-    write_chunked(w, all_triangles(parts), |buf, t| {
-        buf.push(3);
-        for i in t {
-            buf.extend_from_slice(&i.to_le_bytes());
-        }
-    })
-}
-
-pub(super) fn write_obj(w: &mut impl Write, parts: &[Part], normals: bool) -> Result<()> {
-    let (nv, nt) = counts(parts);
-    writeln!(w, "# meniscus surface: {nv} vertices, {nt} triangles")?;
-    for p in all_positions(parts) {
-        writeln!(w, "v {} {} {}", p.x, p.y, p.z)?;
-    }
-    if normals {
-        for n in all_normals(parts) {
-            writeln!(w, "vn {} {} {}", n.x, n.y, n.z)?;
-        }
-        for t in all_triangles(parts) {
-            let [a, b, c] = t.map(|i| i + 1);
-            writeln!(w, "f {a}//{a} {b}//{b} {c}//{c}")?;
-        }
-    } else {
-        for t in all_triangles(parts) {
-            let [a, b, c] = t.map(|i| i + 1);
-            writeln!(w, "f {a} {b} {c}")?;
-        }
-    }
-    Ok(())
-}
-
-pub(super) fn write_vtk(
-    w: &mut impl Write,
-    parts: &[Part],
-    normals: bool,
-    shared: &Shared,
-) -> Result<()> {
-    let (nv, nt) = counts(parts);
-    write!(w, "# vtk DataFile Version 4.2\nmeniscus surface\nBINARY\nDATASET POLYDATA\nPOINTS {nv} float\n")?;
-    write_chunked(w, all_positions(parts), |buf, p| {
-        for v in p.to_array() {
-            buf.extend_from_slice(&v.to_be_bytes());
-        }
-    })?;
-    write!(w, "\nPOLYGONS {nt} {}\n", 4 * nt)?;
-    write_chunked(w, all_triangles(parts), |buf, t| {
-        buf.extend_from_slice(&3i32.to_be_bytes());
-        for i in t {
-            buf.extend_from_slice(&(i as i32).to_be_bytes());
-        }
-    })?;
-    w.write_all(b"\n")?;
-    // One POINT_DATA section holds every point array.
-    if normals || !shared.list.is_empty() {
-        writeln!(w, "POINT_DATA {nv}")?;
-    }
-    if normals {
-        w.write_all(b"NORMALS normals float\n")?;
-        write_chunked(w, all_normals(parts), |buf, n| {
-            for v in n.to_array() {
-                buf.extend_from_slice(&v.to_be_bytes());
-            }
-        })?;
-        w.write_all(b"\n")?;
-    }
-    for (k, a) in shared.list.iter().enumerate() {
-        let name = columns::word(&a.name);
-        match a.components {
-            1 => writeln!(w, "SCALARS {name} float 1\nLOOKUP_TABLE default")?,
-            3 => writeln!(w, "VECTORS {name} float")?,
-            c => writeln!(w, "FIELD FieldData 1\n{name} {c} {nv} float")?,
-        }
-        for p in 0..parts.len() {
-            write_chunked(w, 0..parts[p].vertex_count(), |buf, i| {
-                shared.encode(parts, p, i, Some(k), true, buf)
-            })?;
-        }
-        w.write_all(b"\n")?;
-    }
-    Ok(())
 }

@@ -1,6 +1,8 @@
-//! glTF 2.0 output, built with serde_json: the document is small and fixed in shape, and
-//! writing its JSON directly keeps the byte layout (alignment, accessor bounds) in view.
-//! The `gltf` crate reads the result back in the tests.
+//! glTF 2.0 meshes.
+//!
+//! **Written** with serde_json: the document is small and fixed in shape, and writing its
+//! JSON directly keeps the byte layout (alignment, accessor bounds) in view. The `gltf`
+//! crate reads the result back in the tests.
 //!
 //! The binary buffer is never assembled in memory: the document records which mesh arrays
 //! go where, and writing streams them in chunks of [`CHUNK_BYTES`] (base64-encoded on the
@@ -11,15 +13,232 @@
 //! merged mesh (instances translated, each vertex with its particle's values) instead of
 //! one node per instance: glTF attributes belong to a mesh, and Blender's importer drops
 //! per-instance attributes of `EXT_mesh_gpu_instancing`.
+//!
+//! **Read** with the `gltf` crate (`.glb`, `.gltf` with embedded buffers), after
+//! [`gltf_check`]'s checks: every triangle primitive of the default scene, node transforms
+//! applied. Float `_NAME` accessors come back as attributes named `name` (lower-cased,
+//! sorted by name; values as stored, not transformed by the nodes; primitives that do not
+//! all carry the same attributes lose them, as [`TriMesh::append`] does).
 
 use super::columns;
-use super::simple::{write_chunked, CHUNK_BYTES};
+use super::gltf_check::{self, check_accessor};
+use super::parts::{write_chunked, CHUNK_BYTES};
 use crate::attributes::Attribute;
+use crate::error::{Error, Result};
+use crate::io::base64::Base64Writer;
 use crate::mesh::{SphereInstances, Surface, TriMesh};
-use glam::Vec3;
+use glam::{Mat4, Vec3};
 use serde_json::{json, Value};
-use std::io::{Result, Write};
+use std::io::Write;
+use std::path::Path;
 
+/// Reads a glTF mesh (`.glb`, or `.gltf` with embedded buffers) held in memory.
+pub(super) fn read(path: &Path, bytes: &[u8]) -> Result<TriMesh> {
+    let bad = |m: String| Error::parse(path, "glTF", m);
+    // Indices, extents, component types and the node hierarchy are checked first: the
+    // crate's readers trust them (and the scene walk below ends only on a forest).
+    gltf_check::check(path, bytes)?;
+    // Last guard: the gltf crate's validation indexes with unchecked accessor indices and
+    // panics on some malformed documents: such a document is an error, not a crash.
+    let imported = std::panic::catch_unwind(|| gltf::import_slice(bytes))
+        .map_err(|_| bad("malformed document (an index out of range)".into()))?;
+    let (doc, buffers, _) = imported.map_err(|e| bad(e.to_string()))?;
+    let mut mesh = TriMesh::default();
+    let scene = doc
+        .default_scene()
+        .or_else(|| doc.scenes().next())
+        .ok_or_else(|| bad("no scene".into()))?;
+    // Depth-first in document order: the stack holds nodes reversed.
+    let mut stack: Vec<(gltf::Node, Mat4)> = scene.nodes().map(|n| (n, Mat4::IDENTITY)).collect();
+    stack.reverse();
+    while let Some((node, parent)) = stack.pop() {
+        let transform = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+        if let Some(m) = node.mesh() {
+            for prim in m.primitives() {
+                if prim.mode() != gltf::mesh::Mode::Triangles {
+                    continue;
+                }
+                let piece = read_primitive(path, &prim, &buffers, transform, mesh.positions.len())?;
+                // Normals and attributes are kept only when every primitive has them.
+                mesh.append(&piece);
+            }
+        }
+        let children: Vec<gltf::Node> = node.children().collect();
+        for child in children.into_iter().rev() {
+            stack.push((child, transform));
+        }
+    }
+    Ok(mesh)
+}
+
+/// One triangle primitive, `transform`ed, for a mesh that holds `before` vertices so far.
+fn read_primitive(
+    path: &Path,
+    prim: &gltf::Primitive,
+    buffers: &[gltf::buffer::Data],
+    transform: Mat4,
+    before: usize,
+) -> Result<TriMesh> {
+    let bad = |m: String| Error::parse(path, "glTF", m);
+    // The gltf crate's readers assume accessors of the right type and layout (they panic
+    // otherwise): checked first.
+    use gltf::accessor::{DataType, Dimensions};
+    let position = prim
+        .get(&gltf::Semantic::Positions)
+        .ok_or_else(|| bad("a primitive has no POSITION".into()))?;
+    check_accessor(
+        path,
+        &position,
+        "POSITION",
+        Dimensions::Vec3,
+        &[DataType::F32],
+    )?;
+    if let Some(a) = prim.get(&gltf::Semantic::Normals) {
+        check_accessor(path, &a, "NORMAL", Dimensions::Vec3, &[DataType::F32])?;
+    }
+    if let Some(a) = prim.indices() {
+        let types = [DataType::U8, DataType::U16, DataType::U32];
+        check_accessor(path, &a, "indices", Dimensions::Scalar, &types)?;
+    }
+    let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+    let mut piece = TriMesh {
+        positions: reader
+            .read_positions()
+            .ok_or_else(|| bad("a primitive has no POSITION".into()))?
+            .map(|p| transform.transform_point3(Vec3::from(p)))
+            .collect(),
+        ..TriMesh::default()
+    };
+    // Indices are offset by the vertices before this primitive: the total must fit u32.
+    let n = u32::try_from(piece.positions.len())
+        .ok()
+        .filter(|&n| n.checked_add(before as u32).is_some())
+        .ok_or_else(|| bad("more than 2^32 vertices".into()))?;
+    if let Some(ns) = reader.read_normals() {
+        piece.normals = ns
+            .map(|v| {
+                transform
+                    .transform_vector3(Vec3::from(v))
+                    .normalize_or_zero()
+            })
+            .collect();
+    }
+    match reader.read_indices() {
+        Some(ix) => {
+            let ix: Vec<u32> = ix.into_u32().collect();
+            // Checked per primitive: once offset (TriMesh::append), an index past this
+            // primitive would name another primitive's vertex, or overflow.
+            if let Some(&i) = ix.iter().find(|&&i| i >= n) {
+                return Err(bad(format!(
+                    "primitive index {i} out of range (the primitive has {n} vertices)"
+                )));
+            }
+            piece.triangles = ix.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+        }
+        None => {
+            piece.triangles = (0..n / 3 * 3)
+                .step_by(3)
+                .map(|i| [i, i + 1, i + 2])
+                .collect();
+        }
+    }
+    piece.attributes = gltf_attributes(path, prim, buffers, n as usize)?;
+    Ok(piece)
+}
+
+/// The application-specific float attributes (`_NAME`) of a primitive with `vertices`
+/// vertices, sorted by name, `_NAME_0 … _NAME_k` scalars (k ≥ 4) regrouped. Attributes of
+/// other component types or of matrix type are skipped.
+fn gltf_attributes(
+    path: &Path,
+    prim: &gltf::Primitive,
+    buffers: &[gltf::buffer::Data],
+    vertices: usize,
+) -> Result<Vec<Attribute>> {
+    use gltf::accessor::{util::Iter, DataType, Dimensions};
+    let get = |b: gltf::Buffer| buffers.get(b.index()).map(|d| &d.0[..]);
+    let mut vectors = Vec::new();
+    let mut scalars = Vec::new();
+    for (semantic, accessor) in prim.attributes() {
+        let gltf::Semantic::Extras(name) = semantic else {
+            continue;
+        };
+        let components = match accessor.dimensions() {
+            Dimensions::Scalar => 1,
+            Dimensions::Vec2 => 2,
+            Dimensions::Vec3 => 3,
+            Dimensions::Vec4 => 4,
+            _ => continue,
+        };
+        if accessor.data_type() != DataType::F32 {
+            continue;
+        }
+        let dimensions = accessor.dimensions();
+        check_accessor(
+            path,
+            &accessor,
+            &format!("_{name}"),
+            dimensions,
+            &[DataType::F32],
+        )?;
+        if accessor.count() != vertices {
+            return Err(Error::parse(
+                path,
+                format!("attribute _{name}"),
+                format!(
+                    "{} values for a primitive of {vertices} vertices",
+                    accessor.count()
+                ),
+            ));
+        }
+        let unreadable = || {
+            Error::parse(
+                path,
+                format!("attribute _{name}"),
+                "the accessor's data cannot be read",
+            )
+        };
+        let values: Vec<f32> = match components {
+            1 => Iter::<f32>::new(accessor, get)
+                .ok_or_else(unreadable)?
+                .collect(),
+            2 => Iter::<[f32; 2]>::new(accessor, get)
+                .ok_or_else(unreadable)?
+                .flatten()
+                .collect(),
+            3 => Iter::<[f32; 3]>::new(accessor, get)
+                .ok_or_else(unreadable)?
+                .flatten()
+                .collect(),
+            _ => Iter::<[f32; 4]>::new(accessor, get)
+                .ok_or_else(unreadable)?
+                .flatten()
+                .collect(),
+        };
+        let name = name.to_ascii_lowercase();
+        if components == 1 {
+            scalars.push((name, values));
+        } else {
+            vectors.push(Attribute {
+                name,
+                components,
+                values,
+            });
+        }
+    }
+    // `_S_10` after `_S_9`, so that split attributes regroup in component order.
+    let key = |name: &str| match name.rsplit_once('_') {
+        Some((base, n)) if !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()) => {
+            (base.to_string(), n.parse::<u64>().ok())
+        }
+        _ => (name.to_string(), None),
+    };
+    scalars.sort_by_key(|(name, _)| key(name));
+    let mut all = columns::regroup(scalars, false);
+    all.extend(vectors);
+    all.sort_by(|a, b| a.name.cmp(&b.name));
+    Ok(all)
+}
 const FLOAT: u32 = 5126;
 const UNSIGNED_INT: u32 = 5125;
 const ARRAY_BUFFER: u32 = 34962;
@@ -54,7 +273,7 @@ impl Payload<'_> {
     }
 
     /// Writes the little-endian bytes in chunks.
-    fn write(&self, w: &mut impl Write) -> Result<()> {
+    fn write(&self, w: &mut impl Write) -> std::io::Result<()> {
         match self {
             Payload::Vectors(v) => write_chunked(w, v.iter(), |buf, p| {
                 for c in p.to_array() {
@@ -80,7 +299,7 @@ pub(super) struct Document<'a> {
     payloads: Vec<Payload<'a>>,
     /// Length of the whole buffer (a multiple of 4).
     bin_len: usize,
-    pub vertices: usize,
+    pub(super) vertices: usize,
 }
 
 #[derive(Default)]
@@ -400,7 +619,7 @@ pub(super) fn build_sequence(frames: &[TriMesh], fps: f32, normals: bool) -> Doc
 
 impl Document<'_> {
     /// Streams the buffer: every view at its offset, zero padding between and at the end.
-    fn write_bin(&self, w: &mut impl Write) -> Result<()> {
+    fn write_bin(&self, w: &mut impl Write) -> std::io::Result<()> {
         let mut at = 0usize;
         for payload in &self.payloads {
             let offset = at.next_multiple_of(4);
@@ -411,7 +630,7 @@ impl Document<'_> {
         w.write_all(&[0u8; 3][..self.bin_len - at])
     }
 
-    pub fn write_glb(&self, w: &mut impl Write) -> Result<()> {
+    pub(super) fn write_glb(&self, w: &mut impl Write) -> std::io::Result<()> {
         let mut json = serde_json::to_vec(&self.json).map_err(std::io::Error::other)?;
         while json.len() % 4 != 0 {
             json.push(b' ');
@@ -437,7 +656,7 @@ impl Document<'_> {
         Ok(())
     }
 
-    pub fn write_gltf(&self, w: &mut impl Write) -> Result<()> {
+    pub(super) fn write_gltf(&self, w: &mut impl Write) -> std::io::Result<()> {
         if self.bin_len == 0 {
             serde_json::to_writer(&mut *w, &self.json).map_err(std::io::Error::other)?;
             return w.write_all(b"\n");
@@ -453,120 +672,10 @@ impl Document<'_> {
             .expect("the placeholder is in the JSON");
         w.write_all(before.as_bytes())?;
         w.write_all(b"data:application/octet-stream;base64,")?;
-        let mut encoder = Base64Writer {
-            inner: &mut *w,
-            carry: Vec::with_capacity(3),
-            out: Vec::with_capacity(CHUNK_BYTES / 3 * 4 + 8),
-        };
+        let mut encoder = Base64Writer::new(&mut *w, CHUNK_BYTES);
         self.write_bin(&mut encoder)?;
         encoder.finish()?;
         w.write_all(after.as_bytes())?;
         w.write_all(b"\n")
-    }
-}
-
-/// Base64-encodes what is written to it (standard alphabet, `=` padding on `finish`).
-struct Base64Writer<W: Write> {
-    inner: W,
-    carry: Vec<u8>,
-    out: Vec<u8>,
-}
-
-impl<W: Write> Write for Base64Writer<W> {
-    fn write(&mut self, bytes: &[u8]) -> Result<usize> {
-        let mut rest = bytes;
-        if !self.carry.is_empty() {
-            let take = (3 - self.carry.len()).min(rest.len());
-            self.carry.extend_from_slice(&rest[..take]);
-            rest = &rest[take..];
-            if self.carry.len() < 3 {
-                return Ok(bytes.len());
-            }
-            let group = std::mem::take(&mut self.carry);
-            encode_base64(&group, &mut self.out);
-        }
-        let whole = rest.len() / 3 * 3;
-        encode_base64(&rest[..whole], &mut self.out);
-        self.carry.extend_from_slice(&rest[whole..]);
-        if self.out.len() >= CHUNK_BYTES {
-            self.inner.write_all(&self.out)?;
-            self.out.clear();
-        }
-        Ok(bytes.len())
-    }
-
-    fn flush(&mut self) -> Result<()> {
-        self.inner.flush()
-    }
-}
-
-impl<W: Write> Base64Writer<W> {
-    fn finish(mut self) -> Result<()> {
-        let tail = std::mem::take(&mut self.carry);
-        encode_base64(&tail, &mut self.out);
-        self.inner.write_all(&self.out)
-    }
-}
-
-/// Appends the base64 text of `bytes` to `out` (padded when `bytes.len()` is not a
-/// multiple of 3).
-fn encode_base64(bytes: &[u8], out: &mut Vec<u8>) {
-    const TABLE: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    for chunk in bytes.chunks(3) {
-        let b = [
-            chunk[0],
-            *chunk.get(1).unwrap_or(&0),
-            *chunk.get(2).unwrap_or(&0),
-        ];
-        let n = ((b[0] as u32) << 16) | ((b[1] as u32) << 8) | b[2] as u32;
-        for k in 0..4 {
-            if k <= chunk.len() {
-                out.push(TABLE[((n >> (18 - 6 * k)) & 63) as usize]);
-            } else {
-                out.push(b'=');
-            }
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use std::io::Write;
-
-    fn base64(bytes: &[u8]) -> String {
-        let mut out = Vec::new();
-        super::encode_base64(bytes, &mut out);
-        String::from_utf8(out).unwrap()
-    }
-
-    #[test]
-    fn base64_matches_known_vectors() {
-        assert_eq!(base64(b""), "");
-        assert_eq!(base64(b"f"), "Zg==");
-        assert_eq!(base64(b"fo"), "Zm8=");
-        assert_eq!(base64(b"foo"), "Zm9v");
-        assert_eq!(base64(b"foobar"), "Zm9vYmFy");
-    }
-
-    #[test]
-    fn streamed_base64_equals_one_shot_for_any_split() {
-        let data: Vec<u8> = (0..1000u32).map(|i| (i * 7919 % 251) as u8).collect();
-        for split in [1, 2, 3, 4, 5, 7, 64, 999] {
-            let mut out = Vec::new();
-            let mut w = super::Base64Writer {
-                inner: &mut out,
-                carry: Vec::new(),
-                out: Vec::new(),
-            };
-            for piece in data.chunks(split) {
-                w.write_all(piece).unwrap();
-            }
-            w.finish().unwrap();
-            assert_eq!(
-                String::from_utf8(out).unwrap(),
-                base64(&data),
-                "split {split}"
-            );
-        }
     }
 }

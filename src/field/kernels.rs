@@ -28,14 +28,15 @@
 //! same order as the whole scene, so the kernels do not depend on the tiling or the
 //! thread count.
 
-use crate::field::{home_half_block, FieldOptions, HALF_BLOCK_EDGE};
-use crate::grid::BlockKey;
+use crate::field::FieldOptions;
+use crate::grid::{home_half_block, BlockKey, HALF_BLOCK_EDGE};
 use glam::{DMat3, DVec3, Vec3};
 use rayon::prelude::*;
 
 /// Parameters of the anisotropic kernels; lengths in multiples of the particle radius
 /// `r`. The covariance neighbourhood is the field's influence radius `R`.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[non_exhaustive]
 pub struct AnisotropyOptions {
     /// Radius `h_a` of the kernel of a particle with an isotropic neighbourhood, multiples
     /// of `r`. Default 3.5.
@@ -137,6 +138,11 @@ impl AnisotropyOptions {
     }
 }
 
+/// Bytes per particle that anisotropic kernels add to a tile or an untiled run: the
+/// kernel of every loaded particle (64), then for the field particles the kernels kept
+/// (64), the prepared copy (64) and the sort by centre (16).
+pub(crate) const BYTES_PER_PARTICLE: u64 = 208;
+
 /// The kernel of one particle.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParticleKernel {
@@ -199,7 +205,7 @@ pub fn compute_kernels(
     field: &FieldOptions,
 ) -> crate::Result<(Vec<ParticleKernel>, AnisotropyStats)> {
     field.validate()?;
-    crate::field::check_positions(positions, field)?;
+    crate::grid::check_positions(0, positions, field.cell_size_world(), field.particle_radius)?;
     let inv_h = 1.0 / field.cell_size_world();
     let halves: Vec<BlockKey> = positions
         .par_iter()

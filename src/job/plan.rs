@@ -1,0 +1,73 @@
+//! The frames of a job and where each goes: [`plan_frames`].
+
+use super::sink;
+use crate::error::{Error, Result};
+use crate::sequence::{self, Frame, FrameChoice};
+use std::path::{Path, PathBuf};
+
+/// The frames of a job: a single file, or the frames of a `{}` pattern that `choice`
+/// takes ([`sequence::choose`]). The output must be a pattern exactly when the input is
+/// (or one `.mseq`, `.glb` or `.gltf` for the whole sequence).
+pub fn plan_frames(
+    input: &str,
+    output: &str,
+    choice: &FrameChoice,
+) -> Result<Vec<(Frame, PathBuf)>> {
+    if sequence::is_pattern(output) {
+        sink::check_pattern_output(output)?;
+    }
+    match (sequence::is_pattern(input), sequence::is_pattern(output)) {
+        (true, true) => Ok(sequence::choose(input, choice)?
+            .into_iter()
+            .map(|f| {
+                let out = sequence::substitute(output, &f.label);
+                (f, out)
+            })
+            .collect()),
+        (false, false) => single_file(input, output, choice),
+        (true, false) if sink::holds_a_sequence(Path::new(output)) => {
+            Ok(sequence::choose(input, choice)?
+                .into_iter()
+                .map(|f| (f, PathBuf::from(output)))
+                .collect())
+        }
+        (true, false) => Err(Error::InvalidOption {
+            option: "output",
+            message: format!(
+                "INPUT {input:?} is a sequence pattern, so OUTPUT {output:?} needs a {{}} too (or is one {} for the whole sequence)",
+                sink::sequence_extensions()
+            ),
+        }),
+        (false, true) => Err(Error::InvalidOption {
+            option: "output",
+            message: format!("OUTPUT {output:?} has a {{}} but INPUT {input:?} is a single file"),
+        }),
+    }
+}
+
+/// The plan of a single file, frame 0: nothing may choose frames of it.
+fn single_file(input: &str, output: &str, choice: &FrameChoice) -> Result<Vec<(Frame, PathBuf)>> {
+    if choice.is_given() {
+        let option = if choice.frames.is_some() {
+            "frames"
+        } else if choice.shard.is_some() && choice.start.is_none() && choice.end.is_none() {
+            "shard"
+        } else {
+            "start/end"
+        };
+        return Err(Error::InvalidOption {
+            option,
+            message: format!(
+                "choosing frames needs a {{}} pattern in INPUT and OUTPUT; {input:?} is a single file"
+            ),
+        });
+    }
+    Ok(vec![(
+        Frame {
+            number: 0,
+            label: String::new(),
+            input: PathBuf::from(input),
+        },
+        PathBuf::from(output),
+    )])
+}
