@@ -544,7 +544,7 @@ fn reconstruct_file<'py>(
     normals: bool,
     error_bound: Option<f64>,
     attribute_error_bound: f64,
-    fps: f32,
+    fps: f64,
     input_format: Option<String>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
@@ -577,6 +577,8 @@ fn reconstruct_file<'py>(
                 .unwrap_or(meniscus::archive::default_error_bound(particle_radius)),
             archive_attribute_error_bound: attribute_error_bound,
             fps,
+            up_axis: Default::default(),
+            meters_per_unit: 1.0,
             attributes,
             cancel: cancel.clone(),
             keep_going,

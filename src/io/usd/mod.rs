@@ -2,10 +2,10 @@
 //!
 //! [`UsdStageWriter`] writes one stage holding a sequence: a `UsdGeomMesh` (`/Surface/Fluid`)
 //! with time samples at the simulation's frame numbers for `points`, `faceVertexCounts`,
-//! `faceVertexIndices`, `normals`, `extent`, `velocities` (the `velocity` attribute as it
-//! is, units per second) and `primvars:NAME` for the other attributes (vertex
-//! interpolation; 1–4 components as `float`…`float4`, more as `float[]` with
-//! `elementSize`); the isolated-particle spheres as a `UsdGeomPointInstancer`
+//! `faceVertexIndices`, `normals`, `extent`, `velocities` (the velocity attribute, `v`,
+//! `vel` or `velocity`, as it is: units per second) and `primvars:NAME` for the other
+//! attributes (vertex interpolation; 1–4 components as `float`…`float4`, more as
+//! `float[]` with `elementSize`); the isolated-particle spheres as a `UsdGeomPointInstancer`
 //! (`/Surface/Spheres`) of the icosphere, with time-sampled positions, velocities and
 //! primvars per instance. The layer metadata sets `startTimeCode`/`endTimeCode` to the
 //! first and last frame, `timeCodesPerSecond` = `framesPerSecond` = [`UsdOptions::fps`],
@@ -55,6 +55,25 @@ impl UpAxis {
             UpAxis::Y => "Y",
             UpAxis::Z => "Z",
         }
+    }
+}
+
+impl std::str::FromStr for UpAxis {
+    type Err = String;
+
+    /// `Y` or `Z`, either case.
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "Y" | "y" => Ok(UpAxis::Y),
+            "Z" | "z" => Ok(UpAxis::Z),
+            other => Err(format!("the up axis is Y or Z, got {other:?}")),
+        }
+    }
+}
+
+impl std::fmt::Display for UpAxis {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.token())
     }
 }
 
@@ -127,6 +146,21 @@ impl UsdOptions {
         }
         Ok(())
     }
+}
+
+/// Writes `surface` as a stage of one frame, `frame` (its time code: a single time sample
+/// there, the time range `frame`..`frame`), atomically: [`UsdStageWriter`] with one
+/// [`UsdStageWriter::append_frame`]. A stage per frame of a sequence, as a farm writes them
+/// or USD value clips take them.
+pub fn write_stage(
+    path: &Path,
+    frame: i64,
+    surface: &Surface,
+    options: &UsdOptions,
+) -> Result<UsdStageStats> {
+    let mut stage = UsdStageWriter::create(path, options)?;
+    stage.append_frame(frame, surface)?;
+    stage.finish()
 }
 
 /// What a [`UsdStageWriter`] wrote.

@@ -15,7 +15,7 @@
 //! ```
 
 use super::UsdOptions;
-use crate::attributes::Attribute;
+use crate::attributes::{Attribute, VELOCITY_NAMES};
 use crate::error::{Error, Result};
 use crate::mesh::{Surface, TriMesh};
 use glam::Vec3;
@@ -23,9 +23,6 @@ use std::path::Path;
 
 /// Name of the root prim (the layer's default prim).
 pub(crate) const ROOT: &str = "Surface";
-
-/// The attribute that becomes `velocities` (3 components, units per second).
-const VELOCITY: &str = "velocity";
 
 /// The prim a series belongs to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -184,10 +181,14 @@ pub(crate) fn extent(points: &[Vec3], pad: [Vec3; 2]) -> [Vec3; 2] {
     [lo + pad[0], hi + pad[1]]
 }
 
-/// The series an attribute of `owner` goes to: `velocities` for a 3-component
-/// `velocity`, `primvars:NAME` otherwise.
+/// The series an attribute of `owner` goes to: `velocities` for a 3-component velocity
+/// (named `v`, `vel` or `velocity`, any case, as the default attribute selection finds
+/// it), `primvars:NAME` otherwise.
 fn attribute_series(owner: Owner, a: &Attribute) -> Series {
-    if a.name == VELOCITY && a.components == 3 {
+    let velocity = VELOCITY_NAMES
+        .iter()
+        .any(|v| a.name.eq_ignore_ascii_case(v));
+    if velocity && a.components == 3 {
         return Series {
             owner,
             name: "velocities".into(),
