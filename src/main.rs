@@ -43,6 +43,21 @@ enum Command {
     Archive(ArchiveCommand),
 }
 
+/// The playback rate of a sequence in one file, and a USD stage's metadata.
+#[derive(Args)]
+struct StageArgs {
+    /// Playback rate of a `{}` sequence written into one .glb/.gltf, and the time codes
+    /// per second of a USD stage, frames per second.
+    #[arg(long, default_value_t = 24.0)]
+    fps: f64,
+    /// Up axis of a USD stage output: Y (the simulators' convention) or Z.
+    #[arg(long, default_value_t = UpAxis::Y)]
+    up_axis: UpAxis,
+    /// Meters in one world unit of a USD stage output (its `metersPerUnit`).
+    #[arg(allow_negative_numbers = true, long, default_value_t = 1.0)]
+    meters_per_unit: f64,
+}
+
 /// Frame selection of a sequence: a range, or a list and a share as render farms give
 /// them.
 #[derive(Args)]
@@ -191,16 +206,8 @@ struct ReconstructArgs {
     /// (m/s for a velocity): every value within it.
     #[arg(allow_negative_numbers = true, long, default_value_t = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND)]
     attribute_error_bound: f64,
-    /// Playback rate of a `{}` sequence written into one .glb/.gltf, and the time codes
-    /// per second of a USD stage, frames per second.
-    #[arg(long, default_value_t = 24.0)]
-    fps: f64,
-    /// Up axis of a USD stage output: Y (the simulators' convention) or Z.
-    #[arg(long, default_value_t = UpAxis::Y)]
-    up_axis: UpAxis,
-    /// Meters in one world unit of a USD stage output (its `metersPerUnit`).
-    #[arg(allow_negative_numbers = true, long, default_value_t = 1.0)]
-    meters_per_unit: f64,
+    #[command(flatten)]
+    stage: StageArgs,
     /// Point attributes carried to the surface: a comma-separated list of names
     /// (`velocity,density`), `all`, or `none`. Default: the velocity (`v`, `vel` or
     /// `velocity`, any case) when the input has one.
@@ -473,10 +480,10 @@ fn check_run_options(args: &ReconstructArgs) -> Result<(), Failure> {
     if args.threads == Some(0) {
         return Err(Failure::option("--threads", "must be at least 1, got 0"));
     }
-    if !(args.fps.is_finite() && args.fps > 0.0) {
+    if !(args.stage.fps.is_finite() && args.stage.fps > 0.0) {
         return Err(Failure::option(
             "--fps",
-            format!("must be > 0 (frames per second), got {}", args.fps),
+            format!("must be > 0 (frames per second), got {}", args.stage.fps),
         ));
     }
     Ok(())
@@ -499,9 +506,9 @@ fn job_options(
             .error_bound
             .unwrap_or(meniscus::archive::default_error_bound(args.particle_radius)),
         archive_attribute_error_bound: args.attribute_error_bound,
-        fps: args.fps,
-        up_axis: args.up_axis,
-        meters_per_unit: args.meters_per_unit,
+        fps: args.stage.fps,
+        up_axis: args.stage.up_axis,
+        meters_per_unit: args.stage.meters_per_unit,
         attributes,
         cancel: cancel.clone(),
         keep_going: args.keep_going,

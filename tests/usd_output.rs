@@ -230,3 +230,40 @@ fn a_stage_refuses_skip_existing_and_an_unwritable_path_before_any_work() {
     );
     assert!(!out.exists());
 }
+
+#[test]
+fn an_archive_extracts_into_one_stage_or_a_stage_per_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let pattern = write_particle_sequence(dir.path());
+    let archive = dir.path().join("run.mseq");
+    let (code, err) = reconstruct(&pattern, &["-o", archive.to_str().unwrap()]);
+    assert_eq!(code, Some(0), "{err}");
+    let extract = |args: &[&str]| {
+        let out = meniscus()
+            .args(["archive", "extract", archive.to_str().unwrap()])
+            .args(args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "{err}");
+        err
+    };
+    let shot = dir.path().join("shot.usda");
+    let err = extract(&["-o", shot.to_str().unwrap(), "--up-axis", "Z"]);
+    assert!(err.contains("3 frame(s) written to 1 stage(s)"), "{err}");
+    let text = read(&shot);
+    assert!(text.contains("upAxis = \"Z\"") && text.contains("startTimeCode = 1.0"));
+    for property in ["point3f[] points", "vector3f[] velocities"] {
+        assert_eq!(sample_times(&text, property), [1, 2, 4], "{property}");
+    }
+    let one = dir.path().join("one.usdc");
+    extract(&["-o", one.to_str().unwrap(), "--frame", "2"]);
+    assert!(one.exists());
+    let stages = dir.path().join("stages");
+    extract(&["-o", &format!("{}/s_{{}}.usda", stages.display())]);
+    assert_eq!(names_in(&stages), ["s_1.usda", "s_2.usda", "s_4.usda"]);
+    assert_eq!(
+        sample_times(&read(&stages.join("s_4.usda")), "point3f[] points"),
+        [4]
+    );
+}
