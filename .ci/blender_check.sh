@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# Checks that Blender 5 imports meniscus attributes: installs bpy 5.0.1 (Blender as a
-# Python module) into target/bpy-venv if missing, writes the attribute fixtures with the
-# attribute_fixture example, and runs tests/blender/import_attributes.py on them.
-# Exits non-zero when an import loses or changes an attribute value.
+# Checks that Blender 5 imports meniscus attributes and USD stages: installs bpy 5.0.1
+# (Blender as a Python module) into target/bpy-venv if missing, writes the attribute
+# fixtures with the attribute_fixture example and runs tests/blender/import_attributes.py
+# on them, then imports a reconstruction (glTF) and a USD stage of a sequence
+# (tests/blender/import_usd.py). Exits non-zero when an import loses or changes a value.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=target/bpy-venv
@@ -27,3 +28,12 @@ cargo run --release --quiet -- reconstruct datasets/dambreak_small/ParticleData_
 cargo run --release --quiet -- reconstruct datasets/dambreak_small/ParticleData_Fluid_25.vtk \
   --particle-radius 0.012 -o "$out/frame25.ply" --quiet
 PYTHONHASHSEED=2 "$venv/bin/python" tests/blender/import_reconstruction.py "$out/frame25.glb" "$out/frame25.ply"
+# A USD stage of a 3-frame sequence with a gap (frames 1, 2, 4; velocity mostly +Y),
+# against the PLYs of the same run: Mesh Sequence Cache, frame range, faces and velocity
+# at the middle frame, the velocity turned to Blender's +Z, a Cycles motion-blur render.
+pattern=$(cargo run --release --quiet --example particle_sequence -- "$out/particles")
+for output in "$out/shot.usdc" "$out/f_{}.ply"; do
+  cargo run --release --quiet -- reconstruct "$pattern" --particle-radius 0.025 \
+    --isolated-spheres off -o "$output" --quiet
+done
+"$venv/bin/python" tests/blender/import_usd.py "$out/shot.usdc" "$out/f_{}.ply"

@@ -9,7 +9,7 @@ python3 -m venv "$venv"
 # shellcheck disable=SC1091
 . "$venv/bin/activate"
 pip install -q --upgrade pip
-pip install -q maturin pytest numpy "dask[distributed]"
+pip install -q maturin pytest numpy "dask[distributed]" "usd-core==26.11"
 cargo clippy --release -p meniscus-python --all-targets -- -D warnings
 (cd python && maturin develop --release)
 cargo build --release --quiet --bin meniscus

@@ -126,9 +126,11 @@ class Mesh:
     @property
     def triangle_count(self) -> int:
         """Number of triangles."""
-    def write(self, path: _Path, *, normals: bool = True) -> int:
-        """Writes the surface to ``path`` (.ply, .obj, .glb, .gltf or .vtk by extension), as the
-        CLI does (glTF keeps the spheres instanced); returns the bytes written."""
+    def write(self, path: _Path, *, normals: bool = True, frame: int = 0) -> int:
+        """Writes the surface to ``path`` (.ply, .obj, .glb, .gltf, .vtk, or a USD stage .usdc,
+        .usda, .usd, by extension), as the CLI does (glTF keeps the spheres instanced, USD
+        has them as a point instancer); a stage holds it at time code ``frame``. Returns the
+        bytes written."""
 
 def reconstruct(
     positions: npt.ArrayLike,
@@ -175,13 +177,15 @@ def reconstruct_file(
     error_bound: float | None = None,
     attribute_error_bound: float = 1e-3,
     fps: float = 24.0,
+    up_axis: str = "Y",
+    meters_per_unit: float = 1.0,
     input_format: str | None = None,
     **options: Unpack[ReconstructOptions],
 ) -> list[dict[str, Any]]:
     """Reconstructs a particle file, or a ``{}`` frame sequence, into ``output`` as
     ``meniscus reconstruct INPUT -o OUTPUT`` does (the same library function): a mesh
-    file, a ``{}`` pattern of them, one ``.mseq`` archive or one ``.glb``/``.gltf`` for a
-    sequence. An archive is the CLI's, byte for byte (the control mesh of each frame is
+    file, a ``{}`` pattern of them, one ``.mseq`` archive, one ``.glb``/``.gltf`` or one USD
+    stage (``.usdc``, ``.usda``, ``.usd``; with ``{}``, a stage per frame) for a sequence. An archive is the CLI's, byte for byte (the control mesh of each frame is
     stored, subdivided when read).
 
     Args:
@@ -206,7 +210,10 @@ def reconstruct_file(
         error_bound: ``.mseq`` position bound, world units; default 0.01 r (r as written,
             the CLI's).
         attribute_error_bound: ``.mseq`` attribute bound, in the attribute's units.
-        fps: playback rate of a sequence written into one glTF.
+        fps: playback rate of a sequence written into one glTF; a USD stage's time codes
+            per second.
+        up_axis: a USD stage's up axis, ``"Y"`` (the simulators') or ``"Z"``.
+        meters_per_unit: a USD stage's ``metersPerUnit``.
         input_format: ``"xyz"``, ``"vtk"``, ``"ply"`` or ``"bgeo"``, instead of the extension.
         **options: the reconstruction settings (``ReconstructOptions``).
 

@@ -11,6 +11,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use meniscus::attributes::AttributeSelection;
 use meniscus::io::mesh::MeshWriteOptions;
 use meniscus::io::particles::ParticleFormat;
+use meniscus::io::usd::UpAxis;
 use meniscus::job::{
     check_outputs, output_profile, peak_rss_bytes, plan_frames, run_frames, FrameReport,
     FrameStatus, JobOptions,
@@ -40,6 +41,21 @@ enum Command {
     /// Inspect, check, extract from or fill a `.mseq` mesh-sequence archive.
     #[command(subcommand)]
     Archive(ArchiveCommand),
+}
+
+/// The playback rate of a sequence in one file, and a USD stage's metadata.
+#[derive(Args)]
+struct StageArgs {
+    /// Playback rate of a `{}` sequence written into one .glb/.gltf, and the time codes
+    /// per second of a USD stage, frames per second.
+    #[arg(long, default_value_t = 24.0)]
+    fps: f64,
+    /// Up axis of a USD stage output: Y (the simulators' convention) or Z.
+    #[arg(long, default_value_t = UpAxis::Y)]
+    up_axis: UpAxis,
+    /// Meters in one world unit of a USD stage output (its `metersPerUnit`).
+    #[arg(allow_negative_numbers = true, long, default_value_t = 1.0)]
+    meters_per_unit: f64,
 }
 
 /// Frame selection of a sequence: a range, or a list and a share as render farms give
@@ -190,9 +206,8 @@ struct ReconstructArgs {
     /// (m/s for a velocity): every value within it.
     #[arg(allow_negative_numbers = true, long, default_value_t = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND)]
     attribute_error_bound: f64,
-    /// Playback rate of a `{}` sequence written into one .glb/.gltf, frames per second.
-    #[arg(long, default_value_t = 24.0)]
-    fps: f32,
+    #[command(flatten)]
+    stage: StageArgs,
     /// Point attributes carried to the surface: a comma-separated list of names
     /// (`velocity,density`), `all`, or `none`. Default: the velocity (`v`, `vel` or
     /// `velocity`, any case) when the input has one.
@@ -465,10 +480,10 @@ fn check_run_options(args: &ReconstructArgs) -> Result<(), Failure> {
     if args.threads == Some(0) {
         return Err(Failure::option("--threads", "must be at least 1, got 0"));
     }
-    if !(args.fps.is_finite() && args.fps > 0.0) {
+    if !(args.stage.fps.is_finite() && args.stage.fps > 0.0) {
         return Err(Failure::option(
             "--fps",
-            format!("must be > 0 (frames per second), got {}", args.fps),
+            format!("must be > 0 (frames per second), got {}", args.stage.fps),
         ));
     }
     Ok(())
@@ -491,7 +506,9 @@ fn job_options(
             .error_bound
             .unwrap_or(meniscus::archive::default_error_bound(args.particle_radius)),
         archive_attribute_error_bound: args.attribute_error_bound,
-        fps: args.fps,
+        fps: args.stage.fps,
+        up_axis: args.stage.up_axis,
+        meters_per_unit: args.stage.meters_per_unit,
         attributes,
         cancel: cancel.clone(),
         keep_going: args.keep_going,
@@ -673,13 +690,23 @@ fn ineffective_options(
     }
     if given("fps") {
         match profile.animated {
-            true if plan.len() == 1 => warnings.push(format!(
+            true if plan.len() == 1 && !profile.stage_metadata => warnings.push(format!(
                 "--fps has no effect: {output:?} holds a single frame, which does not play"
             )),
             true => {}
             false => warnings.push(format!(
-                "--fps has no effect: only a {{}} sequence written into one .glb/.gltf is animated, and {output:?} is not one"
+                "--fps has no effect: only a {{}} sequence written into one .glb/.gltf, or a USD stage, is animated, and {output:?} is neither"
             )),
+        }
+    }
+    for (id, option) in [
+        ("up_axis", "--up-axis"),
+        ("meters_per_unit", "--meters-per-unit"),
+    ] {
+        if given(id) && !profile.stage_metadata {
+            warnings.push(format!(
+                "{option} has no effect: it is recorded in a USD stage (.usdc, .usda, .usd), and {output:?} is not one"
+            ));
         }
     }
     if given("skip_existing") && profile.written_whole {

@@ -479,6 +479,8 @@ fn run_into_archive(
         archive_error_bound: 0.00025,
         archive_attribute_error_bound: 1e-3,
         fps: 24.0,
+        up_axis: Default::default(),
+        meters_per_unit: 1.0,
         attributes: Default::default(),
         keep_going: false,
         cancel: cancel.clone(),

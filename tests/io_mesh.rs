@@ -395,23 +395,50 @@ fn attributes_only_the_fluid_carries_are_kept_where_the_format_allows() {
 #[test]
 fn a_sequence_carries_the_attributes_of_every_frame() {
     let dir = tempfile::tempdir().unwrap();
-    let frames: Vec<TriMesh> = (0..3)
+    let frames: Vec<(i64, TriMesh)> = (0..3)
         .map(|k| {
             let mut m = attributed().merged();
             m.attributes[0]
                 .values
                 .iter_mut()
                 .for_each(|v| *v += k as f32);
-            m
+            (k, m)
         })
         .collect();
     let path = dir.path().join("seq.glb");
     write_sequence_gltf(&path, &frames, 24.0, &MeshWriteOptions::default()).unwrap();
     let back = read_mesh(&path).unwrap();
-    let mut all = frames[0].clone();
-    all.append(&frames[1]);
-    all.append(&frames[2]);
+    let mut all = frames[0].1.clone();
+    all.append(&frames[1].1);
+    all.append(&frames[2].1);
     assert_eq!(sorted(&back.attributes), sorted(&all.attributes));
+}
+
+#[test]
+fn a_sequence_names_its_nodes_and_times_its_frames_by_their_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    // Out of order, with gaps: frame N is shown from (N - 3) / 24 s.
+    let frames: Vec<(i64, TriMesh)> = [7, 3, 4]
+        .into_iter()
+        .map(|n| (n, attributed().merged()))
+        .collect();
+    let path = dir.path().join("seq.glb");
+    write_sequence_gltf(&path, &frames, 24.0, &MeshWriteOptions::default()).unwrap();
+    let (doc, buffers, _) = gltf::import(&path).unwrap();
+    let names: Vec<&str> = doc.nodes().filter_map(|n| n.name()).collect();
+    assert_eq!(names, ["frame_3", "frame_4", "frame_7"]);
+    let animation = doc.animations().next().unwrap();
+    let channel = animation.channels().next().unwrap();
+    let times: Vec<f32> = channel
+        .reader(|b| Some(&buffers[b.index()]))
+        .read_inputs()
+        .unwrap()
+        .collect();
+    assert_eq!(times, [0.0, 1.0 / 24.0, 4.0 / 24.0]);
+    // One file holds one frame per number.
+    let twice = [(3, frames[0].1.clone()), (3, frames[1].1.clone())];
+    let err = write_sequence_gltf(&path, &twice, 24.0, &MeshWriteOptions::default()).unwrap_err();
+    assert!(matches!(err, Error::FramesExist { .. }), "{err}");
 }
 
 #[test]

@@ -12,6 +12,7 @@ use meniscus::attributes::AttributeSelection;
 use meniscus::io::mesh::{write_surface, MeshWriteOptions};
 use meniscus::io::particles::ParticleFormat;
 use meniscus::io::particles::ParticleSlices;
+use meniscus::io::usd::{write_stage, UpAxis, UsdFormat, UsdOptions};
 use meniscus::job::{plan_frames, run_frames, FrameReport, JobOptions};
 use meniscus::mesh::Surface;
 use meniscus::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
@@ -387,15 +388,26 @@ impl Mesh {
         fluid.triangles.len() + spheres.centers.len() * spheres.template.triangles.len()
     }
 
-    /// Writes the surface to `path` (.ply, .obj, .glb, .gltf or .vtk by extension), as
-    /// the CLI writes it (glTF keeps the spheres instanced). Returns the bytes written.
-    #[pyo3(signature = (path, *, normals = true))]
-    fn write(&self, py: Python<'_>, path: PathBuf, normals: bool) -> PyResult<u64> {
+    /// Writes the surface to `path` (.ply, .obj, .glb, .gltf, .vtk, or a USD stage
+    /// .usdc, .usda, .usd, by extension), as the CLI writes it (glTF keeps the spheres
+    /// instanced, USD has them as a point instancer). A stage holds the surface at time
+    /// code `frame` (other formats have no time). Returns the bytes written.
+    #[pyo3(signature = (path, *, normals = true, frame = 0))]
+    fn write(&self, py: Python<'_>, path: PathBuf, normals: bool, frame: i64) -> PyResult<u64> {
+        let surface = &self.surface;
+        if UsdFormat::from_path(&path).is_ok() {
+            let options = UsdOptions {
+                normals,
+                ..UsdOptions::default()
+            };
+            return run_interruptible(py, |_| {
+                write_stage(&path, frame, surface, &options).map(|s| s.bytes)
+            });
+        }
         let options = MeshWriteOptions {
             normals,
             ..MeshWriteOptions::default()
         };
-        let surface = &self.surface;
         run_interruptible(py, |_| {
             write_surface(&path, surface, &options).map(|s| s.bytes)
         })
@@ -514,7 +526,8 @@ fn selection(attributes: Option<&Bound<'_, PyAny>>) -> PyResult<AttributeSelecti
 
 /// Reconstructs a particle file (or a `{}` frame sequence) into `output` as the CLI's
 /// `meniscus reconstruct INPUT -o OUTPUT` does (a mesh file, a `{}` pattern of them, a
-/// `.mseq` archive or one `.glb` for a sequence), through the same library function
+/// `.mseq` archive, one `.glb` or one USD stage for a sequence; `up_axis` and
+/// `meters_per_unit` are a stage's metadata), through the same library function
 /// ([`run_frames`]). `frames`, `shard`, `start`/`end`, `keep_going` are the CLI's
 /// `--frames`, `--shard`, `--start`/`--end`, `--keep-going`; `progress` is called with
 /// each finished frame's `--json-progress` object (a dict). Returns one report per frame
@@ -525,7 +538,7 @@ fn selection(attributes: Option<&Bound<'_, PyAny>>) -> PyResult<AttributeSelecti
     frames = None, shard = None, start = None, end = None, keep_going = false,
     progress = None, skip_existing = false, normals = true, error_bound = None,
     attribute_error_bound = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND, fps = 24.0,
-    input_format = None, **options))]
+    up_axis = "Y", meters_per_unit = 1.0, input_format = None, **options))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct_file<'py>(
     py: Python<'py>,
@@ -544,7 +557,9 @@ fn reconstruct_file<'py>(
     normals: bool,
     error_bound: Option<f64>,
     attribute_error_bound: f64,
-    fps: f32,
+    fps: f64,
+    up_axis: &str,
+    meters_per_unit: f64,
     input_format: Option<String>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
@@ -554,6 +569,9 @@ fn reconstruct_file<'py>(
             "invalid fps: must be > 0 (frames per second), got {fps}"
         )));
     }
+    let up_axis: UpAxis = up_axis
+        .parse()
+        .map_err(|e| PyValueError::new_err(format!("invalid up_axis: {e}")))?;
     let options = reconstruct_options(py, "reconstruct_file", particle_radius, options)?;
     let attributes = selection(attributes)?;
     let choice = options::frame_choice(start, end, frames, shard)?;
@@ -577,6 +595,8 @@ fn reconstruct_file<'py>(
                 .unwrap_or(meniscus::archive::default_error_bound(particle_radius)),
             archive_attribute_error_bound: attribute_error_bound,
             fps,
+            up_axis,
+            meters_per_unit,
             attributes,
             cancel: cancel.clone(),
             keep_going,

@@ -9,7 +9,9 @@
 //! run leaves a consistent archive ([`ArchiveWriter`]). **Read:** [`ArchiveReader::open`]
 //! uses the index, or — after an interrupted append — scans the records and keeps every
 //! complete frame; [`ArchiveReader::read_frame`] is O(1) by frame number;
-//! [`ArchiveReader::verify`] decodes everything and names damaged frames.
+//! [`ArchiveReader::verify`] decodes everything and names damaged frames;
+//! [`ArchiveReader::extract`] writes frames as mesh files, [`ArchiveReader::extract_stage`]
+//! as USD stages.
 //!
 //! **Frames** ([`ArchiveFrame`]): the pipeline's fluid surface is stored as its Loop
 //! control mesh (the decimated mesh, a quarter of the triangles) and subdivided again on
@@ -47,6 +49,7 @@ mod merge;
 mod options;
 mod parts;
 mod reader;
+mod to_usd;
 mod writer;
 
 pub use attributes::{AttributeInfo, AttributeTarget};

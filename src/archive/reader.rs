@@ -142,7 +142,7 @@ fn check_decoded(s: Surface) -> std::result::Result<Surface, String> {
 
 /// Reads an archive.
 pub struct ArchiveReader {
-    path: PathBuf,
+    pub(super) path: PathBuf,
     pub(super) version: u32,
     bytes: Vec<u8>,
     pub(super) frames: Vec<FrameInfo>,

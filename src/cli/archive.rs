@@ -1,10 +1,11 @@
 //! `meniscus archive`: inspect, check, extract from, fill and merge `.mseq` mesh-sequence
 //! archives.
 
-use crate::{Failure, FarmArgs};
+use crate::{Failure, FarmArgs, StageArgs};
 use clap::Subcommand;
 use meniscus::archive::{ArchiveOptions, ArchiveReader, ArchiveWriter};
 use meniscus::io::mesh::{read_mesh, MeshWriteOptions};
+use meniscus::io::usd::{UsdFormat, UsdOptions};
 use std::path::{Path, PathBuf};
 
 #[derive(Subcommand)]
@@ -24,16 +25,20 @@ pub(crate) enum ArchiveCommand {
         /// The archive.
         file: PathBuf,
     },
-    /// Write one frame, or every frame, as .glb, .gltf, .ply, .obj or .vtk.
+    /// Write one frame, or every frame, as .glb, .gltf, .ply, .obj or .vtk, or as a USD
+    /// stage (.usdc, .usda, .usd).
     Extract {
         /// The archive.
         file: PathBuf,
-        /// Frame number; without it every frame is written (OUTPUT needs a `{}`).
+        /// Frame number; without it every frame is written (OUTPUT needs a `{}`, unless it
+        /// is one USD stage holding them all).
         #[arg(long, allow_negative_numbers = true)]
         frame: Option<i64>,
-        /// Output mesh file; `{}` stands for the frame number.
+        /// Output mesh file or USD stage; `{}` stands for the frame number.
         #[arg(short, long)]
         output: String,
+        #[command(flatten)]
+        stage: StageArgs,
     },
     /// Join archives (one per farm task, say) into one, frames in increasing order,
     /// records copied as they are: the same bytes as one run writing every frame.
@@ -77,7 +82,8 @@ pub(crate) fn archive(
             file,
             frame,
             output,
-        } => extract(&file, frame, &output, cancel),
+            stage,
+        } => extract(&file, frame, &output, &stage, cancel),
         ArchiveCommand::Merge { inputs, output } => merge(&inputs, &output),
         ArchiveCommand::Pack {
             input,
@@ -197,15 +203,29 @@ fn verify(file: &Path) -> Result<(), Failure> {
     Ok(())
 }
 
-/// `archive extract`: frame `frame`, or every frame, to `output`.
+/// `archive extract`: frame `frame`, or every frame, to `output`: mesh files, or USD
+/// stages by the extension.
 fn extract(
     file: &Path,
     frame: Option<i64>,
     output: &str,
+    stage: &StageArgs,
     cancel: &meniscus::CancelToken,
 ) -> Result<(), Failure> {
     let r = ArchiveReader::open(file)?;
     let numbers = frame.map(|n| vec![n]);
+    if UsdFormat::from_path(Path::new(output)).is_ok() {
+        let options = UsdOptions {
+            fps: stage.fps,
+            up_axis: stage.up_axis,
+            meters_per_unit: stage.meters_per_unit,
+            ..UsdOptions::default()
+        };
+        let written = r.extract_stage(numbers.as_deref(), output, &options, cancel)?;
+        let frames = numbers.map_or(r.frames().len(), |n| n.len());
+        eprintln!("{frames} frame(s) written to {} stage(s)", written.len());
+        return Ok(());
+    }
     let written = r.extract(
         numbers.as_deref(),
         output,

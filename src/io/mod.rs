@@ -12,4 +12,5 @@ pub mod particles;
 pub(crate) mod ply_header;
 pub(crate) mod tempfiles;
 pub(crate) mod text;
+pub mod usd;
 pub(crate) mod vtk_legacy;

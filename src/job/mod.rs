@@ -4,11 +4,11 @@
 //! ([`FrameReport`]). The CLI is a thin layer over [`plan_frames`] and [`run_frames`].
 //!
 //! Where the frames go is a frame sink (`sink::FrameSink`), one per kind of output —
-//! a mesh file per frame, one animated glTF, one `.mseq` archive — chosen by the output's
-//! extension in one place (`sink::choose`); the run itself knows no kind. A new format
-//! that holds a whole sequence in one file (a USD stage, `-o shot.usdc`, written frame by
-//! frame) is one new file in `job/sink/` implementing the trait and defining its kind
-//! (extensions, [`OutputProfile`], opener), plus its line in the chooser's list.
+//! a mesh file per frame, one animated glTF, one `.mseq` archive, USD stages — chosen by
+//! the output's extension in one place (`sink::choose`); the run itself knows no kind. A
+//! new format that holds a whole sequence in one file is one new file in `job/sink/`
+//! implementing the trait and defining its kind (extensions, [`OutputProfile`], opener),
+//! plus its line in the chooser's list.
 
 mod frame;
 mod plan;
@@ -24,6 +24,7 @@ use crate::cancel::CancelToken;
 use crate::error::{Error, Result};
 use crate::io::mesh::MeshWriteOptions;
 use crate::io::particles::ParticleFormat;
+use crate::io::usd::UpAxis;
 use crate::pipeline::ReconstructOptions;
 use crate::sequence::Frame;
 use sink::FrameSink;
@@ -39,23 +40,30 @@ pub struct JobOptions {
     /// Mesh writer options.
     pub write: MeshWriteOptions,
     /// Skip frames whose output file already exists (resume a sequence); for a `.mseq`
-    /// output, frames the archive already holds.
+    /// output, frames the archive already holds. Refused for one USD stage of several
+    /// frames ([`crate::Error::InvalidOption`] `skip_existing`): a stage is written whole,
+    /// so there is nothing to resume, and rewriting one would drop the frames it holds.
     pub skip_existing: bool,
     /// Error bound of `.mseq` outputs, world units.
     pub archive_error_bound: f64,
     /// Error bound of attributes in `.mseq` outputs, in each attribute's own units.
     pub archive_attribute_error_bound: f64,
-    /// Playback rate of a sequence written into one glTF, frames per second.
-    pub fps: f32,
+    /// Playback rate of a sequence written into one glTF or USD stage, frames per second
+    /// (a stage's `timeCodesPerSecond` and `framesPerSecond`).
+    pub fps: f64,
+    /// Up axis of a USD stage output (`upAxis`).
+    pub up_axis: UpAxis,
+    /// Meters in one world unit of a USD stage output (`metersPerUnit`).
+    pub meters_per_unit: f64,
     /// The point attributes carried to the surface.
     pub attributes: AttributeSelection,
     /// Stops the job between tiles, stages and frames ([`crate::Error::Interrupted`]).
     pub cancel: CancelToken,
     /// A frame that fails is reported (status [`FrameStatus::Failed`]) and the run goes
     /// on with the next; otherwise the first failure stops the run. Either way a `.mseq`
-    /// output keeps the frames done (a failed frame is not appended) and is finished with
-    /// its index. An interruption, and an I/O error on the archive itself (which leaves
-    /// it unfit for more frames), always stop the run.
+    /// output or a USD stage keeps the frames done (a failed frame is not appended) and is
+    /// finished. An interruption, and an I/O error on the archive or stage itself (which
+    /// leaves it unfit for more frames), always stop the run.
     pub keep_going: bool,
 }
 

@@ -1,12 +1,14 @@
 //! Helpers the integration tests share. Each `tests/*.rs` is a crate of its own and
 //! includes this module with `mod support;`: the shipped datasets, the `meniscus`
 //! binary, thread pools, directories, deterministic random generators and mutations, the
-//! splash generator ([`splash`]) and the archive tests' frames and meshes ([`archive`]).
+//! splash generator ([`splash`]), the archive tests' frames and meshes ([`archive`]) and
+//! the USD output's particle sequence ([`particle_sequence`]).
 
 // Every test crate compiles all of it and uses only some.
 #![allow(dead_code)]
 
 pub mod archive;
+pub mod particle_sequence;
 pub mod splash;
 
 use glam::Vec3;

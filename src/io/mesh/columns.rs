@@ -144,13 +144,13 @@ pub(super) fn check_surface(path: &Path, s: &Surface, format: Option<Column>) ->
 }
 
 /// Checks the attributes of sequence frames before they are written as glTF.
-pub(super) fn check_frames(path: &Path, frames: &[TriMesh]) -> Result<()> {
-    for (i, f) in frames.iter().enumerate() {
+pub(super) fn check_frames(path: &Path, frames: &[(i64, TriMesh)]) -> Result<()> {
+    for (number, f) in frames {
         check_list(
             path,
             &f.attributes,
             f.vertex_count(),
-            &format!("frame {i}"),
+            &format!("frame {number}"),
             Some(Column::Gltf),
         )?;
     }

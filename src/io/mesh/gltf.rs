@@ -553,35 +553,43 @@ pub(super) fn build(surface: &Surface, normals: bool) -> Document<'_> {
     b.finish(json, vertices)
 }
 
-/// A sequence: one node per frame (fluid and spheres merged into one mesh), shown in turn
-/// by a step-interpolated scale animation (scale 1 during its frame, 0 otherwise) at
-/// `fps` frames per second.
-pub(super) fn build_sequence(frames: &[TriMesh], fps: f32, normals: bool) -> Document<'_> {
+/// A sequence: one node per frame (fluid and spheres merged into one mesh), named
+/// `frame_N` after its frame number N, shown in turn by a step-interpolated scale
+/// animation (scale 1 during its frame, 0 otherwise): frame N from time (N − first)/`fps`
+/// seconds, so a gap in the numbering stays a gap. `frames` are in increasing order of
+/// their numbers.
+pub(super) fn build_sequence<'a>(
+    frames: &[&'a (i64, TriMesh)],
+    fps: f64,
+    normals: bool,
+) -> Document<'a> {
     let mut b = Builder::default();
     let mut meshes = Vec::new();
     let mut nodes = Vec::new();
     let mut vertices = 0;
     let n = frames.len();
-    for (i, mesh) in frames.iter().enumerate() {
-        let mut node = json!({"name": format!("frame_{i}"), "scale": if i == 0 { [1.0, 1.0, 1.0] } else { [0.0, 0.0, 0.0] }});
+    for (i, (number, mesh)) in frames.iter().copied().enumerate() {
+        let mut node = json!({"name": format!("frame_{number}"), "scale": if i == 0 { [1.0, 1.0, 1.0] } else { [0.0, 0.0, 0.0] }});
         if mesh.triangle_count() > 0 {
             let mut p = b.primitive(mesh, normals);
             b.attributes(&mut p, &mesh.attributes, 1, mesh.vertex_count());
-            meshes.push(json!({"name": format!("frame_{i}"), "primitives": [p]}));
+            meshes.push(json!({"name": format!("frame_{number}"), "primitives": [p]}));
             node["mesh"] = json!(meshes.len() - 1);
             vertices += mesh.vertex_count();
         }
         nodes.push(node);
     }
     // Shared key times, then one scale track per node.
-    let mut times = Vec::with_capacity(n * 4);
-    for k in 0..n {
-        times.extend_from_slice(&(k as f32 / fps).to_le_bytes());
-    }
+    let first = frames.first().map_or(0, |(number, _)| *number);
+    let key_times: Vec<f32> = frames
+        .iter()
+        .map(|(number, _)| ((number - first) as f64 / fps) as f32)
+        .collect();
+    let times = key_times.iter().flat_map(|t| t.to_le_bytes()).collect();
     let view = b.push_view(Payload::Bytes(times), None);
     let input = b.push_accessor(json!({
         "bufferView": view, "componentType": FLOAT, "count": n, "type": "SCALAR",
-        "min": [0.0], "max": [(n.saturating_sub(1)) as f32 / fps]
+        "min": [0.0], "max": [key_times.last().copied().unwrap_or(0.0)]
     }));
     let mut samplers = Vec::with_capacity(n);
     let mut channels = Vec::with_capacity(n);

@@ -158,14 +158,17 @@ pub struct MeshWriteStats {
     pub dropped_attributes: Vec<String>,
 }
 
-/// Writes a whole sequence as one glTF (`.glb` or `.gltf`), atomically: one node per frame
-/// (fluid and spheres merged), shown in turn by a step-interpolated scale animation at
-/// `fps` frames per second, which Blender and three.js play back. Every frame is held in
-/// memory; for long sequences prefer a `.mseq` archive.
+/// Writes a whole sequence, `(frame number, mesh)` in any order of the numbers, as one
+/// glTF (`.glb` or `.gltf`), atomically: one node per frame named `frame_N` (fluid and
+/// spheres merged), shown in turn by a step-interpolated scale animation at `fps` frames
+/// per second, frame N from time (N − first)/`fps` (a gap in the numbering stays a gap),
+/// which Blender and three.js play back. A number given twice fails with
+/// [`Error::FramesExist`]. Every frame is held in memory; for long sequences prefer a USD
+/// stage ([`crate::io::usd`]) or a `.mseq` archive.
 pub fn write_sequence_gltf(
     path: &Path,
-    frames: &[TriMesh],
-    fps: f32,
+    frames: &[(i64, TriMesh)],
+    fps: f64,
     options: &MeshWriteOptions,
 ) -> Result<MeshWriteStats> {
     let format = match options.format {
@@ -178,12 +181,27 @@ pub fn write_sequence_gltf(
             message: "a sequence in one file needs .glb, .gltf or .mseq; use a {} pattern for one file per frame".into(),
         });
     }
+    let mut ordered: Vec<&(i64, TriMesh)> = frames.iter().collect();
+    ordered.sort_by_key(|(number, _)| *number);
+    if let Some(pair) = ordered.windows(2).find(|w| w[0].0 == w[1].0) {
+        return Err(Error::FramesExist {
+            path: path.to_path_buf(),
+            frames: vec![pair[0].0],
+            planned: frames.len(),
+        });
+    }
+    if !(fps.is_finite() && fps > 0.0) {
+        return Err(Error::InvalidOption {
+            option: "fps",
+            message: format!("{fps} is not a positive finite number"),
+        });
+    }
     columns::check_frames(path, frames)?;
-    let doc = gltf::build_sequence(frames, fps, options.normals);
+    let doc = gltf::build_sequence(&ordered, fps, options.normals);
     Ok(MeshWriteStats {
         bytes: write_document(path, &doc, format)?,
         vertices: doc.vertices,
-        triangles: frames.iter().map(|f| f.triangle_count()).sum(),
+        triangles: frames.iter().map(|(_, f)| f.triangle_count()).sum(),
         dropped_attributes: Vec::new(),
     })
 }

@@ -19,7 +19,9 @@ pub(super) const OUTPUT: Output = Output {
         normals: true,
         animated: false,
         written_whole: false,
+        stage_metadata: false,
     },
+    per_frame: false,
     open: super::open::<FileSink>,
 };
 

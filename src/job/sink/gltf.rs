@@ -1,6 +1,7 @@
 //! The frames of a `{}` sequence in one animated `.glb`/`.gltf`: collected (fluid and
 //! spheres merged) and written whole, atomically, by [`write_sequence_gltf`] when the run
-//! finishes with at least one frame done.
+//! finishes with at least one frame done; a node per frame named after its number, shown
+//! from (number − first)/fps seconds.
 
 use super::{Appended, FrameSink, Output, OutputProfile};
 use crate::error::Result;
@@ -20,20 +21,25 @@ pub(super) const OUTPUT: Output = Output {
         normals: true,
         animated: true,
         written_whole: true,
+        stage_metadata: false,
     },
+    per_frame: false,
     open: super::open::<AnimatedGltfSink>,
 };
 
 /// Collects the frames of an animated glTF.
 pub(crate) struct AnimatedGltfSink {
     path: PathBuf,
-    frames: Vec<TriMesh>,
-    fps: f32,
+    /// (frame number, fluid and spheres merged).
+    frames: Vec<(i64, TriMesh)>,
+    fps: f64,
     write: MeshWriteOptions,
 }
 
 impl FrameSink for AnimatedGltfSink {
+    /// Frames of one number (`f_7`, `f_07`) are refused before any work.
     fn open(plan: &[(Frame, PathBuf)], _: &ReconstructOptions, job: &JobOptions) -> Result<Self> {
+        super::check_distinct_numbers(plan)?;
         Ok(AnimatedGltfSink {
             path: plan.first().map(|(_, out)| out.clone()).unwrap_or_default(),
             frames: Vec::new(),
@@ -49,12 +55,12 @@ impl FrameSink for AnimatedGltfSink {
 
     fn append(
         &mut self,
-        _: &Frame,
+        frame: &Frame,
         _: &Path,
         surface: &Surface,
         _: &mut ReconstructionStats,
     ) -> Result<Appended> {
-        self.frames.push(surface.merged());
+        self.frames.push((frame.number, surface.merged()));
         Ok(Appended::default())
     }
 

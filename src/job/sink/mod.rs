@@ -10,18 +10,24 @@
 //! * [`mseq`]: every frame appended to one `.mseq` archive ([`crate::archive::ArchiveWriter`]),
 //!   new or existing; it stores the control mesh (subdivision deferred to its decoder) and is
 //!   finished with the frames done when a frame fails.
+//! * [`usd`]: every frame appended to one USD stage (`.usdc`, `.usda`, `.usd`) as it
+//!   comes, finished with the frames done when a frame fails; with `{}` in its name, a
+//!   stage per frame.
 //!
 //! A new format that holds a whole sequence in one file is a new file here implementing
 //! [`FrameSink`] and defining its [`Output`] (extensions, [`OutputProfile`], opener), plus
 //! its line in [`SEQUENCES`]. `.mseq` is not a mesh format: a single input file goes into
-//! it too, and a `{}` in its name is refused. `.glb`/`.gltf` are mesh formats: only the
-//! frames of a `{}` pattern written into one path of that extension go to its sink; a
-//! single file, or a `{}` output, is a file per frame. The same rule holds for a new
-//! format by whether [`MeshFormat`] knows its extension.
+//! it too, and a `{}` in its name is refused. A USD stage is not a mesh format either, but
+//! its sink takes a `{}` name too ([`Output::per_frame`]): a stage per frame.
+//! `.glb`/`.gltf` are mesh formats: only the frames of a `{}` pattern written into one
+//! path of that extension go to its sink; a single file, or a `{}` output, is a file per
+//! frame. The same rule holds for a new format by whether [`MeshFormat`] knows its
+//! extension.
 
 mod files;
 mod gltf;
 mod mseq;
+mod usd;
 
 use super::JobOptions;
 use crate::error::{Error, Result};
@@ -111,6 +117,9 @@ pub struct OutputProfile {
     /// It is written whole at the end: no frame of it exists before (nothing for
     /// [`JobOptions::skip_existing`] to skip).
     pub written_whole: bool,
+    /// It records [`JobOptions::up_axis`] and [`JobOptions::meters_per_unit`] (a USD
+    /// stage's `upAxis` and `metersPerUnit`).
+    pub stage_metadata: bool,
 }
 
 /// One kind of output: its file extensions, what it makes of the job's options, and its
@@ -123,6 +132,9 @@ pub(crate) struct Output {
     noun: &'static str,
     /// What it makes of the job's options.
     profile: OutputProfile,
+    /// A `{}` in the output's name is a file of this kind per frame, written by its sink
+    /// too; otherwise such a name is refused.
+    per_frame: bool,
     /// Opens its sink ([`FrameSink::open`]).
     pub(crate) open: Opener,
 }
@@ -142,7 +154,7 @@ fn open<S: FrameSink + 'static>(
 
 /// The outputs that hold a whole sequence in one file, found by extension (the order
 /// messages list them in). A new sequence format is a line here and its sink's file.
-const SEQUENCES: [&Output; 2] = [&mseq::OUTPUT, &gltf::OUTPUT];
+const SEQUENCES: [&Output; 3] = [&mseq::OUTPUT, &gltf::OUTPUT, &usd::OUTPUT];
 
 /// The kind of output that holds a whole sequence in one file of `path`'s extension.
 fn sequence_output(path: &Path) -> Option<&'static Output> {
@@ -162,8 +174,8 @@ fn is_mesh_file(path: &Path) -> bool {
 
 /// The kind of output of `plan`: the one place that tells the kinds apart. An extension
 /// that only a sequence output knows takes every plan (its sink refuses what it cannot
-/// take); one a mesh writer knows takes the frames of a `{}` pattern written into one
-/// path; anything else is a file per frame.
+/// take, or writes a file per frame: [`Output::per_frame`]); one a mesh writer knows takes
+/// the frames of a `{}` pattern written into one path; anything else is a file per frame.
 pub(crate) fn choose(plan: &[(Frame, PathBuf)]) -> &'static Output {
     let Some((first, out)) = plan.first() else {
         return &files::OUTPUT;
@@ -192,7 +204,7 @@ pub fn check_outputs(plan: &[(Frame, PathBuf)]) -> Result<()> {
             return Err(Error::UnsupportedFormat {
                 path: out.clone(),
                 message: format!(
-                    "unknown output extension {:?}; supported: .glb, .gltf, .ply, .obj, .vtk, .mseq (archive)",
+                    "unknown output extension {:?}; supported: .glb, .gltf, .ply, .obj, .vtk, .usdc, .usda, .usd (USD stage), .mseq (archive)",
                     out.extension().unwrap_or_default().to_string_lossy()
                 ),
             });
@@ -204,14 +216,39 @@ pub fn check_outputs(plan: &[(Frame, PathBuf)]) -> Result<()> {
 /// Refuses a `{}` pattern `output` that names a file only a whole sequence goes into.
 pub(crate) fn check_pattern_output(output: &str) -> Result<()> {
     match sequence_output(Path::new(output)) {
-        Some(kind) if !is_mesh_file(Path::new(output)) => Err(Error::InvalidOption {
-            option: "output",
+        Some(kind) if !is_mesh_file(Path::new(output)) && !kind.per_frame => {
+            Err(Error::InvalidOption {
+                option: "output",
+                message: format!(
+                    "{output:?}: one .{} {} holds the whole sequence; name it without {{}}",
+                    kind.extensions[0], kind.noun
+                ),
+            })
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Refuses a plan whose frames go into one file and share a number (`f_7` and `f_07`):
+/// one file holds a frame per number.
+fn check_distinct_numbers(plan: &[(Frame, PathBuf)]) -> Result<()> {
+    let mut numbers: Vec<(i64, &Path)> = plan
+        .iter()
+        .map(|(f, _)| (f.number, f.input.as_path()))
+        .collect();
+    numbers.sort();
+    match numbers.windows(2).find(|w| w[0].0 == w[1].0) {
+        Some(pair) => Err(Error::InvalidOption {
+            option: "input",
             message: format!(
-                "{output:?}: one .{} {} holds the whole sequence; name it without {{}}",
-                kind.extensions[0], kind.noun
+                "{} and {} are both frame {}, and {} holds one frame per number",
+                pair[0].1.display(),
+                pair[1].1.display(),
+                pair[0].0,
+                plan[0].1.display()
             ),
         }),
-        _ => Ok(()),
+        None => Ok(()),
     }
 }
 
@@ -220,8 +257,8 @@ pub(crate) fn holds_a_sequence(output: &Path) -> bool {
     sequence_output(output).is_some()
 }
 
-/// The extensions of the outputs that hold a whole sequence, for messages: `.mseq, .glb or
-/// .gltf`.
+/// The extensions of the outputs that hold a whole sequence, for messages: `.mseq, .glb,
+/// .gltf, .usdc, .usda or .usd`.
 pub(crate) fn sequence_extensions() -> String {
     let all: Vec<String> = SEQUENCES
         .iter()

@@ -27,7 +27,9 @@ pub(super) const OUTPUT: Output = Output {
         normals: false,
         animated: false,
         written_whole: false,
+        stage_metadata: false,
     },
+    per_frame: false,
     open: super::open::<ArchiveSink>,
 };
 
