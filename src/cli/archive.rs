@@ -45,6 +45,16 @@ pub(crate) enum ArchiveCommand {
         #[arg(short, long)]
         output: PathBuf,
     },
+    /// Rewrite a damaged or unfinished archive with every frame that can be read: damaged
+    /// records skipped, a cut-off end cut, the index rebuilt; lists what it dropped.
+    Repair {
+        /// The archive.
+        file: PathBuf,
+        /// The repaired archive (a new file); by default FILE itself, replaced whole
+        /// under a temporary name.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+    },
     /// Pack existing mesh files (`{}` pattern; PLY, OBJ, glTF) into an archive.
     Pack {
         /// Mesh files, a pattern with `{}` for the frame number.
@@ -79,6 +89,7 @@ pub(crate) fn archive(
             output,
         } => extract(&file, frame, &output, cancel),
         ArchiveCommand::Merge { inputs, output } => merge(&inputs, &output),
+        ArchiveCommand::Repair { file, output } => repair(&file, output.as_deref()),
         ArchiveCommand::Pack {
             input,
             output,
@@ -188,10 +199,11 @@ fn verify(file: &Path) -> Result<(), Failure> {
     );
     if !v.is_clean() {
         return Err(Failure::Run(format!(
-            "{}: damaged: {} damaged frame(s), {} other problem(s)",
+            "{}: damaged: {} damaged frame(s), {} other problem(s)\nhint: {}",
             file.display(),
             v.damaged.len(),
-            v.damage.len()
+            v.damage.len(),
+            meniscus::archive::repair_advice(file)
         )));
     }
     Ok(())
@@ -227,6 +239,31 @@ fn merge(inputs: &[PathBuf], output: &Path) -> Result<(), Failure> {
         stats.inputs,
         output.display(),
         stats.bytes
+    );
+    Ok(())
+}
+
+/// `archive repair`: `file` rewritten with its readable frames, to `output` or itself.
+fn repair(file: &Path, output: Option<&Path>) -> Result<(), Failure> {
+    let output = output.unwrap_or(file);
+    let report = meniscus::archive::repair(file, output)?;
+    for why in &report.dropped {
+        eprintln!("dropped {why}");
+    }
+    for n in &report.relengthed {
+        eprintln!("frame {n}: kept, the payload length in its record header corrected");
+    }
+    eprintln!(
+        "{} frame(s) kept, {} item(s) dropped{}: {} ({} bytes)",
+        report.kept.len(),
+        report.dropped.len(),
+        if report.index_was_missing {
+            ", index rebuilt (there was none)"
+        } else {
+            ", index rebuilt"
+        },
+        output.display(),
+        report.bytes
     );
     Ok(())
 }
