@@ -343,3 +343,118 @@ fn archive_repair_on_the_command_line() {
         .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
 }
+
+/// A structure-aware mutation of the finished archive `base` (records at `offsets`, each
+/// `lens[k]` bytes): header fields changed and re-checksummed (a lying length, frame
+/// number or count), records swapped, duplicated or cut short, the index removed or
+/// pointed elsewhere; sometimes two of them. Returns the bytes and what was done.
+fn mutate_structure(
+    rng: &mut support::Rng,
+    base: &[u8],
+    offsets: &[usize],
+    lens: &[usize],
+) -> (Vec<u8>, String) {
+    let records_end = index_offset(base);
+    let record = |k: usize| &base[offsets[k]..offsets[k] + lens[k]];
+    let k = rng.below(offsets.len());
+    let j = rng.below(offsets.len());
+    // Two different records, in file order.
+    let (lo, hi) = match (k.min(j), k.max(j)) {
+        (a, b) if a == b && b + 1 < offsets.len() => (a, b + 1),
+        (a, b) if a == b => (a - 1, b),
+        pair => pair,
+    };
+    let mut b = base.to_vec();
+    let what = match rng.below(7) {
+        0 => {
+            let len = payload_len(&b, offsets[k]) as i64;
+            let delta = rng.below(129) as i64 - 64;
+            set_payload_len(&mut b, offsets[k], (len + delta).max(0) as u64);
+            format!("record {k} length {delta:+}")
+        }
+        1 => {
+            // The frame number, the vertex or the triangle count.
+            let field = [4usize, 12, 16][rng.below(3)];
+            b[offsets[k] + field] = b[offsets[j] + field].wrapping_add(rng.below(2) as u8);
+            support::archive::reseal_header(&mut b, offsets[k]);
+            format!("record {k} field {field} from record {j}")
+        }
+        2 => {
+            let mut swapped = base[..offsets[lo]].to_vec();
+            swapped.extend_from_slice(record(hi));
+            swapped.extend_from_slice(&base[offsets[lo] + lens[lo]..offsets[hi]]);
+            swapped.extend_from_slice(record(lo));
+            swapped.extend_from_slice(&base[offsets[hi] + lens[hi]..]);
+            b = swapped;
+            format!("records {lo} and {hi} swapped")
+        }
+        3 => {
+            let at = offsets[j];
+            b.splice(at..at, record(k).iter().copied());
+            format!("record {k} copied before record {j}")
+        }
+        4 => {
+            let cut = offsets[k] + 1 + rng.below(lens[k] - 1);
+            b.drain(cut..offsets[k] + lens[k]);
+            format!("record {k} cut at {cut}")
+        }
+        5 => {
+            b.truncate(records_end);
+            "index removed".to_string()
+        }
+        _ => {
+            let n = b.len();
+            let to = offsets[k] as u64 + rng.below(64) as u64;
+            b[n - 16..n - 8].copy_from_slice(&to.to_le_bytes());
+            format!("index pointed at {to}")
+        }
+    };
+    if rng.below(4) == 0 && b.len() > records_end && b.ends_with(b"MSEQEND!") {
+        let n = b.len();
+        let index = u64::from_le_bytes(b[n - 16..n - 8].try_into().unwrap()) as usize;
+        b.truncate(index.min(n));
+        return (b, format!("{what}, then the index removed"));
+    }
+    (b, what)
+}
+
+#[test]
+fn structure_aware_mutations_never_make_a_readable_frame_unreadable() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.mseq");
+    let repaired = dir.path().join("repaired.mseq");
+    let merged = dir.path().join("merged.mseq");
+    let (base, offsets) = small_archive(&path, 4);
+    let lens: Vec<usize> = records(&path).iter().map(|r| r.1.len()).collect();
+    let mut rng = support::Rng(0x243f_6a88_85a3_08d3);
+    for round in 0..400 {
+        let (b, what) = mutate_structure(&mut rng, &base, &offsets, &lens);
+        let what = format!("round {round}: {what}");
+        std::fs::write(&path, &b).unwrap();
+        let before = readable(&path);
+        // Repair: every readable frame kept, the result clean.
+        let _ = std::fs::remove_file(&repaired);
+        match meniscus::archive::repair(&path, &repaired) {
+            Ok(report) => {
+                assert_still_readable(&repaired, &before, &what);
+                let v = ArchiveReader::open(&repaired).unwrap().verify();
+                assert!(v.is_clean() && v.good == report.kept, "{what}: {v:?}");
+            }
+            Err(e) => panic!("{what}: repair failed: {e}"),
+        }
+        // Merge: refused, or every readable frame in the output.
+        let _ = std::fs::remove_file(&merged);
+        if meniscus::archive::merge(std::slice::from_ref(&path), &merged).is_ok() {
+            assert_still_readable(&merged, &before, &format!("{what}, merged"));
+        }
+        // Append: refused with the file unchanged, or every readable frame still read.
+        match append_one(&path) {
+            Ok(()) => assert_still_readable(&path, &before, &format!("{what}, appended")),
+            Err(_) => assert_eq!(
+                std::fs::read(&path).unwrap(),
+                b,
+                "{what}: refused, unchanged"
+            ),
+        }
+    }
+}

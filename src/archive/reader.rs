@@ -467,10 +467,24 @@ impl ArchiveReader {
                     .damage
                     .iter()
                     .find(|d| d.frame == Some(number))
-                    .map_or("no such frame in the archive", |d| d.message.as_str());
+                    .map_or_else(|| self.absent_frame_message(), |d| d.message.clone());
                 archive_error(&self.path, Some(number), why)
             })?;
         self.decode(k)
+    }
+
+    /// Why a frame number is not in the archive: which frames are.
+    pub fn absent_frame_message(&self) -> String {
+        let mut held: Vec<i64> = self.frames.iter().map(|f| f.number).collect();
+        held.sort_unstable();
+        held.dedup();
+        match held.len() {
+            0 => "no such frame: the archive holds no frames".to_string(),
+            n => format!(
+                "no such frame in the archive; it holds {n} frame(s): {}",
+                crate::sequence::number_ranges(&held)
+            ),
+        }
     }
 
     fn decode(&self, k: usize) -> Result<Surface> {
@@ -618,10 +632,27 @@ impl ArchiveReader {
                     .map(|e| e.to_string())
             })
             .collect();
+        // A frame number held by several records reads as the first of them: damage,
+        // never listed as good.
+        let mut records: std::collections::HashMap<i64, usize> = Default::default();
+        for f in &self.frames {
+            *records.entry(f.number).or_default() += 1;
+        }
         for (f, outcome) in self.frames.iter().zip(outcomes) {
-            match outcome {
-                None => report.good.push(f.number),
-                Some(e) => report.damaged.push((f.number, e)),
+            match (outcome, records.get_mut(&f.number)) {
+                (_, Some(0)) => {}
+                (_, Some(n)) if *n > 1 => {
+                    report.damaged.push((
+                        f.number,
+                        format!(
+                            "{n} records of this frame number (the first at offset {}): the archive is damaged",
+                            f.offset
+                        ),
+                    ));
+                    *n = 0;
+                }
+                (None, _) => report.good.push(f.number),
+                (Some(e), _) => report.damaged.push((f.number, e)),
             }
         }
         for d in &self.damage {

@@ -40,8 +40,9 @@ struct Found {
 /// that decodes: the records are walked from the file header on (the index, when there is
 /// one, is not trusted for where they are); damaged records and bytes that hold no record
 /// are skipped, a cut-off record at the end is cut, a record whose length field lies but
-/// whose payload is intact is kept with its length corrected, a second record of a frame
-/// number is dropped (the first that decodes is kept), and a new index is written. The
+/// whose payload is intact is kept with its length corrected, of a frame number held by
+/// several records the one the archive reads now is kept when it decodes (else the first
+/// that does), and a new index is written. The
 /// kept records are copied byte for byte, in file order, so every readable frame decodes
 /// exactly as before. `output` is written whole under a temporary name and renamed into
 /// place: on any error nothing is changed. An `output` that exists and is not `input` is
@@ -151,10 +152,13 @@ fn recover(
     }
 }
 
-/// The records of `found` that decode, the first of each frame number; the others are
-/// described in `report.dropped`, the kept and relengthed frames listed in `report`.
+/// The records of `found` that decode, one per frame number: the record the archive
+/// reads for that number now (through its index, or the first the scan found) when it
+/// decodes, else the first that decodes. The others are described in `report.dropped`,
+/// the kept and relengthed frames listed in `report`.
 fn readable(reader: &ArchiveReader, found: Vec<Found>, report: &mut RepairReport) -> Vec<Found> {
     use rayon::prelude::*;
+    use std::collections::HashMap;
     let bytes = &reader.bytes;
     let outcomes: Vec<Option<String>> = found
         .par_iter()
@@ -166,21 +170,35 @@ fn readable(reader: &ArchiveReader, found: Vec<Found>, report: &mut RepairReport
                 .map(|e| e.to_string())
         })
         .collect();
-    let mut kept: Vec<Found> = Vec::with_capacity(found.len());
-    let mut first_at: std::collections::HashMap<i64, usize> = Default::default();
+    let mut read_now: HashMap<i64, usize> = HashMap::new();
+    for f in reader.frames.iter().rev() {
+        read_now.insert(f.number, f.offset as usize);
+    }
+    let mut chosen: HashMap<i64, usize> = HashMap::new();
+    for (f, outcome) in found.iter().zip(&outcomes) {
+        if outcome.is_some() {
+            continue;
+        }
+        let n = f.header.number;
+        if read_now.get(&n) == Some(&f.offset) {
+            chosen.insert(n, f.offset);
+        } else {
+            chosen.entry(n).or_insert(f.offset);
+        }
+    }
+    let mut kept: Vec<Found> = Vec::with_capacity(chosen.len());
     for (f, outcome) in found.into_iter().zip(outcomes) {
         let n = f.header.number;
         if let Some(why) = outcome {
             report
                 .dropped
                 .push(format!("frame {n} (record at offset {}): {why}", f.offset));
-        } else if let Some(first) = first_at.get(&n) {
+        } else if chosen.get(&n) != Some(&f.offset) {
             report.dropped.push(format!(
-                "frame {n} (record at offset {}): a second record of this frame (the one at offset {first} is kept)",
-                f.offset
+                "frame {n} (record at offset {}): a second record of this frame (the one at offset {} is kept)",
+                f.offset, chosen[&n]
             ));
         } else {
-            first_at.insert(n, f.offset);
             report.kept.push(n);
             if f.relengthed {
                 report.relengthed.push(n);

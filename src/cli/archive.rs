@@ -24,7 +24,8 @@ pub(crate) enum ArchiveCommand {
         /// The archive.
         file: PathBuf,
     },
-    /// Write one frame, or every frame, as .glb, .gltf, .ply, .obj or .vtk.
+    /// Write one frame, or every frame, as .glb, .gltf, .ply, .obj or .vtk (existing mesh
+    /// files are replaced, as `reconstruct` replaces them).
     Extract {
         /// The archive.
         file: PathBuf,
@@ -126,6 +127,22 @@ fn info(file: &Path) -> Result<(), Failure> {
             ""
         }
     );
+    // A quantization step no writer gives (NaN, zero, negative, infinite): damage.
+    let bad_steps: Vec<String> = r
+        .frames()
+        .iter()
+        .filter(|f| !(f.step.is_finite() && f.step > 0.0))
+        .map(|f| format!("frame {} (quantization step {})", f.number, f.step))
+        .collect();
+    if !bad_steps.is_empty() {
+        return Err(Failure::Run(format!(
+            "{}: damaged: {}: not a positive finite quantization step (`archive verify` lists \
+             every damaged frame)\nhint: {}",
+            file.display(),
+            bad_steps.join(", "),
+            meniscus::archive::repair_advice(file)
+        )));
+    }
     if let (Some(first), Some(last)) = (r.frames().first(), r.frames().last()) {
         println!(
             "frames {} .. {}, error bound {} (world units)",
@@ -216,6 +233,9 @@ fn extract(
     output: &str,
     cancel: &meniscus::CancelToken,
 ) -> Result<(), Failure> {
+    // A usage error (exit 2, as `reconstruct` gives it) before the archive is read.
+    meniscus::io::mesh::MeshFormat::from_path(Path::new(output))
+        .map_err(|e| Failure::Usage(e.to_string()))?;
     let r = ArchiveReader::open(file)?;
     let numbers = frame.map(|n| vec![n]);
     let written = r.extract(
