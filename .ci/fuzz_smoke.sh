@@ -14,7 +14,9 @@ if [ -z "$base" ]; then
     if git rev-parse --verify -q "$candidate" >/dev/null; then base=$candidate; break; fi
   done
 fi
-changed=$( { git diff --name-only "$base" -- src/io src/archive; git status --porcelain -- src/io src/archive | cut -c4-; } | sort -u)
+# Since the branch left the base (its merge base), committed or not.
+since=$(git merge-base "$base" HEAD)
+changed=$( { git diff --name-only "$since" -- src/io src/archive; git status --porcelain -- src/io src/archive | cut -c4-; } | sort -u)
 targets=()
 if [ "${FUZZ_ALL:-0}" = 1 ] || grep -q '^src/archive/' <<<"$changed"; then
   targets+=(archive archive_payload)
@@ -26,7 +28,7 @@ if [ "${FUZZ_ALL:-0}" = 1 ] || grep -Eq '^src/io/(mesh|[^/]*\.rs)' <<<"$changed"
   targets+=(mesh_ply mesh_obj mesh_gltf mesh_vtk)
 fi
 if [ ${#targets[@]} -eq 0 ]; then
-  echo "no change to src/io or src/archive since $base: no fuzzing"
+  echo "no change to src/io or src/archive since $base (${since:0:8}): no fuzzing"
   exit 0
 fi
 command -v cargo-fuzz >/dev/null || cargo install cargo-fuzz --locked
