@@ -19,7 +19,7 @@ use meniscus::job::{
 use meniscus::pipeline::ReconstructOptions;
 use meniscus::settings::{Decimation, ReconstructSettings};
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -302,7 +302,9 @@ fn flag(option: &str) -> String {
 
 fn main() -> ExitCode {
     meniscus::tune_allocator();
-    let matches = Cli::command().get_matches();
+    let matches = Cli::command()
+        .try_get_matches()
+        .unwrap_or_else(|e| exit_with_hint(e));
     let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     // A panic inside a library entry point comes back as an error that is printed once,
     // naming the input; the default hook would print it a first time (kept with
@@ -314,14 +316,19 @@ fn main() -> ExitCode {
         }
     }));
     // Ctrl-C: the first stops the run at the next tile or stage (temporary files are
-    // removed, no partial output is left); a second one exits at once.
+    // removed, no partial output is left); a second one exits at once, leaving the
+    // temporary files to the next run (which removes those of runs that are gone) and
+    // an archive being appended to without its index (the next append writes it).
     let cancel = meniscus::CancelToken::new();
     let handler = cancel.clone();
     let _ = ctrlc::set_handler(move || {
         if handler.cancel() {
             std::process::exit(130);
         }
-        eprintln!("\ninterrupted: stopping at the next tile or stage (Ctrl-C again to quit now)");
+        eprintln!(
+            "\ninterrupted: stopping at the next tile or stage (Ctrl-C again to quit now, \
+             leaving temporary files that the next run removes)"
+        );
     });
     let result = match cli.command {
         Command::Reconstruct(args) => {
@@ -337,6 +344,28 @@ fn main() -> ExitCode {
         return ExitCode::from(130);
     }
     report(result)
+}
+
+/// Prints a command-line error and exits; an extra argument that is an existing file (a
+/// shell glob the shell expanded) gets a hint at the `{}` pattern.
+fn exit_with_hint(e: clap::Error) -> ! {
+    use clap::error::{ContextKind, ContextValue, ErrorKind};
+    let extra = match e.get(ContextKind::InvalidArg) {
+        Some(ContextValue::String(arg)) if e.kind() == ErrorKind::UnknownArgument => {
+            Some(arg.clone())
+        }
+        _ => None,
+    };
+    let Some(extra) = extra.filter(|a| Path::new(a).is_file()) else {
+        e.exit()
+    };
+    let _ = e.print();
+    eprintln!(
+        "hint: {extra:?} is a file: did the shell expand a glob into several inputs? A sequence is \
+         one quoted pattern with {{}} where the frame number goes, e.g. {:?}",
+        meniscus::sequence::suggested_pattern(&extra)
+    );
+    std::process::exit(e.exit_code())
 }
 
 fn report(result: Result<(), Failure>) -> ExitCode {
@@ -579,7 +608,7 @@ fn run_with_progress(
                     )
                 });
             }
-            if !args.quiet && plan.len() == 1 {
+            if !args.quiet && plan.len() == 1 && report.error.is_none() && !report.skipped {
                 bar.suspend(|| eprint!("{}", report.reconstruction.table()));
             }
         },

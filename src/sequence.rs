@@ -36,6 +36,76 @@ pub fn substitute(pattern: &str, label: &str) -> PathBuf {
     PathBuf::from(pattern.replace(PLACEHOLDER, label))
 }
 
+/// `numbers` (increasing) as runs, for messages: `4-6, 9, 12-13`.
+pub fn number_ranges(numbers: &[i64]) -> String {
+    let mut runs: Vec<(i64, i64)> = Vec::new();
+    for &n in numbers {
+        match runs.last_mut() {
+            Some((_, last)) if *last + 1 == n => *last = n,
+            _ => runs.push((n, n)),
+        }
+    }
+    runs.iter()
+        .map(|&(a, b)| {
+            if a == b {
+                a.to_string()
+            } else {
+                format!("{a}-{b}")
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// A `{}` pattern for what a user gave instead of one (for hints): the run of `#`, `*` or
+/// `?` in the file name, else its last run of digits, replaced by `{}`; for a directory,
+/// that pattern of the first file in it (by name) whose name holds digits.
+pub fn suggested_pattern(input: &str) -> String {
+    let path = Path::new(input);
+    if path.is_dir() {
+        let mut names: Vec<String> = std::fs::read_dir(path)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .filter_map(|e| e.file_name().into_string().ok())
+            .filter(|n| n.bytes().any(|b| b.is_ascii_digit()))
+            .collect();
+        names.sort();
+        let name = names
+            .first()
+            .map_or_else(|| "frame_{}.xyz".to_string(), |n| name_pattern(n));
+        return path.join(name).display().to_string();
+    }
+    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or(input);
+    match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.join(name_pattern(name)).display().to_string(),
+        _ => name_pattern(name),
+    }
+}
+
+/// The file name `name` with its frame number (a run of `#`, `*`, `?`, else the last run
+/// of digits) replaced by `{}`; `_{}` before the extension when it has neither.
+fn name_pattern(name: &str) -> String {
+    let wild = |c: char| matches!(c, '#' | '*' | '?');
+    let digit = |c: char| c.is_ascii_digit();
+    let run = if let Some(start) = name.find(wild) {
+        let end = name[start..]
+            .find(|c| !wild(c))
+            .map_or(name.len(), |k| start + k);
+        Some((start, end))
+    } else {
+        name.rfind(digit).map(|last| {
+            let start = name[..last].rfind(|c| !digit(c)).map_or(0, |k| k + 1);
+            (start, last + 1)
+        })
+    };
+    match (run, name.rsplit_once('.')) {
+        (Some((start, end)), _) => format!("{}{{}}{}", &name[..start], &name[end..]),
+        (None, Some((stem, ext))) => format!("{stem}_{{}}.{ext}"),
+        (None, None) => format!("{name}_{{}}"),
+    }
+}
+
 /// The frames of an input pattern, in increasing frame order. With `start`/`end`
 /// (inclusive; both or either) the range is generated, and missing files are an error;
 /// without either, the directory is scanned. A pattern must contain exactly one `{}`, in
@@ -69,17 +139,13 @@ pub fn frames(pattern: &str, start: Option<i64>, end: Option<i64>) -> Result<Vec
                 message: format!("start {s} is after end {e}"),
             });
         }
+        let mut missing = Vec::new();
         for number in s..=e {
             let label = number.to_string();
             let input = substitute(pattern, &label);
             if !input.exists() {
-                return Err(Error::io(
-                    &input,
-                    std::io::Error::new(
-                        std::io::ErrorKind::NotFound,
-                        format!("frame {number} of the range {s}..={e} is missing"),
-                    ),
-                ));
+                missing.push((number, input));
+                continue;
             }
             found.push(Frame {
                 number,
@@ -87,7 +153,30 @@ pub fn frames(pattern: &str, start: Option<i64>, end: Option<i64>) -> Result<Vec
                 input,
             });
         }
-        return Ok(found);
+        return match missing.as_slice() {
+            [] => Ok(found),
+            [(number, input)] => Err(Error::io(
+                input,
+                std::io::Error::new(
+                    std::io::ErrorKind::NotFound,
+                    format!("frame {number} of the range {s}..={e} is missing"),
+                ),
+            )),
+            _ => {
+                let numbers: Vec<i64> = missing.iter().map(|m| m.0).collect();
+                Err(Error::io(
+                    pattern,
+                    std::io::Error::new(
+                        std::io::ErrorKind::NotFound,
+                        format!(
+                            "{} frames of the range {s}..={e} are missing: {}",
+                            numbers.len(),
+                            number_ranges(&numbers)
+                        ),
+                    ),
+                ))
+            }
+        };
     }
     let entries = std::fs::read_dir(&dir).map_err(|e| Error::io(&dir, e))?;
     for entry in entries {

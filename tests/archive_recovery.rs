@@ -10,7 +10,9 @@ use meniscus::isolated::icosphere;
 use meniscus::mesh::{SphereInstances, Surface, TriMesh};
 use meniscus::pipeline::ReconstructOptions;
 use std::path::Path;
-use support::archive::{archive_frame, decoded, frames, write_archive, BOUND};
+use support::archive::{
+    archive_frame, decoded, frames, index_offset, small_mesh, write_archive, BOUND,
+};
 
 #[test]
 fn truncation_and_bit_flips_are_detected() {
@@ -324,15 +326,6 @@ fn a_new_archive_is_written_only_when_its_first_frame_is() {
 // ---------------------------------------------------------------------------------------
 // Failures partway through appending: the archive stays consistent.
 
-/// A small mesh of its own per frame number.
-fn small_mesh(k: i64) -> TriMesh {
-    let mut m = icosphere(2, 1.0 + 0.1 * k as f32);
-    for p in &mut m.positions {
-        p.x += k as f32;
-    }
-    m
-}
-
 /// The archive verifies clean through its index and holds exactly `numbers`.
 fn assert_clean(path: &Path, numbers: &[i64]) {
     let r = ArchiveReader::open(path).unwrap();
@@ -340,12 +333,6 @@ fn assert_clean(path: &Path, numbers: &[i64]) {
     assert!(v.is_clean(), "{v:?}");
     assert!(!r.recovered_by_scan(), "the index was written");
     assert_eq!(v.good, numbers);
-}
-
-/// Where the index of a finished archive starts (from its trailer).
-fn index_offset(bytes: &[u8]) -> usize {
-    let n = bytes.len();
-    u64::from_le_bytes(bytes[n - 16..n - 8].try_into().unwrap()) as usize
 }
 
 static NO_SPHERES: std::sync::LazyLock<SphereInstances> =

@@ -383,6 +383,14 @@ fn new_user_errors_name_the_real_cause() {
     bytes[n / 2] ^= 0x55;
     std::fs::write(d.join("damaged.mseq"), &bytes).unwrap();
     let damaged = path("damaged.mseq");
+    // The archive with a NaN quantization step (its header re-checksummed).
+    let mut bytes = std::fs::read(&archive).unwrap();
+    bytes[16 + 20..16 + 28].copy_from_slice(&f64::NAN.to_le_bytes());
+    let crc = crc32fast::hash(&bytes[16..16 + 44]);
+    bytes[16 + 44..16 + 48].copy_from_slice(&crc.to_le_bytes());
+    std::fs::write(d.join("nan.mseq"), &bytes).unwrap();
+    let nan = path("nan.mseq");
+    let hashed = path("seq/f_#.xyz");
     let meshes = path("mesh_{}.ply");
     let packed = path("packed.mseq");
     let anim = path("anim.glb");
@@ -400,14 +408,63 @@ fn new_user_errors_name_the_real_cause() {
         (
             vec!["reconstruct", &folder, "-o", &out],
             1,
-            vec!["frames.xyz", "is a directory"],
+            vec![
+                "frames.xyz",
+                "is a directory",
+                "a sequence is one pattern with {} where the frame number goes",
+            ],
             vec!["byte offset", "invalid option"],
         ),
+        // A sequence written as a directory, a `#` pattern or a glob: the `{}` pattern.
+        (
+            vec!["reconstruct", &folder, "-o", "o_{}.ply"],
+            2,
+            vec!["frames.xyz", "a sequence is one pattern with {}"],
+            vec!["os error"],
+        ),
+        (
+            vec!["reconstruct", &hashed, "-o", &out],
+            1,
+            vec!["f_#.xyz", "no such file", "e.g. \"", "seq/f_{}.xyz\""],
+            vec!["os error", "invalid option"],
+        ),
+        (
+            vec!["reconstruct", sphere, &junk, "-o", &out],
+            2,
+            vec![
+                "junk.xyz",
+                "did the shell expand a glob",
+                "quoted pattern with {}",
+            ],
+            vec![],
+        ),
+        // Every missing frame of a range is named.
+        (
+            vec![
+                "reconstruct",
+                &seq,
+                "--start",
+                "1",
+                "--end",
+                "4",
+                "-o",
+                "o_{}.ply",
+            ],
+            1,
+            vec!["3 frames of the range 1..=4 are missing: 2-4"],
+            vec!["invalid option"],
+        ),
+        // An input error prints no (empty) stage table before the message.
         (
             vec!["reconstruct", &junk, "-o", &out],
             1,
             vec!["junk.xyz", "looks like text"],
-            vec!["invalid option", "--particle-radius", "--input-format"],
+            vec![
+                "invalid option",
+                "--particle-radius",
+                "--input-format",
+                "time [ms]",
+            ],
         ),
         (
             vec!["reconstruct", &huge, "-r", "0.025", "-o", &out],
@@ -441,8 +498,31 @@ fn new_user_errors_name_the_real_cause() {
         (
             vec!["archive", "verify", &damaged],
             1,
-            vec!["damaged.mseq", "damaged"],
+            vec!["damaged.mseq", "damaged", "meniscus archive repair"],
             vec!["invalid option"],
+        ),
+        (
+            vec!["archive", "info", &nan],
+            1,
+            vec![
+                "nan.mseq",
+                "quantization step NaN",
+                "meniscus archive repair",
+            ],
+            vec!["error bound NaN"],
+        ),
+        // An unknown output extension is a usage error here too, before any reading.
+        (
+            vec!["archive", "extract", &damaged, "-o", "x_{}.foo"],
+            2,
+            vec!["x_{}.foo", "unknown mesh file extension"],
+            vec![],
+        ),
+        (
+            vec!["archive", "extract", &archive, "--frame", "6", "-o", &out],
+            1,
+            vec!["frame 6", "it holds 1 frame(s): 0"],
+            vec![],
         ),
         (
             vec![

@@ -62,8 +62,21 @@ impl Archive {
     /// The mesh of frame `frame` (decoded, with normals); KeyError when not held.
     fn __getitem__(&self, py: Python<'_>, frame: i64) -> PyResult<Mesh> {
         let reader = self.reader(py)?;
-        let Some(reader) = reader.filter(|r| r.frames().iter().any(|f| f.number == frame)) else {
-            return Err(PyKeyError::new_err(frame));
+        let reader = match reader {
+            Some(r) if r.frames().iter().any(|f| f.number == frame) => r,
+            Some(r) => {
+                return Err(PyKeyError::new_err(format!(
+                    "frame {frame}: {} ({})",
+                    r.absent_frame_message(),
+                    self.path.display()
+                )))
+            }
+            None => {
+                return Err(PyKeyError::new_err(format!(
+                    "frame {frame}: {} does not exist yet (the first append creates it)",
+                    self.path.display()
+                )))
+            }
         };
         let surface = run_interruptible(py, |_| reader.read_surface(frame))?;
         Ok(Mesh::decoded(surface))

@@ -102,7 +102,7 @@ def test_archive_append_read_verify(frame25, tmp_path):
     assert report["clean"] and report["good"] == [25, 31]
     with pytest.raises(FileExistsError):
         archive.append(25, meshes[25])
-    with pytest.raises(KeyError):
+    with pytest.raises(KeyError, match=r"frame 7: .*it holds 2 frame\(s\): 25, 31"):
         archive[7]
     # A frame read back is appended with the archive's bound; a new archive needs one.
     archive.append(40, archive[25])

@@ -49,6 +49,15 @@ pub(crate) fn archive_error(path: &Path, frame: Option<i64>, message: impl Into<
     Error::parse(path, location, message)
 }
 
+/// What to do with a damaged or unfinished archive at `path` (appending, merging and
+/// verifying it say so).
+pub fn repair_advice(path: &Path) -> String {
+    format!(
+        "`meniscus archive repair {}` keeps every readable frame and rebuilds the index",
+        path.display()
+    )
+}
+
 /// The file header of an archive of format `version`.
 pub(crate) fn file_header(version: u32) -> [u8; HEADER_LEN as usize] {
     let mut header = [0u8; HEADER_LEN as usize];
@@ -108,7 +117,7 @@ impl RecordHeader {
 }
 
 /// A complete record (valid header, payload within `limit`) at `pos`: its header and end.
-fn record_at(bytes: &[u8], pos: usize, limit: usize) -> Option<(RecordHeader, usize)> {
+pub(crate) fn record_at(bytes: &[u8], pos: usize, limit: usize) -> Option<(RecordHeader, usize)> {
     let header_end = pos.checked_add(RECORD_HEADER_LEN)?;
     if header_end > limit {
         return None;
@@ -116,6 +125,80 @@ fn record_at(bytes: &[u8], pos: usize, limit: usize) -> Option<(RecordHeader, us
     let h = RecordHeader::parse(bytes.get(pos..header_end)?)?;
     let end = header_end.checked_add(usize::try_from(h.payload_len).ok()?)?;
     (end <= limit).then_some((h, end))
+}
+
+/// True when a record may end at `pos` of `bytes[..limit]`: the end itself, a record
+/// header whose checksum holds (its payload complete or not), or the start of a record or
+/// an index that a write cut off.
+fn is_boundary(bytes: &[u8], pos: usize, limit: usize) -> bool {
+    let Some(rest) = bytes.get(pos..limit) else {
+        return false;
+    };
+    rest.is_empty()
+        || rest
+            .get(..RECORD_HEADER_LEN)
+            .and_then(RecordHeader::parse)
+            .is_some()
+        || is_cut_off_record_or_index(rest)
+}
+
+/// True when the payload `bytes[pos + RECORD_HEADER_LEN..end]` of the record at `pos`
+/// has the checksum its header `h` gives.
+fn payload_holds(bytes: &[u8], pos: usize, h: &RecordHeader, end: usize) -> bool {
+    crc32fast::hash(&bytes[pos + RECORD_HEADER_LEN..end]) == h.payload_crc
+}
+
+/// The complete record at `pos` when its length can be trusted: it ends where a record
+/// may end ([`is_boundary`]; then a checksum mismatch is damage to the payload, reported
+/// by frame), or its payload has its checksum. A record whose length field lies
+/// (re-checksummed header) ends inside the bytes of what follows and its payload fails
+/// its checksum: not taken, so that the walk finds what follows. `crc_budget` bounds the
+/// bytes checksummed for this (a crafted file of many such headers would otherwise take
+/// quadratic time); once spent, such a record is not taken.
+fn trusted_record_at(
+    bytes: &[u8],
+    pos: usize,
+    limit: usize,
+    crc_budget: &mut usize,
+) -> Option<(RecordHeader, usize)> {
+    let (h, end) = record_at(bytes, pos, limit)?;
+    if is_boundary(bytes, end, limit) {
+        return Some((h, end));
+    }
+    let len = end - pos - RECORD_HEADER_LEN;
+    if len > *crc_budget {
+        return None;
+    }
+    *crc_budget -= len;
+    payload_holds(bytes, pos, &h, end).then_some((h, end))
+}
+
+/// The true end of the payload of the record at `pos` whose header `h` parses but whose
+/// length field is wrong: the first place after its header where a record or an index
+/// may start (a record header whose checksum holds, `INDX`, or `limit`), when the bytes
+/// up to there have the payload's checksum and are not empty (a writer's payload never
+/// is). `None` otherwise (the payload itself is damaged or cut off). One checksum, over
+/// the bytes up to that place.
+pub(crate) fn true_payload_end(
+    bytes: &[u8],
+    pos: usize,
+    h: &RecordHeader,
+    limit: usize,
+) -> Option<usize> {
+    let start = pos.checked_add(RECORD_HEADER_LEN)?;
+    let region = bytes.get(start..limit)?;
+    let end = (0..region.len())
+        .find(|&k| {
+            let rest = &region[k..];
+            rest.starts_with(INDEX_MAGIC)
+                || (rest.starts_with(RECORD_MAGIC)
+                    && rest
+                        .get(..RECORD_HEADER_LEN)
+                        .and_then(RecordHeader::parse)
+                        .is_some())
+        })
+        .unwrap_or(region.len());
+    (end > 0 && crc32fast::hash(&region[..end]) == h.payload_crc).then_some(start + end)
 }
 
 /// A stretch of the records, as [`scan_records`] finds it.
@@ -137,26 +220,41 @@ impl Span {
 
 /// Walks the records in `HEADER_LEN..limit`. Past bytes that are not a complete record
 /// it resynchronises at the next record magic whose header checksum holds and whose
-/// payload is complete, so one damaged record costs only its own frame. The position
-/// only ever moves forward.
+/// payload is complete, so one damaged record costs only its own frame. A record whose
+/// length does not end where a record may end and whose payload fails its checksum is not
+/// followed (its length field is damaged: [`trusted_record_at`]). The position only ever
+/// moves forward.
 pub(crate) fn scan_records(bytes: &[u8], limit: usize) -> Vec<Span> {
     let mut spans = Vec::new();
     let mut pos = HEADER_LEN as usize;
+    let mut crc_budget = 2 * limit + (1 << 20);
     while pos < limit {
-        if let Some((h, end)) = record_at(bytes, pos, limit) {
+        if let Some((h, end)) = trusted_record_at(bytes, pos, limit, &mut crc_budget) {
             spans.push(Span::Record(pos, h));
             pos = end;
             continue;
         }
         let next = (pos + 1..limit)
             .find(|&p| {
-                bytes[p..limit].starts_with(RECORD_MAGIC) && record_at(bytes, p, limit).is_some()
+                bytes[p..limit].starts_with(RECORD_MAGIC)
+                    && trusted_record_at(bytes, p, limit, &mut crc_budget).is_some()
             })
             .unwrap_or(limit);
         spans.push(Span::Damaged(pos, next));
         pos = next;
     }
     spans
+}
+
+/// Where a walk of the records ([`scan_records`] up to `limit`) says they end: the end of
+/// its last span when that is a complete record; else the start of the damaged span at
+/// the end, where the walk cannot tell.
+pub(crate) fn walk_end(spans: &[Span]) -> usize {
+    match spans.last() {
+        None => HEADER_LEN as usize,
+        Some(Span::Damaged(p, _)) => *p,
+        Some(Span::Record(p, h)) => p + RECORD_HEADER_LEN + h.payload_len as usize,
+    }
 }
 
 /// What a damaged record header at `pos` claims, for messages.

@@ -1,7 +1,8 @@
 //! `archive merge`: several archives joined into one without re-encoding.
 
 use super::container::{
-    archive_error, file_header, index_bytes, RecordHeader, HEADER_LEN, RECORD_HEADER_LEN, VERSION,
+    archive_error, file_header, index_bytes, repair_advice, RecordHeader, HEADER_LEN,
+    RECORD_HEADER_LEN, VERSION,
 };
 use super::reader::ArchiveReader;
 use crate::error::{Error, Result};
@@ -65,7 +66,7 @@ pub fn merge(inputs: &[PathBuf], output: &Path) -> Result<MergeStats> {
 }
 
 /// Refuses no inputs, and an `output` that exists and is none of them.
-fn check_output(inputs: &[PathBuf], output: &Path) -> Result<()> {
+pub(super) fn check_output(inputs: &[PathBuf], output: &Path) -> Result<()> {
     if inputs.is_empty() {
         return Err(Error::io(
             output,
@@ -104,8 +105,9 @@ fn plan(inputs: &[PathBuf]) -> Result<(Vec<Entry>, u32)> {
                 path,
                 d.frame,
                 format!(
-                    "refusing to merge a damaged or unfinished archive: {}",
-                    d.message
+                    "refusing to merge a damaged or unfinished archive: {}; {}",
+                    d.message,
+                    repair_advice(path)
                 ),
             ));
         }

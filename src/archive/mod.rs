@@ -49,17 +49,19 @@ mod merge;
 mod options;
 mod parts;
 mod reader;
+mod repair;
 mod to_usd;
 mod writer;
 
 pub use attributes::{AttributeInfo, AttributeTarget};
-pub use container::MAX_SUBDIVISION_LEVELS;
+pub use container::{repair_advice, MAX_SUBDIVISION_LEVELS};
 pub use frame::ArchiveFrame;
 pub use merge::{merge, MergeStats};
 pub use options::{
     default_error_bound, ArchiveOptions, DEFAULT_ATTRIBUTE_ERROR_BOUND, DEFAULT_ERROR_BOUND_RADII,
 };
 pub use reader::{ArchiveReader, FrameInfo, VerifyReport};
+pub use repair::{repair, RepairReport};
 pub use writer::ArchiveWriter;
 
 #[cfg(test)]

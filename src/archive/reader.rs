@@ -6,7 +6,8 @@ use super::attributes::{self, AttributeInfo};
 use super::codec;
 use super::container::{
     archive_error, claimed_frame, is_cut_off_record_or_index, read_index, scan_records,
-    RecordHeader, Span, ATTRIBUTES_VERSION, HEADER_LEN, MAGIC, MAX_STEP, RECORD_HEADER_LEN,
+    true_payload_end, walk_end, RecordHeader, Span, ATTRIBUTES_VERSION, HEADER_LEN, MAGIC,
+    MAX_STEP, RECORD_HEADER_LEN,
 };
 use super::frame;
 use crate::error::{Error, Result};
@@ -39,7 +40,7 @@ pub struct FrameInfo {
 }
 
 impl FrameInfo {
-    fn of(h: &RecordHeader, offset: usize, bytes: &[u8]) -> FrameInfo {
+    pub(super) fn of(h: &RecordHeader, offset: usize, bytes: &[u8]) -> FrameInfo {
         let descriptor = (h.flags & attributes::HAS_ATTRIBUTES != 0)
             .then(|| bytes.get(offset + RECORD_HEADER_LEN..))
             .flatten()
@@ -144,7 +145,7 @@ fn check_decoded(s: Surface) -> std::result::Result<Surface, String> {
 pub struct ArchiveReader {
     pub(super) path: PathBuf,
     pub(super) version: u32,
-    bytes: Vec<u8>,
+    pub(super) bytes: Vec<u8>,
     pub(super) frames: Vec<FrameInfo>,
     /// Payload CRCs and record flags, parallel to `frames`.
     crcs: Vec<u32>,
@@ -152,6 +153,9 @@ pub struct ArchiveReader {
     recovered_by_scan: bool,
     /// Where appending starts: the index offset, or the end of the last complete record.
     pub(super) data_end: u64,
+    /// Where a walk of the records before `data_end` says they end: equal
+    /// to `data_end` unless the last record's header is damaged or its length field lies.
+    pub(super) walk_end: u64,
     /// Damage found while opening (records, tail, index).
     pub(super) damage: Vec<Damage>,
 }
@@ -213,6 +217,7 @@ impl ArchiveReader {
             flags: Vec::new(),
             recovered_by_scan: false,
             data_end: HEADER_LEN,
+            walk_end: HEADER_LEN,
             damage: Vec::new(),
         };
         match read_index(&reader.bytes) {
@@ -264,9 +269,7 @@ impl ArchiveReader {
                             kind: DamageKind::Record,
                             frame: Some(number),
                             offset: Some(offset),
-                            message: format!(
-                                "record header at offset {offset} is damaged (checksum mismatch or cut off)"
-                            ),
+                            message: self.damaged_record_message(offset as usize),
                         }
                     } else {
                         Damage {
@@ -308,6 +311,25 @@ impl ArchiveReader {
             }
         }
         self.data_end = index_offset as u64;
+        self.walk_end = walk_end(&spans) as u64;
+    }
+
+    /// What is wrong with the record the index lists at `offset`, where the walk of the
+    /// records found no complete record.
+    fn damaged_record_message(&self, offset: usize) -> String {
+        let header = self
+            .bytes
+            .get(offset..offset + RECORD_HEADER_LEN)
+            .and_then(RecordHeader::parse);
+        match header {
+            Some(h) => format!(
+                "the record header at offset {offset} claims a payload of {} bytes, which does not end where the next record or the index starts (its length field is damaged)",
+                h.payload_len
+            ),
+            None => {
+                format!("record header at offset {offset} is damaged (checksum mismatch or cut off)")
+            }
+        }
     }
 
     /// Without an index: keeps every complete record, resynchronising past damaged ones.
@@ -329,6 +351,7 @@ impl ArchiveReader {
                 Span::Record(p, h) => {
                     self.push_frame(&h, p);
                     self.data_end = (p + RECORD_HEADER_LEN) as u64 + h.payload_len;
+                    self.walk_end = self.data_end;
                 }
                 Span::Damaged(p, end) if end < limit => self.damage.push(Damage {
                     kind: DamageKind::Record,
@@ -342,7 +365,21 @@ impl ArchiveReader {
                 Span::Damaged(p, _) => {
                     let tail = &self.bytes[p..];
                     let header = tail.get(..RECORD_HEADER_LEN).and_then(RecordHeader::parse);
-                    let (kind, frame, message) = if let Some(h) = header {
+                    let (kind, frame, message) = if let Some(h) = header
+                        .as_ref()
+                        .filter(|h| true_payload_end(&self.bytes, p, h, limit).is_some())
+                    {
+                        // Not cut off: the payload is all there, its length field lies.
+                        (
+                            DamageKind::Tail,
+                            Some(h.number),
+                            format!(
+                                "the record header at offset {p} claims a payload of {} bytes, but the {} bytes after it hold the payload its checksum gives (its length field is damaged)",
+                                h.payload_len,
+                                tail.len() - RECORD_HEADER_LEN
+                            ),
+                        )
+                    } else if let Some(h) = header {
                         (
                             DamageKind::CutTail,
                             Some(h.number),
@@ -430,14 +467,33 @@ impl ArchiveReader {
                     .damage
                     .iter()
                     .find(|d| d.frame == Some(number))
-                    .map_or("no such frame in the archive", |d| d.message.as_str());
+                    .map_or_else(|| self.absent_frame_message(), |d| d.message.clone());
                 archive_error(&self.path, Some(number), why)
             })?;
         self.decode(k)
     }
 
+    /// Why a frame number is not in the archive: which frames are.
+    pub fn absent_frame_message(&self) -> String {
+        let mut held: Vec<i64> = self.frames.iter().map(|f| f.number).collect();
+        held.sort_unstable();
+        held.dedup();
+        match held.len() {
+            0 => "no such frame: the archive holds no frames".to_string(),
+            n => format!(
+                "no such frame in the archive; it holds {n} frame(s): {}",
+                crate::sequence::number_ranges(&held)
+            ),
+        }
+    }
+
     fn decode(&self, k: usize) -> Result<Surface> {
-        let f = &self.frames[k];
+        self.decode_record(&self.frames[k], self.crcs[k], self.flags[k])
+    }
+
+    /// Decodes the record `f` describes, whose header gives the payload checksum `crc`
+    /// and `flags`.
+    pub(super) fn decode_record(&self, f: &FrameInfo, crc: u32, flags: u32) -> Result<Surface> {
         let start = f.offset as usize + RECORD_HEADER_LEN;
         let payload = usize::try_from(f.payload_bytes)
             .ok()
@@ -450,7 +506,7 @@ impl ArchiveReader {
                     "payload cut off (truncated archive)",
                 )
             })?;
-        if crc32fast::hash(payload) != self.crcs[k] {
+        if crc32fast::hash(payload) != crc {
             return Err(archive_error(
                 &self.path,
                 Some(f.number),
@@ -468,7 +524,6 @@ impl ArchiveReader {
             ));
         }
         let (vertices, triangles) = (f.vertices as usize, f.triangles as usize);
-        let flags = self.flags[k];
         match (self.version, flags) {
             (1, 0) => codec::decode_v1(payload, vertices, triangles, f.step).map(|fluid| Surface {
                 fluid,
@@ -577,10 +632,27 @@ impl ArchiveReader {
                     .map(|e| e.to_string())
             })
             .collect();
+        // A frame number held by several records reads as the first of them: damage,
+        // never listed as good.
+        let mut records: std::collections::HashMap<i64, usize> = Default::default();
+        for f in &self.frames {
+            *records.entry(f.number).or_default() += 1;
+        }
         for (f, outcome) in self.frames.iter().zip(outcomes) {
-            match outcome {
-                None => report.good.push(f.number),
-                Some(e) => report.damaged.push((f.number, e)),
+            match (outcome, records.get_mut(&f.number)) {
+                (_, Some(0)) => {}
+                (_, Some(n)) if *n > 1 => {
+                    report.damaged.push((
+                        f.number,
+                        format!(
+                            "{n} records of this frame number (the first at offset {}): the archive is damaged",
+                            f.offset
+                        ),
+                    ));
+                    *n = 0;
+                }
+                (None, _) => report.good.push(f.number),
+                (Some(e), _) => report.damaged.push((f.number, e)),
             }
         }
         for d in &self.damage {

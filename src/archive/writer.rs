@@ -5,8 +5,8 @@
 use super::attributes;
 use super::codec;
 use super::container::{
-    archive_error, file_header, index_bytes, RecordHeader, ATTRIBUTES_VERSION, HEADER_LEN,
-    MAX_SUBDIVISION_LEVELS, RECORD_HEADER_LEN, VERSION, VERSION_OFFSET,
+    archive_error, file_header, index_bytes, repair_advice, RecordHeader, ATTRIBUTES_VERSION,
+    HEADER_LEN, MAX_SUBDIVISION_LEVELS, RECORD_HEADER_LEN, VERSION, VERSION_OFFSET,
 };
 use super::frame::{self, ArchiveFrame};
 use super::options::ArchiveOptions;
@@ -94,7 +94,38 @@ impl ArchiveWriter {
     fn open_append_unguarded(path: &Path, options: &ArchiveOptions) -> Result<ArchiveWriter> {
         options.check()?;
         let reader = ArchiveReader::open(path)?;
-        check_appendable(path, &reader, options)?;
+        check_appendable(path, &reader)?;
+        check_error_bound(path, &reader, options)?;
+        Self::from_reader(path, reader, options)
+    }
+
+    /// Writes the index of the archive at `path` when it has none (a run killed between
+    /// its last record and its index, or an archive cut after a record): the index of
+    /// every complete frame, as an append would write it. Returns whether it wrote one.
+    /// Refused, changing nothing, when appending would be (a damaged archive).
+    pub fn finish_unindexed(path: &Path) -> Result<bool> {
+        let input = path.display().to_string();
+        crate::error::guard(
+            move || input,
+            || {
+                let reader = ArchiveReader::open(path)?;
+                if !reader.recovered_by_scan() {
+                    return Ok(false);
+                }
+                check_appendable(path, &reader)?;
+                let bound = reader.frames.first().map_or(1.0, |f| f.step / 2.0);
+                Self::from_reader(path, reader, &ArchiveOptions::new(bound))?.close()?;
+                Ok(true)
+            },
+        )
+    }
+
+    /// The writer appending to the archive `reader` read from `path`.
+    fn from_reader(
+        path: &Path,
+        reader: ArchiveReader,
+        options: &ArchiveOptions,
+    ) -> Result<ArchiveWriter> {
         let file = OpenOptions::new()
             .write(true)
             .open(path)
@@ -391,8 +422,8 @@ impl Drop for ArchiveWriter {
 }
 
 /// Refuses to append to the archive `reader` read from `path` when appending could lose
-/// or hide anything, or with another error bound than its frames'.
-fn check_appendable(path: &Path, reader: &ArchiveReader, options: &ArchiveOptions) -> Result<()> {
+/// or hide anything.
+fn check_appendable(path: &Path, reader: &ArchiveReader) -> Result<()> {
     let report = reader.verify();
     // A frame whose payload is damaged, an index that disagrees with the records, or
     // bytes at the end that appending would cut and that are not a cut-off record:
@@ -415,9 +446,17 @@ fn check_appendable(path: &Path, reader: &ArchiveReader, options: &ArchiveOption
         return Err(archive_error(
             path,
             n,
-            format!("refusing to append to a damaged archive: {why}"),
+            format!(
+                "refusing to append to a damaged archive: {why}; {}",
+                repair_advice(path)
+            ),
         ));
     }
+    check_records_end(path, reader)
+}
+
+/// Refuses to append frames of another error bound than the archive's frames'.
+fn check_error_bound(path: &Path, reader: &ArchiveReader, options: &ArchiveOptions) -> Result<()> {
     // One error bound for all frames: the archive lists one, and a frame quantized
     // more coarsely than the others would break what the archive promises.
     // Compared in world units, to a relative 1e-6: a bound given as text (`2.5e-4`)
@@ -437,6 +476,40 @@ fn check_appendable(path: &Path, reader: &ArchiveReader, options: &ArchiveOption
         ));
     }
     Ok(())
+}
+
+/// Refuses to append when the index and a walk of the records disagree about where the
+/// records end (the last record's header is damaged, or its length field claims more or
+/// fewer bytes than it has): a record written where the index says would start inside
+/// what the walk takes for that record, and readers following the record lengths would
+/// miss it and every frame after it.
+fn check_records_end(path: &Path, reader: &ArchiveReader) -> Result<()> {
+    if reader.walk_end == reader.data_end {
+        return Ok(());
+    }
+    let at = reader.walk_end;
+    let why = reader
+        .damage
+        .iter()
+        .find(|d| d.offset == Some(at))
+        .map_or_else(
+            || format!("the bytes at offset {at} are no complete record"),
+            |d| d.message.clone(),
+        );
+    let frame = reader
+        .damage
+        .iter()
+        .find(|d| d.offset == Some(at))
+        .and_then(|d| d.frame);
+    Err(archive_error(
+        path,
+        frame,
+        format!(
+            "refusing to append: by the index the records end at byte {}, but a walk of the records stops at byte {at} ({why}), so a frame appended there could not be read; {}",
+            reader.data_end,
+            repair_advice(path)
+        ),
+    ))
 }
 
 #[cfg(test)]

@@ -26,7 +26,8 @@ pub(crate) enum ArchiveCommand {
         file: PathBuf,
     },
     /// Write one frame, or every frame, as .glb, .gltf, .ply, .obj or .vtk, or as a USD
-    /// stage (.usdc, .usda, .usd).
+    /// stage (.usdc, .usda, .usd); existing files are replaced, as `reconstruct` replaces
+    /// them.
     Extract {
         /// The archive.
         file: PathBuf,
@@ -49,6 +50,16 @@ pub(crate) enum ArchiveCommand {
         /// The merged archive; written whole under a temporary name, then renamed.
         #[arg(short, long)]
         output: PathBuf,
+    },
+    /// Rewrite a damaged or unfinished archive with every frame that can be read: damaged
+    /// records skipped, a cut-off end cut, the index rebuilt; lists what it dropped.
+    Repair {
+        /// The archive.
+        file: PathBuf,
+        /// The repaired archive (a new file); by default FILE itself, replaced whole
+        /// under a temporary name.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
     },
     /// Pack existing mesh files (`{}` pattern; PLY, OBJ, glTF) into an archive.
     Pack {
@@ -85,6 +96,7 @@ pub(crate) fn archive(
             stage,
         } => extract(&file, frame, &output, &stage, cancel),
         ArchiveCommand::Merge { inputs, output } => merge(&inputs, &output),
+        ArchiveCommand::Repair { file, output } => repair(&file, output.as_deref()),
         ArchiveCommand::Pack {
             input,
             output,
@@ -121,6 +133,22 @@ fn info(file: &Path) -> Result<(), Failure> {
             ""
         }
     );
+    // A quantization step no writer gives (NaN, zero, negative, infinite): damage.
+    let bad_steps: Vec<String> = r
+        .frames()
+        .iter()
+        .filter(|f| !(f.step.is_finite() && f.step > 0.0))
+        .map(|f| format!("frame {} (quantization step {})", f.number, f.step))
+        .collect();
+    if !bad_steps.is_empty() {
+        return Err(Failure::Run(format!(
+            "{}: damaged: {}: not a positive finite quantization step (`archive verify` lists \
+             every damaged frame)\nhint: {}",
+            file.display(),
+            bad_steps.join(", "),
+            meniscus::archive::repair_advice(file)
+        )));
+    }
     if let (Some(first), Some(last)) = (r.frames().first(), r.frames().last()) {
         println!(
             "frames {} .. {}, error bound {} (world units)",
@@ -194,10 +222,11 @@ fn verify(file: &Path) -> Result<(), Failure> {
     );
     if !v.is_clean() {
         return Err(Failure::Run(format!(
-            "{}: damaged: {} damaged frame(s), {} other problem(s)",
+            "{}: damaged: {} damaged frame(s), {} other problem(s)\nhint: {}",
             file.display(),
             v.damaged.len(),
-            v.damage.len()
+            v.damage.len(),
+            meniscus::archive::repair_advice(file)
         )));
     }
     Ok(())
@@ -212,9 +241,15 @@ fn extract(
     stage: &StageArgs,
     cancel: &meniscus::CancelToken,
 ) -> Result<(), Failure> {
+    // A usage error (exit 2, as `reconstruct` gives it) before the archive is read.
+    let is_stage = UsdFormat::from_path(Path::new(output)).is_ok();
+    if !is_stage {
+        meniscus::io::mesh::MeshFormat::from_path(Path::new(output))
+            .map_err(|e| Failure::Usage(e.to_string()))?;
+    }
     let r = ArchiveReader::open(file)?;
     let numbers = frame.map(|n| vec![n]);
-    if UsdFormat::from_path(Path::new(output)).is_ok() {
+    if is_stage {
         let options = UsdOptions {
             fps: stage.fps,
             up_axis: stage.up_axis,
@@ -247,6 +282,31 @@ fn merge(inputs: &[PathBuf], output: &Path) -> Result<(), Failure> {
         stats.inputs,
         output.display(),
         stats.bytes
+    );
+    Ok(())
+}
+
+/// `archive repair`: `file` rewritten with its readable frames, to `output` or itself.
+fn repair(file: &Path, output: Option<&Path>) -> Result<(), Failure> {
+    let output = output.unwrap_or(file);
+    let report = meniscus::archive::repair(file, output)?;
+    for why in &report.dropped {
+        eprintln!("dropped {why}");
+    }
+    for n in &report.relengthed {
+        eprintln!("frame {n}: kept, the payload length in its record header corrected");
+    }
+    eprintln!(
+        "{} frame(s) kept, {} item(s) dropped{}: {} ({} bytes)",
+        report.kept.len(),
+        report.dropped.len(),
+        if report.index_was_missing {
+            ", index rebuilt (there was none)"
+        } else {
+            ", index rebuilt"
+        },
+        output.display(),
+        report.bytes
     );
     Ok(())
 }

@@ -40,13 +40,42 @@ pub fn plan_frames(
         }),
         (false, true) => Err(Error::InvalidOption {
             option: "output",
-            message: format!("OUTPUT {output:?} has a {{}} but INPUT {input:?} is a single file"),
+            message: format!(
+                "OUTPUT {output:?} has a {{}} but INPUT {input:?} is a single file{}",
+                pattern_hint(input)
+            ),
         }),
     }
 }
 
-/// The plan of a single file, frame 0: nothing may choose frames of it.
+/// For an INPUT without `{}` that looks meant as a sequence (a directory, a file that does
+/// not exist, a name with `#`, `*` or `?`): how to write it as one; else nothing.
+fn pattern_hint(input: &str) -> String {
+    let path = Path::new(input);
+    let meant = path.is_dir() || !path.exists() || input.contains(['#', '*', '?']);
+    if !meant {
+        return String::new();
+    }
+    format!(
+        "; a sequence is one pattern with {{}} where the frame number goes, e.g. {:?}",
+        sequence::suggested_pattern(input)
+    )
+}
+
+/// The plan of a single file, frame 0: nothing may choose frames of it; a directory, or
+/// a missing file whose name looks like a pattern, is refused with a hint at `{}`.
 fn single_file(input: &str, output: &str, choice: &FrameChoice) -> Result<Vec<(Frame, PathBuf)>> {
+    let path = Path::new(input);
+    if path.is_dir() || (!path.exists() && input.contains(['#', '*', '?'])) {
+        let (kind, what) = match path.is_dir() {
+            true => (std::io::ErrorKind::IsADirectory, "is a directory"),
+            false => (std::io::ErrorKind::NotFound, "no such file"),
+        };
+        return Err(Error::io(
+            path,
+            std::io::Error::new(kind, format!("{what}{}", pattern_hint(input))),
+        ));
+    }
     if choice.is_given() {
         let option = if choice.frames.is_some() {
             "frames"

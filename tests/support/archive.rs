@@ -135,3 +135,61 @@ pub fn spheres_with_attributes(count: usize) -> SphereInstances {
         centers,
     }
 }
+
+/// A small mesh of its own per frame number (an uneven sphere moved along x).
+pub fn small_mesh(k: i64) -> TriMesh {
+    let mut m = icosphere(2, 1.0 + 0.1 * k as f32);
+    for p in &mut m.positions {
+        p.x += k as f32;
+    }
+    m
+}
+
+/// Recomputes the checksum of the record header at `offset` (after a field of it was
+/// changed), so that the change is not caught by the header's checksum.
+pub fn reseal_header(bytes: &mut [u8], offset: usize) {
+    let crc = crc32fast::hash(&bytes[offset..offset + 44]);
+    bytes[offset + 44..offset + 48].copy_from_slice(&crc.to_le_bytes());
+}
+
+/// The payload length the record header at `offset` gives.
+pub fn payload_len(bytes: &[u8], offset: usize) -> u64 {
+    u64::from_le_bytes(bytes[offset + 28..offset + 36].try_into().unwrap())
+}
+
+/// Sets the payload length of the record header at `offset` to `len` and re-checksums
+/// the header: a record whose length field lies.
+pub fn set_payload_len(bytes: &mut [u8], offset: usize, len: u64) {
+    bytes[offset + 28..offset + 36].copy_from_slice(&len.to_le_bytes());
+    reseal_header(bytes, offset);
+}
+
+/// Where the index of a finished archive starts (from its trailer).
+pub fn index_offset(bytes: &[u8]) -> usize {
+    let n = bytes.len();
+    u64::from_le_bytes(bytes[n - 16..n - 8].try_into().unwrap()) as usize
+}
+
+/// Every frame the archive at `path` can decode, with its surface (none when the
+/// archive cannot be opened).
+pub fn readable(path: &Path) -> Vec<(i64, Surface)> {
+    let Ok(r) = ArchiveReader::open(path) else {
+        return Vec::new();
+    };
+    r.frames()
+        .iter()
+        .filter_map(|f| Some((f.number, r.read_surface(f.number).ok()?)))
+        .collect()
+}
+
+/// Panics unless every frame of `before` still decodes from the archive at `path` to
+/// the same surface (`what` names the case).
+pub fn assert_still_readable(path: &Path, before: &[(i64, Surface)], what: &str) {
+    let r = ArchiveReader::open(path).unwrap_or_else(|e| panic!("{what}: {e}"));
+    for (n, surface) in before {
+        match r.read_surface(*n) {
+            Ok(s) => assert!(s == *surface, "{what}: frame {n} decodes differently"),
+            Err(e) => panic!("{what}: frame {n} was readable and is not: {e}"),
+        }
+    }
+}

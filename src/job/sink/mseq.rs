@@ -1,7 +1,8 @@
 //! Every frame appended to one `.mseq` archive, new or existing ([`ArchiveWriter`]).
 //!
 //! Frames the archive holds already are refused before it is touched, unless
-//! [`JobOptions::skip_existing`] skips them. The archive stores the control mesh and
+//! [`JobOptions::skip_existing`] skips them; an archive without an index (an interrupted
+//! run) gets one, whether frames are appended or all are skipped. The archive stores the control mesh and
 //! subdivides on decoding (a quarter of the triangles per level to store), so the
 //! pipeline stops before subdivision ([`FrameSink::options`]). A failed frame is not
 //! appended; the archive is finished with the frames done, and an I/O error on the
@@ -37,7 +38,8 @@ pub(super) const OUTPUT: Output = Output {
 pub(crate) struct ArchiveSink {
     path: PathBuf,
     /// `None` when every frame of the plan is held already and skipped: the archive is not
-    /// opened for writing (nor its error bound compared).
+    /// opened for writing (nor its error bound compared); only an archive without an index
+    /// gets one ([`ArchiveWriter::finish_unindexed`]).
     writer: Option<ArchiveWriter>,
     /// The frames the archive holds (for the writer, also those whose record header is
     /// damaged, kept in place).
@@ -96,7 +98,14 @@ impl FrameSink for ArchiveSink {
         let held = held_frames(&path, plan, job)?;
         let all_skipped = job.skip_existing && plan.iter().all(|(f, _)| held.contains(&f.number));
         let writer = match all_skipped {
-            true => None,
+            true => {
+                // An archive holding every frame but no index (a run killed before it
+                // wrote the index) is finished now.
+                if path.exists() {
+                    ArchiveWriter::finish_unindexed(&path)?;
+                }
+                None
+            }
             false => Some(open_writer(&path, job)?),
         };
         Ok(ArchiveSink {
