@@ -515,7 +515,7 @@ fn new_user_errors_name_the_real_cause() {
         (
             vec!["archive", "extract", &damaged, "-o", "x_{}.foo"],
             2,
-            vec!["x_{}.foo", "unknown mesh file extension"],
+            vec!["x_{}.foo", "unknown output extension", ".usdc"],
             vec![],
         ),
         (

@@ -243,9 +243,12 @@ fn extract(
 ) -> Result<(), Failure> {
     // A usage error (exit 2, as `reconstruct` gives it) before the archive is read.
     let is_stage = UsdFormat::from_path(Path::new(output)).is_ok();
-    if !is_stage {
-        meniscus::io::mesh::MeshFormat::from_path(Path::new(output))
-            .map_err(|e| Failure::Usage(e.to_string()))?;
+    if !is_stage && meniscus::io::mesh::MeshFormat::from_path(Path::new(output)).is_err() {
+        let ext = Path::new(output).extension().unwrap_or_default();
+        return Err(Failure::Usage(format!(
+            "{output}: unknown output extension {ext:?}; supported: .glb, .gltf, .ply, .obj, \
+             .vtk, .usdc, .usda, .usd (USD stage)"
+        )));
     }
     let r = ArchiveReader::open(file)?;
     let numbers = frame.map(|n| vec![n]);
