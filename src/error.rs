@@ -154,7 +154,7 @@ impl Error {
 /// How many [`guard`]s are running, in any thread.
 static GUARDS: AtomicUsize = AtomicUsize::new(0);
 
-/// True while a public entry point is running under [`guard`]: a panic now becomes an
+/// True while a public entry point is running under `guard`: a panic now becomes an
 /// [`Error::Internal`] the caller will report, so a panic hook may stay silent (the CLI's
 /// does, to print the message once).
 pub fn panic_is_caught() -> bool {

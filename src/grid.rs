@@ -430,9 +430,11 @@ impl<T> SharedSlots<T> {
     }
 }
 
+#[cfg(test)]
 /// Per key (cell or block), the range of a sorted index list holding its entries.
 pub(crate) type KeyRanges = hashbrown::HashMap<[i32; 3], (u32, u32)>;
 
+#[cfg(test)]
 /// `keys` binned: the indices in [`sort_by_key_zyx`] order, and for every key present the
 /// range of that order holding its indices (ascending index within a key).
 pub(crate) fn bin_by_key(keys: &[[i32; 3]]) -> (Vec<u32>, KeyRanges) {
@@ -441,6 +443,7 @@ pub(crate) fn bin_by_key(keys: &[[i32; 3]]) -> (Vec<u32>, KeyRanges) {
     (order, ranges)
 }
 
+#[cfg(test)]
 /// The range of positions each key holds in `keys`, a sequence in which equal keys are
 /// contiguous (panics otherwise).
 pub(crate) fn group_runs(keys: impl IntoIterator<Item = [i32; 3]>) -> KeyRanges {

@@ -1,9 +1,11 @@
 //! Isolated particles: particles with no other particle within the influence radius `R`
-//! leave the field (see [`crate::neighbors::find_isolated`]) and are drawn as one
+//! leave the field (see `neighbors::find_isolated`) and are drawn as one
 //! pre-tessellated icosphere of radius `r` instanced at every centre (Akinci et al. 2013,
 //! § 3.4).
 
 use crate::mesh::TriMesh;
+#[cfg(test)]
+use crate::neighbors::find_isolated;
 use glam::Vec3;
 use hashbrown::HashMap;
 
@@ -73,6 +75,23 @@ pub fn icosphere(level: u32, radius: f32) -> TriMesh {
         triangles,
         attributes: Vec::new(),
     }
+}
+
+/// Splits `positions` into (particles with a neighbour closer than `radius`, isolated
+/// particle centres), both in input order.
+#[cfg(test)]
+pub(crate) fn split_isolated(positions: &[Vec3], radius: f32) -> (Vec<Vec3>, Vec<Vec3>) {
+    let isolated = find_isolated(positions, radius);
+    let mut kept = Vec::with_capacity(positions.len());
+    let mut alone = Vec::new();
+    for (p, lonely) in positions.iter().zip(isolated) {
+        if lonely {
+            alone.push(*p);
+        } else {
+            kept.push(*p);
+        }
+    }
+    (kept, alone)
 }
 
 #[cfg(test)]

@@ -5,25 +5,36 @@
 //! Pipeline for Particle-Based Fluids" (VRIPHYS 2012 / 2013), built as a sparse-grid engine.
 //!
 //! ```text
-//!  particles ──► isolated split ──► Solenthaler field ──► marching cubes ──► decimation ──► Loop ──► write
-//!  (io)          (isolated)         (field, grid)         (marching_cubes)   (decimation)  (subdivision) (io)
-//!                     └───────────────────────── icospheres of radius r ───────────────────────────┘
+//!  particles ─► plan ─► store ─► tiles: isolate ─► kernels ─► field ─► marching cubes ─► sink
+//!  (io)         (tiles)  (tiles)  (tiles, field::compute_tile, marching_cubes)            │
+//!      ┌───────────────────────────────────────────────────────────────────────────────────┘
+//!      └► decimation ─► smoothing ─► containment ─► subdivision ─► spheres ─► normals ─► attributes ─► write
+//!         (decimation)  (smoothing)  (containment)  (subdivision)  (isolated)  (mesh)    (transfer)    (io, job)
 //! ```
 //!
-//! * [`io`]: particle readers (xyz, VTK, PLY, BGEO) and mesh writers (glTF, PLY, OBJ, VTK).
-//! * [`grid`]: the global lattice and its sparse blocks.
-//! * [`field`]: the Solenthaler et al. 2007 scalar field on the sparse lattice.
+//! [`pipeline::reconstruct`] runs that list for one frame ([`pipeline::ReconstructOptions`]
+//! holds every stage's options, [`pipeline::ReconstructionStats`] what each stage did);
+//! [`job::run_frames`] runs it over files and `{}` sequences into an output
+//! (files, one animated glTF, a `.mseq` archive). The modules, bottom up:
+//!
+//! * [`error`], [`cancel`]: typed errors naming the input; cancellation between stages.
+//! * [`grid`]: the global lattice, its sparse 8³ blocks and half-blocks.
+//! * [`mesh`]: the indexed triangle mesh, normals, topology checks, inside test.
+//! * [`attributes`]: particle attributes (velocity, ...) and which a run carries.
+//! * [`io`]: particle readers (xyz, VTK, PLY, BGEO) and mesh readers and writers (glTF,
+//!   PLY, OBJ, VTK).
+//! * [`field`]: the scalar field (the paper's isotropic one and anisotropic kernels).
 //! * [`marching_cubes`]: surface extraction with globally keyed vertices.
-//! * [`mesh`]: the indexed triangle mesh, normals and topology validation.
-//! * [`neighbors`]: the cell hash behind isolation checks.
-//! * [`tiles`]: field and marching cubes tile by tile, stitched bit-identically.
-//! * [`decimation`], [`containment`], [`subdivision`], [`isolated`]: the post-processing
-//!   stages.
-//! * [`attributes`]: particle attributes (velocity, ...) carried to the surface vertices.
-//! * [`pipeline`]: the whole reconstruction of one frame, stage by stage, with timings.
-//! * [`job`], [`sequence`]: files and `{}` frame sequences, as the CLI runs them.
-//! * [`settings`]: the options as the CLI and the Python package take them.
+//! * [`decimation`], [`smoothing`], [`containment`], [`subdivision`], [`isolated`]: the
+//!   post-processing stages, each usable on its own mesh.
+//! * [`tiles`]: the out-of-core engine (tiles under a memory budget, spill files,
+//!   stitching).
+//! * [`pipeline`]: one frame, stage by stage, with its options and timings.
+//! * [`settings`]: the options as the command line and the Python package take them.
+//! * [`sequence`], [`job`]: frame patterns and selections; runs over many frames.
 //! * [`archive`]: the `.mseq` container for whole mesh sequences.
+//!
+//! `docs/architecture.md` draws the engine and its invariants.
 //!
 //! ```no_run
 //! use meniscus::io::particles::read_particles;

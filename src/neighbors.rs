@@ -1,13 +1,15 @@
-//! Neighbour search for the isolation test. Particles in any order are binned into cubic
-//! cells of edge equal to the search radius, cells kept in a hashbrown map (no dense
-//! grid), so a query visits the 27 cells around a point ([`CellHash`]). Particles already
-//! sorted by a cubic cell of another edge (a tile's, by home half-block) are searched as
-//! they lie ([`find_isolated_sorted`]): the cells of one row are one run of them.
+//! Neighbour search for the isolation test. A tile's particles, sorted by a cubic cell
+//! (their home half-block), are searched as they lie ([`find_isolated_sorted`]): the cells
+//! of one row are one run of them. The tests' oracle bins particles in any order into
+//! cubic cells of edge equal to the search radius kept in a hashbrown map, so a query
+//! visits the 27 cells around a point (`CellHash`).
 
 use glam::Vec3;
+#[cfg(test)]
 use hashbrown::HashMap;
 use rayon::prelude::*;
 
+#[cfg(test)]
 /// Particles binned into cells of a fixed edge length (world units).
 pub struct CellHash {
     cell_size: f32,
@@ -17,6 +19,7 @@ pub struct CellHash {
     cells: HashMap<[i32; 3], (u32, u32)>,
 }
 
+#[cfg(test)]
 impl CellHash {
     /// Bins `positions` into cells of edge `cell_size` (world units, > 0).
     pub fn new(positions: &[Vec3], cell_size: f32) -> Self {
@@ -58,6 +61,7 @@ impl CellHash {
     }
 }
 
+#[cfg(test)]
 fn cell_of(p: Vec3, inv: f32) -> [i32; 3] {
     [
         (p.x * inv).floor() as i32,
@@ -66,12 +70,14 @@ fn cell_of(p: Vec3, inv: f32) -> [i32; 3] {
     ]
 }
 
+#[cfg(test)]
 /// Marks the particles that have no other particle strictly closer than `radius` (world
 /// units). Output is independent of thread count.
 pub fn find_isolated(positions: &[Vec3], radius: f32) -> Vec<bool> {
     find_isolated_where(positions, radius, &vec![true; positions.len()])
 }
 
+#[cfg(test)]
 /// [`find_isolated`] evaluated only where `wanted` is true (`false` elsewhere).
 pub fn find_isolated_where(positions: &[Vec3], radius: f32, wanted: &[bool]) -> Vec<bool> {
     isolated_in(&CellHash::new(positions, radius), positions, radius, wanted)
@@ -138,6 +144,7 @@ pub fn find_isolated_sorted(
         .collect()
 }
 
+#[cfg(test)]
 /// The isolation flags of `positions` with `hash` as the search structure.
 fn isolated_in(hash: &CellHash, positions: &[Vec3], radius: f32, wanted: &[bool]) -> Vec<bool> {
     let r2 = radius * radius;

@@ -9,9 +9,10 @@ use meniscus::containment::ContainmentOptions;
 use meniscus::field::Kernel;
 use meniscus::io::particles::read_particles;
 use meniscus::mesh::{validate, InsideTest, TriMesh};
-use meniscus::pipeline::{reconstruct, split_isolated, ReconstructOptions};
+use meniscus::pipeline::{reconstruct, ReconstructOptions};
 use meniscus::subdivision::{subdivide, SubdivideOptions};
 use std::path::Path;
+use support::split_isolated;
 use support::{in_pool, splash};
 
 /// A splash of a shipped frame and its particle radius.

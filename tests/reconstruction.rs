@@ -6,7 +6,8 @@ mod support;
 
 use glam::Vec3;
 use meniscus::mesh::{validate, InsideTest, TriMesh};
-use meniscus::pipeline::{reconstruct, split_isolated, ReconstructOptions};
+use meniscus::pipeline::{reconstruct, ReconstructOptions};
+use support::split_isolated;
 use support::{in_pool, positions};
 
 /// Field + marching cubes only (no decimation or subdivision), isolated spheres on.

@@ -6,7 +6,7 @@
 //! readers (`io`), the tiles and the writers share. Selecting the attributes of read
 //! particles is [`crate::io::particles::Particles::select`].
 //!
-//! The stage that carries the attributes to the surface is [`crate::transfer`].
+//! The stage that carries the attributes to the surface is `transfer`.
 
 use crate::error::{Error, Result};
 use std::path::Path;

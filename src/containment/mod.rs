@@ -30,7 +30,7 @@
 //! computed from the control mesh, and its triangles are the four children of each
 //! control triangle. It is not even computed for the whole mesh at once: the centres are
 //! measured in slabs across the scene, each against the one-step surface of the control
-//! triangles it can reach ([`slabs`]; [`ContainmentOptions::chunk_triangles`] per slab),
+//! triangles it can reach (`slabs`; [`ContainmentOptions::chunk_triangles`] per slab),
 //! so the stage's memory beyond the control mesh follows the slab and stays far under
 //! the subdivision's peak. A centre's nearest points are looked up in a cell hash of
 //! them (cells of `2r`, the 2 × 2 × 2 cells nearest the centre: every point within r of

@@ -12,7 +12,7 @@
 //! greedy order of a heap, without the heap's cache misses) → compact.
 //!
 //! **Parallel walk** (meshes decimated whole, not region by region). The triangles are
-//! cut into fixed chunks of [`CHUNK_TRIANGLES`] in mesh order (spatially coherent:
+//! cut into fixed chunks of `CHUNK_TRIANGLES` in mesh order (spatially coherent:
 //! marching cubes emits them block by block). At the start of a pass every vertex is
 //! owned by the chunk of its lowest-numbered triangle. The chunks
 //! then walk their own candidates in parallel, each taking only collapses whose two closed
@@ -32,7 +32,7 @@
 //! walk alone: with the cores busy on other regions, the parallel walk's ownership tests
 //! were pure cost (4M scene: decimation 4.0 → 3.5 s, 2026-11-24), and walking each region
 //! in plain mesh order is closer to the greedy order (1M scene: flat bumpiness 0.0080 r
-//! instead of 0.0083 r). Then the band around the seams ([`decimate_band`]: the seam
+//! instead of 0.0083 r). Then the band around the seams (`decimate_band`: the seam
 //! vertices and two rings around them) is decimated to the overall target, the rest of
 //! the mesh left as the regions made it. Seam vertices keep their exact input positions until that
 //! pass. (A final pass over the whole mesh instead took 0.90 s of 5.8 s on the 4M scene

@@ -39,7 +39,7 @@ mod concavity;
 mod coverage;
 mod evaluate;
 mod isotropic;
-pub mod kernels;
+mod kernels;
 mod rows;
 pub(crate) use coverage::apply_coverage;
 pub use kernels::{compute_kernels, AnisotropyOptions, AnisotropyStats, ParticleKernel};
@@ -97,8 +97,8 @@ pub enum Kernel {
     /// The Solenthaler et al. 2007 field with spherical kernels of radius `R` (the paper's).
     #[default]
     Isotropic,
-    /// Yu and Turk 2013 anisotropic kernels ([`crate::anisotropy`]), see
-    /// [`anisotropic`].
+    /// Yu and Turk 2013 anisotropic kernels (`anisotropy`), see
+    /// `anisotropic`.
     Anisotropic,
 }
 
@@ -261,7 +261,7 @@ pub(crate) fn kernel_reach(options: &FieldOptions) -> f32 {
 
 /// Computes the field of `positions` (world units, any order) on the whole sparse
 /// lattice: every particle enters the field (the pipeline first splits off the isolated
-/// ones). The same computation as a tile's ([`compute_tile`]) over one tile holding every
+/// ones). The same computation as a tile's (`compute_tile`) over one tile holding every
 /// particle.
 pub fn compute_field(
     positions: &[Vec3],

@@ -1,12 +1,12 @@
 //! The whole reconstruction of one frame, stage by stage (Akinci et al. 2013, Fig. 2):
 //!
 //! 1. plan: one pass over the particles checks them and cuts the lattice into tiles under
-//!    the memory budget ([`crate::tiles::plan_tiles`]);
+//!    the memory budget (`tiles::plan_tiles`);
 //! 2. store: the particles held for the tiles, in memory or spilled to disk;
 //! 3. tiles: isolated particles split off, the Solenthaler field ([`crate::field`]) and
 //!    marching cubes ([`crate::marching_cubes`]), tile by tile, into a sink that
 //!    stitches the pieces exactly, or decimates each as it comes
-//!    ([`crate::tiles::TileDecimation`]);
+//!    (`tiles::TileDecimation`);
 //! 4. quadric decimation ([`crate::decimation`]), unless the tiles did it;
 //! 5. Taubin smoothing of the decimated mesh ([`crate::smoothing`]);
 //! 6. containment: every non-isolated particle centre pushed under the surface that
@@ -24,7 +24,6 @@ use crate::decimation::{decimate, DecimateStats};
 use crate::error::Result;
 use crate::io::particles::ParticleSource;
 use crate::mesh::{SphereInstances, Surface, TriMesh};
-use crate::neighbors::find_isolated;
 use crate::smoothing::smooth;
 use crate::subdivision::subdivide;
 use crate::tiles::{
@@ -309,26 +308,11 @@ fn sphere_instances(isolated: Vec<Vec3>, options: &ReconstructOptions) -> Sphere
     }
 }
 
-/// Splits `positions` into (particles with a neighbour closer than `radius`, isolated
-/// particle centres), both in input order.
-pub fn split_isolated(positions: &[Vec3], radius: f32) -> (Vec<Vec3>, Vec<Vec3>) {
-    let isolated = find_isolated(positions, radius);
-    let mut kept = Vec::with_capacity(positions.len());
-    let mut alone = Vec::new();
-    for (p, lonely) in positions.iter().zip(isolated) {
-        if lonely {
-            alone.push(*p);
-        } else {
-            kept.push(*p);
-        }
-    }
-    (kept, alone)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::io::particles::read_particles;
+    use crate::isolated::split_isolated;
 
     #[test]
     fn raw_is_the_marching_cubes_surface_of_the_field_alone() {

@@ -72,9 +72,11 @@ impl ReconstructOptions {
     pub fn new(particle_radius: f32) -> Self {
         let mut field = FieldOptions::new(particle_radius);
         field.kernel = Kernel::Anisotropic;
-        let mut decimate = DecimateOptions::default();
-        decimate.target_reduction = Some(DEFAULT_DECIMATION);
-        decimate.max_error = Some(DEFAULT_DECIMATION_ERROR * particle_radius);
+        let decimate = DecimateOptions {
+            target_reduction: Some(DEFAULT_DECIMATION),
+            max_error: Some(DEFAULT_DECIMATION_ERROR * particle_radius),
+            ..DecimateOptions::default()
+        };
         ReconstructOptions {
             field,
             isolated_sphere_level: Some(2),

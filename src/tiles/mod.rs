@@ -13,48 +13,48 @@
 //!   blocks only (reading the field one block further up), and every mesh vertex is owned
 //!   by exactly one block;
 //! * a field block sums over particles whose home block is within `reach` blocks
-//!   ([`crate::field::block_reach`]), in (home half-block, global index) order — the
+//!   (`field::block_reach`), in (home half-block, global index) order — the
 //!   tile loads every particle within `reach` of its field blocks ("zone 1") sorted in
 //!   that order, which is also the order the tile's isolation search sees, and the field
 //!   takes them without sorting again;
 //! * the isolation flag of a zone-1 particle depends on the particles within `R` of it, so
 //!   the tile also loads a second ghost ring of `reach` blocks ("zone 2");
-//! * coverage ([`crate::field::apply_coverage`]) reads the field around particles within
+//! * coverage (`field::apply_coverage`) reads the field around particles within
 //!   `c·r + 2h` of the used blocks, so field blocks are computed one block further all
 //!   round;
-//! * [`crate::marching_cubes::stitch`] numbers vertices in global block order.
+//! * `marching_cubes::stitch` numbers vertices in global block order.
 //!
 //! **The engine: plan → store → run → sink.**
-//! * [`plan_tiles`] ([`plan`]): a first pass over the [`ParticleSource`] checks the
+//! * `plan_tiles` (`plan`): a first pass over the [`ParticleSource`] checks the
 //!   positions and counts particles per block; the memory budget picks the tile size.
-//! * [`store`]: where a tile's particles come from, in the canonical order: the source in
-//!   memory, or (tiled, out of core) a spill file on disk ([`spill`]) that a second pass
+//! * `store`: where a tile's particles come from, in the canonical order: the source in
+//!   memory, or (tiled, out of core) a spill file on disk (`spill`) that a second pass
 //!   fills, after which the source is dropped; each tile reads back the spill cells its
 //!   zones overlap. The payload (selected attributes) travels with the positions in the
-//!   spill records and stays there until the attribute stage ([`crate::attributes`]).
-//! * [`run_tiles`]: the loop only: load → isolate → field → marching cubes → hand the
-//!   tile's block surfaces to a [`TileSink`]. Tiles run one after another, each parallel
+//!   spill records and stays there until the attribute stage (`transfer`).
+//! * `run_tiles`: the loop only: load → isolate → field → marching cubes → hand the
+//!   tile's block surfaces to a `TileSink`. Tiles run one after another, each parallel
 //!   inside.
-//! * sinks: [`StitchSink`] stitches the block surfaces into one mesh;
-//!   [`TileDecimation`] decimates each tile's piece with its border
+//! * sinks: `StitchSink` stitches the block surfaces into one mesh;
+//!   `TileDecimation` decimates each tile's piece with its border
 //!   locked (the locked-seam contract is written down there).
 //!
 //! **Memory budget.** [`TileOptions::memory_budget_bytes`] picks the tile size (the largest
 //! power-of-two number of blocks whose densest tile fits next to the expected output) or
 //! refuses, before any work, a run whose smallest tile cannot fit. The estimate counts the
 //! particles, the blocks they populate and the triangles the populated blocks on the
-//! fluid's surface will carry, calibrated on a real frame and a splash of it ([`budget`]). An untiled run whose
+//! fluid's surface will carry, calibrated on a real frame and a splash of it (`budget`). An untiled run whose
 //! estimate leaves a quarter of it spare keeps the buffers it frees for reuse, in a
 //! program that allows it ([`TileStats::kept_freed_memory`]): 9–11 % more peak memory,
 //! fewer fresh pages.
 //!
 //! **Decimation in tiles.** With decimation requested and more than one tile, the
-//! pipeline runs the tiles into [`TileDecimation`]: the raw surface is
+//! pipeline runs the tiles into `TileDecimation`: the raw surface is
 //! then never whole in memory, memory follows the output. The result is deterministic
 //! and independent of the thread count, but depends on the tile size; without decimation
 //! the stitched marching-cubes mesh is bit-identical for every tiling.
 
-pub mod budget;
+mod budget;
 mod decimating;
 pub(crate) mod plan;
 pub(crate) mod spill;

@@ -216,3 +216,34 @@ pub fn without_panic<T>(
         }
     }
 }
+
+/// Splits `positions` into (particles with another particle strictly closer than
+/// `radius`, isolated particle centres), both in input order: an oracle of the
+/// pipeline's isolation, by a plain hash of cubic cells of edge `radius`.
+pub fn split_isolated(positions: &[Vec3], radius: f32) -> (Vec<Vec3>, Vec<Vec3>) {
+    let cell = |p: Vec3| (p / radius).floor().as_ivec3();
+    let mut cells: std::collections::HashMap<glam::IVec3, Vec<usize>> = Default::default();
+    for (i, p) in positions.iter().enumerate() {
+        cells.entry(cell(*p)).or_default().push(i);
+    }
+    let r2 = radius * radius;
+    let lonely = |i: usize| {
+        let c = cell(positions[i]);
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let near = cells.get(&(c + glam::IVec3::new(dx, dy, dz)));
+                    for &j in near.into_iter().flatten() {
+                        if j != i && (positions[j] - positions[i]).length_squared() < r2 {
+                            return false;
+                        }
+                    }
+                }
+            }
+        }
+        true
+    };
+    let (alone, kept): (Vec<usize>, Vec<usize>) = (0..positions.len()).partition(|&i| lonely(i));
+    let pick = |ids: Vec<usize>| ids.into_iter().map(|i| positions[i]).collect();
+    (pick(kept), pick(alone))
+}
