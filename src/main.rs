@@ -75,7 +75,7 @@ impl FarmArgs {
 
 #[derive(Args)]
 struct ReconstructArgs {
-    /// Particle file (.xyz, .vtk, .ply, .bgeo), or a pattern with `{}` for the frame number.
+    /// Particle file (.xyz, .vtk, .vtu, .vtp, .ply, .bgeo), or a pattern with `{}` for the frame number.
     input: String,
     /// Output mesh (.glb, .gltf, .ply, .obj, .vtk); a pattern with `{}` for sequences.
     #[arg(short, long)]
@@ -158,7 +158,7 @@ struct ReconstructArgs {
     /// directory); removed on success, error and Ctrl-C.
     #[arg(long)]
     temp_dir: Option<PathBuf>,
-    /// Input format, overriding the extension (xyz, vtk, ply, bgeo).
+    /// Input format, overriding the extension (xyz, vtk, vtu, vtp, ply, bgeo).
     #[arg(long)]
     input_format: Option<ParticleFormat>,
     #[command(flatten)]

@@ -471,7 +471,7 @@ fn check_threads(threads: Option<usize>) -> PyResult<()> {
     Ok(())
 }
 
-/// Reads a particle file (.xyz, .vtk, .ply, .bgeo, by extension): positions (N, 3)
+/// Reads a particle file (.xyz, .vtk, .vtu, .vtp, .ply, .bgeo, by extension): positions (N, 3)
 /// float32 and every point attribute, name → (N,) or (N, k) float32.
 #[pyfunction]
 fn read_particles<'py>(

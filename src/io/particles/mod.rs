@@ -234,7 +234,8 @@ pub fn write_particles(path: &Path, particles: &Particles, format: ParticleForma
 /// `format` or the extension. Streams: BGEO (plain or gzip); PLY, binary or ASCII, whose
 /// first element is `vertex` with scalar properties only (the rest of the file is not
 /// read); legacy VTK, binary or ASCII, whose first data section is `POINTS n float|double`
-/// (what SPlisHSPlasH and DualSPHysics write; the rest of the file is not read). Returns
+/// (what SPlisHSPlasH and DualSPHysics write; the rest of the file is not read); VTK XML
+/// (`.vtu`, `.vtp`) of one piece, in any encoding (the points array alone is read). Returns
 /// the particle count, or `Ok(None)` for any other layout, which [`read_particles`]
 /// handles and reports on (and for `.xyz`, which [`MappedXyz`] maps as it is). Memory: one
 /// chunk (and, for ASCII, one line), whatever the file size.

@@ -430,9 +430,11 @@ fn file_header(s: &Scanner, attributes: &[(String, String)], layout: &mut Layout
         None | Some("") => Compressor::None,
         Some("vtkZLibDataCompressor") => Compressor::Zlib,
         Some("vtkLZ4DataCompressor") => Compressor::Lz4,
-        Some(other) => return Err(s.error(format!(
+        Some(other) => {
+            return Err(s.error(format!(
             "compressor {other:?} is not supported (vtkZLibDataCompressor, vtkLZ4DataCompressor)"
-        ))),
+        )))
+        }
     };
     Ok(())
 }
