@@ -65,6 +65,21 @@ pub fn check_radius(given: f32, estimate: f32) -> RadiusCheck {
     }
 }
 
+/// Checks radius `given` against the estimate for the particles of `path`: `Ok` with
+/// the verdict when it is at most [`RadiusCheck::Doubtful`], else an
+/// [`Error::ImplausibleRadius`] naming both values.
+pub fn verify_radius(path: &Path, given: f32, estimate: &RadiusEstimate) -> Result<RadiusCheck> {
+    match check_radius(given, estimate.radius) {
+        RadiusCheck::Implausible => Err(Error::ImplausibleRadius {
+            path: path.to_path_buf(),
+            given,
+            estimate: estimate.radius,
+            sample: estimate.sample,
+        }),
+        verdict => Ok(verdict),
+    }
+}
+
 /// Kernel support, multiples of the lower-quartile nearest-neighbour distance: wide
 /// enough that a lattice's shells blur (the kernel is smooth), narrow enough that a film
 /// two particles thick still fills much of it.

@@ -109,3 +109,44 @@ fn a_given_radius_is_plausible_doubtful_or_implausible() {
         assert_eq!(check_radius(given * 0.025, 0.025), want, "{given}");
     }
 }
+
+/// Without `-r` the CLI estimates r from the first frame, prints it, and runs with it: the
+/// same mesh as `-r` with the printed value.
+#[test]
+fn without_r_the_cli_runs_with_the_estimate_it_prints() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dataset("double_dambreak/ParticleData_Fluid_9.vtk");
+    let input = input.to_str().unwrap();
+    let estimated = dir.path().join("e.ply");
+    let (ok, err) = support::run(&["reconstruct", input, "-o", estimated.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    let line = err
+        .lines()
+        .find(|l| l.starts_with("particle radius r = "))
+        .unwrap_or_else(|| panic!("no estimate printed: {err}"));
+    assert!(
+        line.contains("ParticleData_Fluid_9.vtk") && line.contains("-r sets it"),
+        "{line}"
+    );
+    let r = line["particle radius r = ".len()..]
+        .split(' ')
+        .next()
+        .unwrap();
+    let value: f32 = r.parse().unwrap();
+    assert!((value / 0.025 - 1.0).abs() < 0.1, "{line}");
+    let given = dir.path().join("g.ply");
+    let (ok, err) = support::run(&[
+        "reconstruct",
+        input,
+        "-r",
+        r,
+        "-q",
+        "-o",
+        given.to_str().unwrap(),
+    ]);
+    assert!(ok && err.is_empty(), "{err}");
+    assert!(std::fs::read(&estimated).unwrap() == std::fs::read(&given).unwrap());
+    // Quiet: nothing printed.
+    let (ok, err) = support::run(&["reconstruct", input, "-q", "-o", given.to_str().unwrap()]);
+    assert!(ok && err.is_empty(), "{err}");
+}
