@@ -65,8 +65,8 @@ fn each_vtk_xml_encoding_reads_like_the_legacy_file() {
     assert_eq!(velocity.name, "velocity");
     let files = fixtures();
     // Every data mode × compressor VTK writes, both header sizes, both point types, both
-    // dataset types.
-    assert_eq!(files.len(), 11, "{files:?}");
+    // dataset types, both byte orders.
+    assert_eq!(files.len(), 13, "{files:?}");
     for kind in [
         "ascii_none",
         "binary_none",
@@ -82,6 +82,7 @@ fn each_vtk_xml_encoding_reads_like_the_legacy_file() {
         "u64",
         "f32",
         "f64",
+        "_be",
         ".vtu",
         ".vtp",
     ] {

@@ -6,7 +6,8 @@ Usage, from the repository root:
 Every fixture holds the first COUNT (default 40) particles of the legacy file (default
 datasets/double_dambreak/ParticleData_Fluid_9.vtk) with its velocity, plus an Int32 `id`
 (the index) and a Float64 `density` (1000 + index / 8). The names say what each one is:
-<dataset>_<data mode>_<compressor>_<header type>_<point type>.<vtu|vtp>; the block size is
+<dataset>_<data mode>_<compressor>_<header type>_<point type>[_be].<vtu|vtp> (_be:
+big-endian); the block size is
 64 bytes, so that compressed arrays span several blocks. `frame9_appended_zlib.vtu` is the whole
 frame (its velocity, no cells), as the CLI test compares it with the legacy file.
 """
@@ -60,7 +61,7 @@ def dataset(n, polydata, double, extra, cells=True):
     return d
 
 
-def write(name, d, polydata, mode, compressor, header64, block=64):
+def write(name, d, polydata, mode, compressor, header64, block=64, big=False):
     w = vtk.vtkXMLPolyDataWriter() if polydata else vtk.vtkXMLUnstructuredGridWriter()
     w.SetInputData(d)
     w.SetFileName(os.path.join(out, name))
@@ -69,12 +70,13 @@ def write(name, d, polydata, mode, compressor, header64, block=64):
     {"none": w.SetCompressorTypeToNone, "zlib": w.SetCompressorTypeToZLib,
      "lz4": w.SetCompressorTypeToLZ4}[compressor]()
     w.SetHeaderTypeToUInt64() if header64 else w.SetHeaderTypeToUInt32()
+    w.SetByteOrderToBigEndian() if big else w.SetByteOrderToLittleEndian()
     if block:
         w.SetBlockSize(block)
     assert w.Write() == 1, name
 
 
-# (data mode, compressor, UInt64 headers, Float64 points, PolyData)
+# (data mode, compressor, UInt64 headers, Float64 points, PolyData[, big-endian])
 variants = [
     ("ascii", "none", False, False, True),
     ("ascii", "none", True, True, False),
@@ -87,11 +89,16 @@ variants = [
     ("appended64", "none", False, False, True),
     ("appended64", "zlib", True, False, False),
     ("appended64", "lz4", False, True, True),
+    ("binary", "zlib", False, True, False, True),
+    ("appended", "none", True, False, True, True),
 ]
-for mode, compressor, header64, double, polydata in variants:
-    name = "dd9_%s_%s_%s_%s.%s" % (mode, compressor, "u64" if header64 else "u32",
-                                   "f64" if double else "f32", "vtp" if polydata else "vtu")
-    write(name, dataset(count, polydata, double, True), polydata, mode, compressor, header64)
+for mode, compressor, header64, double, polydata, *big in variants:
+    big = bool(big and big[0])
+    name = "dd9_%s_%s_%s_%s%s.%s" % (mode, compressor, "u64" if header64 else "u32",
+                                     "f64" if double else "f32", "_be" if big else "",
+                                     "vtp" if polydata else "vtu")
+    write(name, dataset(count, polydata, double, True), polydata, mode, compressor, header64,
+          big=big)
 if len(sys.argv) <= 1 or "--frame" in sys.argv:
     n = frame.GetNumberOfPoints()
     # No cells: the points and the velocity are what is compared, and the file stays small.
