@@ -417,3 +417,47 @@ fn a_reconstruction_from_the_vtu_equals_the_legacy_files() {
         assert!(outputs[0] == outputs[1], "{flags:?}: the outputs differ");
     }
 }
+
+/// Mutated VTK-written files (flipped bits, truncations, bytes replaced, counts and
+/// offsets made huge) are read or rejected with an error naming the file, whole and
+/// streamed; never a panic (the fuzz target `particles_vtk_xml` goes further).
+#[test]
+fn mutated_vtk_xml_files_are_read_or_rejected_never_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let bases: Vec<(String, Vec<u8>)> = fixtures()
+        .iter()
+        .map(|p| {
+            let ext = p.extension().unwrap().to_str().unwrap();
+            (format!("m.{ext}"), std::fs::read(p).unwrap())
+        })
+        .collect();
+    let huge = [
+        "18446744073709551615",
+        "4294967295",
+        "999999999999",
+        "2147483647",
+    ];
+    let mut rng = support::Rng(0x2545_f491_4f6c_dd1d);
+    for round in 0..2000 {
+        let (name, base) = &bases[round % bases.len()];
+        let bytes = support::mutate(&mut rng, base, &huge, |_, _| {});
+        let path = dir.path().join(name);
+        std::fs::write(&path, &bytes).unwrap();
+        let result = support::without_panic(round, name, &bytes, || {
+            let whole = read_particles(&path, None).map(|_| ());
+            let format = ParticleFormat::from_path(&path).unwrap();
+            let streamed = SpooledParticles::from_file(
+                &path,
+                format,
+                &AttributeSelection::All,
+                Some(dir.path()),
+                &CancelToken::new(),
+            )
+            .map(|_| ());
+            whole.and(streamed)
+        });
+        if let Err(e) = result {
+            assert!(e.to_string().contains(name.as_str()), "{name}: {e}");
+        }
+    }
+}
