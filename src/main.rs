@@ -443,16 +443,17 @@ fn reconstruct(
     };
     let plan = plan_frames(&args.input, &args.output, &args.farm.choice())?;
     check_outputs(&plan).map_err(|e| Failure::Usage(e.to_string()))?;
-    args.radius = resolve_radius(args, &plan[0].0.input)?;
-    let options = options_from(args)?;
-    for warning in ineffective_options(args, given, &plan, &attributes) {
-        eprintln!("warning: {warning}");
-    }
+    // The pool before the radius estimate, its first parallel work.
     if let Some(threads) = args.threads {
         rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build_global()
             .map_err(|e| Failure::Run(e.to_string()))?;
+    }
+    args.radius = resolve_radius(args, &plan[0].0.input)?;
+    let options = options_from(args)?;
+    for warning in ineffective_options(args, given, &plan, &attributes) {
+        eprintln!("warning: {warning}");
     }
     let job = job_options(args, attributes, cancel);
     let clock = Instant::now();
@@ -474,14 +475,21 @@ fn reconstruct(
 
 /// The particle radius of the run: `-r` after checking it against the first frame's
 /// spacing (a warning outside 0.25×–4×, a usage error outside 0.05×–20×), or without `-r`
-/// the estimate, printed. `--no-radius-check` takes `-r` as given, unread.
+/// the estimate, printed. `--no-radius-check` takes `-r` as given, unread; so does a
+/// first frame the estimate cannot read or measure.
 fn resolve_radius(args: &ReconstructArgs, first: &Path) -> Result<f32, Failure> {
     use meniscus::radius::{estimate_radius_of_file, verify_radius, RadiusCheck};
     let given = match args.particle_radius {
         Some(r) if args.no_radius_check => return Ok(r),
         given => given,
     };
-    let estimate = estimate_radius_of_file(first, args.input_format)?;
+    let estimate = match (estimate_radius_of_file(first, args.input_format), given) {
+        (Ok(estimate), _) => estimate,
+        // A frame that cannot be read or measured: with -r, the run reports it as it
+        // reads it (with --keep-going, as that frame's failure).
+        (Err(_), Some(r)) => return Ok(r),
+        (Err(e), None) => return Err(e.into()),
+    };
     let shown = format!("{:?}", estimate.radius);
     let Some(r) = given else {
         if !args.quiet {
