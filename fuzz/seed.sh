@@ -9,7 +9,7 @@ cd "$(dirname "$0")"
 BIN=${1:-${CARGO_TARGET_DIR:-../target}/release/meniscus}
 OUT=seeds
 rm -rf "$OUT"
-mkdir -p "$OUT"/{particles_xyz,particles_ply,particles_bgeo,particles_vtk,mesh_ply,mesh_obj,mesh_gltf,mesh_vtk,archive,archive_payload}
+mkdir -p "$OUT"/{particles_xyz,particles_ply,particles_bgeo,particles_vtk,particles_vtk_xml,mesh_ply,mesh_obj,mesh_gltf,mesh_vtk,archive,archive_payload}
 
 python3 - "$OUT" <<'EOF'
 import gzip, struct, sys
@@ -62,6 +62,11 @@ for i, (p, v, d) in enumerate(zip(pts, vel, dens)):
 w("particles_bgeo/plain.bgeo", b)
 w("particles_bgeo/gzip.bgeo", gzip.compress(b, 6, mtime=0))
 EOF
+
+# VTK XML: the fixtures VTK's own writers made (tests/data/vtk_xml/make_fixtures.py), every
+# data mode, compressor and header type, and two pieces with ascii data.
+cp ../tests/data/vtk_xml/dd9_*.vt[up] "$OUT/particles_vtk_xml/"
+printf '<?xml version="1.0"?>\n<VTKFile type="PolyData" version="0.1">\n<PolyData><Piece NumberOfPoints="2"><PointData><DataArray type="Float32" Name="m" format="ascii">0 1</DataArray></PointData><Points><DataArray type="Float64" NumberOfComponents="3" format="ascii">0 0 0 1 0 0</DataArray></Points></Piece><Piece NumberOfPoints="1"><PointData><DataArray type="Float32" Name="m" format="ascii">2</DataArray></PointData><Points><DataArray type="Float64" NumberOfComponents="3" format="ascii">2 0 0</DataArray></Points></Piece></PolyData></VTKFile>\n' >"$OUT/particles_vtk_xml/pieces.vtp"
 
 # Meshes and archives from the release binary: the fluid blocks plus an isolated-particle
 # sphere, with the velocity as attribute where the format holds one.

@@ -134,10 +134,11 @@ class Mesh:
 
 def reconstruct(
     positions: npt.ArrayLike,
-    particle_radius: float,
+    particle_radius: float | None = None,
     *,
     attributes: Mapping[str, npt.ArrayLike] | None = None,
     threads: int | None = None,
+    radius_check: bool = True,
     **options: Unpack[ReconstructOptions],
 ) -> Mesh:
     """Reconstructs the surface of the particles at ``positions``.
@@ -145,27 +146,36 @@ def reconstruct(
     Args:
         positions: (N, 3) float32 or float64 array, world units. A C-contiguous float32
             array is used in place, not copied.
-        particle_radius: ``r``, world units (> 0).
+        particle_radius: ``r``, world units (> 0). Default: estimated from the particles'
+            spacing. A given ``r`` outside 0.25x-4x of the estimate is warned about
+            (``UserWarning``), outside 0.05x-20x a ``ValueError``.
         attributes: name -> (N,) or (N, k) array of per-particle values (e.g. velocity),
             carried to the surface vertices (``Mesh.attributes``).
         threads: worker threads (default: all cores). The output does not depend on it.
+        radius_check: False takes ``particle_radius`` as given, unchecked.
         **options: the reconstruction settings (``ReconstructOptions``): influence_radius,
             cell_size, t_low, t_high, particle_coverage, iso_offset, isolated_spheres,
             decimate, decimate_error, smooth, subdivide, defer_subdivision, keep_inside, tile_size,
             memory_budget, temp_dir.
     """
 
+def estimate_radius(positions: npt.ArrayLike) -> float:
+    """The particle radius ``r`` the spacing of the particles at ``positions`` implies,
+    world units (an SPH number density of a sample of them; within 9 % on the shipped
+    frames): what ``reconstruct`` takes without ``particle_radius``."""
+
 def read_particles(path: _Path) -> tuple[npt.NDArray[np.float32], dict[str, npt.NDArray[np.float32]]]:
-    """Reads a particle file (.xyz, .vtk, .ply, .bgeo, by extension): positions (N, 3)
+    """Reads a particle file (.xyz, .vtk, .vtu, .vtp, .ply, .bgeo, by extension): positions (N, 3)
     float32 and every point attribute, name -> (N,) or (N, k) float32."""
 
 def reconstruct_file(
     input: str,
     output: str,
-    particle_radius: float,
+    particle_radius: float | None = None,
     *,
     attributes: str | Sequence[str] | None = None,
     threads: int | None = None,
+    radius_check: bool = True,
     frames: str | Sequence[int] | None = None,
     shard: str | tuple[int, int] | None = None,
     start: int | None = None,
@@ -189,6 +199,8 @@ def reconstruct_file(
     stored, subdivided when read).
 
     Args:
+        particle_radius, radius_check: as for ``reconstruct``; estimated from the first
+            frame.
         attributes: None (the velocity when the input has one), ``"none"``, ``"all"``,
             ``"a,b"`` or a list of names.
         threads: worker threads (default: all cores).

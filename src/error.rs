@@ -120,12 +120,36 @@ pub enum Error {
         /// Bytes free for this user.
         available: u64,
     },
+    /// A given particle radius far from the one the particles' spacing implies (outside
+    /// [`crate::radius::POSSIBLE`] of [`crate::radius::estimate_radius`]): refused before
+    /// any work, as such a run hangs or writes an absurd mesh.
+    #[error("{}: a particle radius of {given:?} is {} × the {estimate:?} the particles' spacing implies (r is half the rest spacing; estimated from {sample} sampled particles)", path.display(), ratio(*given, *estimate))]
+    ImplausibleRadius {
+        /// The input whose particles were sampled.
+        path: PathBuf,
+        /// The radius given, world units.
+        given: f32,
+        /// The estimate, world units.
+        estimate: f32,
+        /// Particles sampled.
+        sample: usize,
+    },
     /// The input holds no particles.
     #[error("{path}: the file holds no particles")]
     EmptyInput {
         /// The file.
         path: PathBuf,
     },
+}
+
+/// `a / b` to three significant digits.
+fn ratio(a: f32, b: f32) -> String {
+    let x = a / b;
+    if (0.01..1000.0).contains(&x) {
+        format!("{x:.3}")
+    } else {
+        format!("{x:.2e}")
+    }
 }
 
 impl Error {

@@ -65,6 +65,7 @@ pub mod marching_cubes;
 pub mod mesh;
 pub(crate) mod neighbors;
 pub mod pipeline;
+pub mod radius;
 pub mod sequence;
 pub mod settings;
 pub mod smoothing;

@@ -91,14 +91,22 @@ impl FarmArgs {
 
 #[derive(Args)]
 struct ReconstructArgs {
-    /// Particle file (.xyz, .vtk, .ply, .bgeo), or a pattern with `{}` for the frame number.
+    /// Particle file (.xyz, .vtk, .vtu, .vtp, .ply, .bgeo), or a pattern with `{}` for the frame number.
     input: String,
     /// Output mesh (.glb, .gltf, .ply, .obj, .vtk); a pattern with `{}` for sequences.
     #[arg(short, long)]
     output: String,
-    /// Particle radius r, world units (half the rest spacing).
+    /// Particle radius r, world units (half the rest spacing). Default: estimated from
+    /// the first frame's spacing (printed). A given r far from that estimate is warned
+    /// about (outside 0.25×–4×) or refused (outside 0.05×–20×).
     #[arg(allow_negative_numbers = true, short = 'r', long)]
-    particle_radius: f32,
+    particle_radius: Option<f32>,
+    /// Take `-r` as given, without comparing it with the particles' spacing.
+    #[arg(long)]
+    no_radius_check: bool,
+    /// The radius the run uses: `-r`, or the estimate.
+    #[arg(skip)]
+    radius: f32,
     /// Influence radius R, multiples of r.
     #[arg(allow_negative_numbers = true, long, default_value_t = defaults().influence_radius)]
     influence_radius: f32,
@@ -174,7 +182,7 @@ struct ReconstructArgs {
     /// directory); removed on success, error and Ctrl-C.
     #[arg(long)]
     temp_dir: Option<PathBuf>,
-    /// Input format, overriding the extension (xyz, vtk, ply, bgeo).
+    /// Input format, overriding the extension (xyz, vtk, vtu, vtp, ply, bgeo).
     #[arg(long)]
     input_format: Option<ParticleFormat>,
     #[command(flatten)]
@@ -331,11 +339,11 @@ fn main() -> ExitCode {
         );
     });
     let result = match cli.command {
-        Command::Reconstruct(args) => {
+        Command::Reconstruct(mut args) => {
             let given = matches
                 .subcommand_matches("reconstruct")
                 .expect("the reconstruct subcommand");
-            reconstruct(&args, given, &cancel)
+            reconstruct(&mut args, given, &cancel)
         }
         Command::Archive(command) => archive(command, &cancel),
     };
@@ -405,7 +413,7 @@ enum KernelArg {
 }
 
 fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, Failure> {
-    let r = args.particle_radius;
+    let r = args.radius;
     let base = match args.paper {
         true => ReconstructSettings::paper(r),
         false => ReconstructSettings::new(r),
@@ -462,13 +470,15 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, Failure> {
 }
 
 fn reconstruct(
-    args: &ReconstructArgs,
+    args: &mut ReconstructArgs,
     given: &ArgMatches,
     cancel: &meniscus::CancelToken,
 ) -> Result<(), Failure> {
-    // Options first, then the frames: usage errors (exit 2) before any file is read.
+    // Options first, then the frames: usage errors (exit 2) before any file is read
+    // (without -r, checked for r = 1 until the estimate replaces it).
     check_run_options(args)?;
-    let options = options_from(args)?;
+    args.radius = args.particle_radius.unwrap_or(1.0);
+    options_from(args)?;
     let attributes = match &args.attributes {
         Some(list) => list
             .parse()
@@ -477,14 +487,17 @@ fn reconstruct(
     };
     let plan = plan_frames(&args.input, &args.output, &args.farm.choice())?;
     check_outputs(&plan).map_err(|e| Failure::Usage(e.to_string()))?;
-    for warning in ineffective_options(args, given, &plan, &attributes) {
-        eprintln!("warning: {warning}");
-    }
+    // The pool before the radius estimate, its first parallel work.
     if let Some(threads) = args.threads {
         rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build_global()
             .map_err(|e| Failure::Run(e.to_string()))?;
+    }
+    args.radius = resolve_radius(args, &plan[0].0.input)?;
+    let options = options_from(args)?;
+    for warning in ineffective_options(args, given, &plan, &attributes) {
+        eprintln!("warning: {warning}");
     }
     let job = job_options(args, attributes, cancel);
     let clock = Instant::now();
@@ -502,6 +515,52 @@ fn reconstruct(
         write_stats(path, &options, &reports, total)?;
     }
     check_failed(&reports)
+}
+
+/// The particle radius of the run: `-r` after checking it against the first frame's
+/// spacing (a warning outside 0.25×–4×, a usage error outside 0.05×–20×), or without `-r`
+/// the estimate, printed. `--no-radius-check` takes `-r` as given, unread; so does a
+/// first frame the estimate cannot read or measure.
+fn resolve_radius(args: &ReconstructArgs, first: &Path) -> Result<f32, Failure> {
+    use meniscus::radius::{estimate_radius_of_file, verify_radius, RadiusCheck};
+    let given = match args.particle_radius {
+        Some(r) if args.no_radius_check => return Ok(r),
+        given => given,
+    };
+    let estimate = match (estimate_radius_of_file(first, args.input_format), given) {
+        (Ok(estimate), _) => estimate,
+        // A frame that cannot be read or measured: with -r, the run reports it as it
+        // reads it (with --keep-going, as that frame's failure).
+        (Err(_), Some(r)) => return Ok(r),
+        (Err(e), None) => return Err(e.into()),
+    };
+    let shown = format!("{:?}", estimate.radius);
+    let Some(r) = given else {
+        if !args.quiet {
+            eprintln!(
+                "particle radius r = {:?} (estimated from the spacing of {} of {}'s particles; -r sets it)",
+                estimate.radius,
+                estimate.sample,
+                first.display()
+            );
+        }
+        return Ok(estimate.radius);
+    };
+    match verify_radius(first, r, &estimate) {
+        Ok(RadiusCheck::Plausible) => {}
+        Ok(_) => eprintln!(
+            "warning: -r {r:?} is {:.2} × the particle radius the spacing of {}'s particles implies ({}); r is half the rest spacing (--no-radius-check silences this)",
+            r / estimate.radius,
+            first.display(),
+            shown
+        ),
+        Err(e) => {
+            return Err(Failure::Usage(format!(
+                "{e}\nhint: give -r about {shown} (half the particle spacing), or --no-radius-check to run with -r {r:?} anyway"
+            )))
+        }
+    }
+    Ok(r)
 }
 
 /// The options of a run that the library does not check: `--threads`, `--fps`.
@@ -533,7 +592,7 @@ fn job_options(
         skip_existing: args.skip_existing,
         archive_error_bound: args
             .error_bound
-            .unwrap_or(meniscus::archive::default_error_bound(args.particle_radius)),
+            .unwrap_or(meniscus::archive::default_error_bound(args.radius)),
         archive_attribute_error_bound: args.attribute_error_bound,
         fps: args.stage.fps,
         up_axis: args.stage.up_axis,
@@ -707,12 +766,12 @@ fn ineffective_options(
     }
     // An error bound of world units given as multiples of r (as it once was).
     if let (true, Some(bound)) = (profile.quantized, args.error_bound) {
-        let r = args.particle_radius as f64;
+        let r = args.radius as f64;
         if bound > 0.1 * r {
             warnings.push(format!(
                 "--error-bound is in world units: {bound} is {:.3} × the particle radius (default {} = {} r)",
                 bound / r,
-                meniscus::archive::default_error_bound(args.particle_radius),
+                meniscus::archive::default_error_bound(args.radius),
                 meniscus::archive::DEFAULT_ERROR_BOUND_RADII
             ));
         }

@@ -472,9 +472,18 @@ fn new_user_errors_name_the_real_cause() {
             vec!["huge.ply", "claims 18446744073709551615 rows"],
             vec!["free space", "invalid option"],
         ),
-        // A radius far too small for the coordinates blames the radius, not --cell-size.
+        // A radius far too small for the coordinates blames the radius, not --cell-size
+        // (when the radius check is off).
         (
-            vec!["reconstruct", sphere, "-r", "1e-9", "-o", &out],
+            vec![
+                "reconstruct",
+                sphere,
+                "-r",
+                "1e-9",
+                "--no-radius-check",
+                "-o",
+                &out,
+            ],
             1,
             vec!["sphere.xyz", "the particle radius is too small"],
             vec!["--cell-size", "invalid option"],
@@ -570,6 +579,56 @@ fn new_user_errors_name_the_real_cause() {
             2,
             vec!["--particle-radius: must be a finite number > 0"],
             vec!["-- -1", "unexpected argument"],
+        ),
+        // A radius far from the one the spacing implies (0.0249 for the sphere, r = 0.025)
+        // is refused before any work, naming both values and the way out: 100x too large
+        // would run for minutes, 1e-9 would fail deep in the lattice.
+        (
+            vec!["reconstruct", sphere, "-r", "2.5", "-o", &out],
+            2,
+            vec![
+                "sphere.xyz: a particle radius of 2.5 is 100.",
+                "the 0.0248",
+                "r is half the rest spacing",
+                "hint: give -r about 0.0248",
+                "--no-radius-check",
+            ],
+            vec!["--cell-size", "warning"],
+        ),
+        (
+            vec!["reconstruct", sphere, "-r", "1e-9", "-o", &out],
+            2,
+            vec![
+                "a particle radius of 1e-9 is 4.02e-8 × the 0.0248",
+                "hint: give -r about",
+            ],
+            vec!["--cell-size", "lattice"],
+        ),
+        // Outside 0.25x-4x: a warning, and the run goes on.
+        (
+            vec!["reconstruct", sphere, "-r", "0.2", "-q", "-o", &out],
+            0,
+            vec![
+                "warning: -r 0.2 is 8.04 × the particle radius the spacing of",
+                "sphere.xyz's particles implies (0.0248",
+                "--no-radius-check silences this",
+            ],
+            vec!["error"],
+        ),
+        (
+            vec![
+                "reconstruct",
+                sphere,
+                "-r",
+                "0.2",
+                "--no-radius-check",
+                "-q",
+                "-o",
+                &out,
+            ],
+            0,
+            vec![],
+            vec!["warning", "error"],
         ),
         // Cells too small for the influence radius: the pair is named, either may be set.
         (

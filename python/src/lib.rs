@@ -52,6 +52,7 @@ pub(crate) fn to_py(e: Error) -> PyErr {
     let message = e.to_string();
     match e {
         Error::InvalidOption { .. }
+        | Error::ImplausibleRadius { .. }
         | Error::ParticleOutOfRange { .. }
         | Error::MemoryBudget { .. } => PyValueError::new_err(message),
         Error::Io { path, source } | Error::Spill { path, source } => match source.raw_os_error() {
@@ -257,6 +258,41 @@ fn attribute_of(name: String, array: &Bound<'_, PyAny>, count: usize) -> PyResul
 
 use pyo3::types::IntoPyDict;
 
+/// The particle radius of a run: `given` after checking it against the estimate (a
+/// `UserWarning` outside 0.25×–4×, a `ValueError` outside 0.05×–20×) unless not
+/// `radius_check`; without `given`, the estimate. `input` names the particles in errors.
+fn resolve_radius(
+    py: Python<'_>,
+    given: Option<f32>,
+    radius_check: bool,
+    input: &std::path::Path,
+    estimate: impl FnOnce() -> meniscus::Result<meniscus::radius::RadiusEstimate> + Send,
+) -> PyResult<f32> {
+    use meniscus::radius::{verify_radius, RadiusCheck};
+    if let (Some(r), false) = (given, radius_check) {
+        return Ok(r);
+    }
+    let estimate = py.allow_threads(estimate).map_err(to_py)?;
+    let Some(r) = given else {
+        return Ok(estimate.radius);
+    };
+    if verify_radius(input, r, &estimate).map_err(to_py)? == RadiusCheck::Doubtful {
+        let message = format!(
+            "particle_radius {r:?} is {:.2} × the radius the spacing of {}'s particles implies ({:?}); radius_check=False silences this",
+            r / estimate.radius,
+            input.display(),
+            estimate.radius
+        );
+        PyErr::warn_bound(
+            py,
+            &py.get_type_bound::<pyo3::exceptions::PyUserWarning>(),
+            &message,
+            1,
+        )?;
+    }
+    Ok(r)
+}
+
 /// The library's options of a function's `**options` (see [`options::settings`]).
 fn reconstruct_options(
     py: Python<'_>,
@@ -431,21 +467,33 @@ impl Mesh {
 
 /// Reconstructs the surface of particles at `positions` ((N, 3) float32 or float64;
 /// a C-contiguous float32 array is not copied) of radius `particle_radius` (world
-/// units). `**options` are the reconstruction settings ([`options::SETTINGS`]).
+/// units; default: estimated from their spacing, see [`resolve_radius`], which also
+/// checks a given one unless `radius_check` is false). `**options` are the
+/// reconstruction settings ([`options::SETTINGS`]).
 #[pyfunction]
-#[pyo3(signature = (positions, particle_radius, *, attributes = None, threads = None, **options))]
+#[pyo3(signature = (positions, particle_radius = None, *, attributes = None, threads = None,
+    radius_check = true, **options))]
 fn reconstruct(
     py: Python<'_>,
     positions: &Bound<'_, PyAny>,
-    particle_radius: f32,
+    particle_radius: Option<f32>,
     attributes: Option<&Bound<'_, PyDict>>,
     threads: Option<usize>,
+    radius_check: bool,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Mesh> {
     check_threads(threads)?;
-    let options = reconstruct_options(py, "reconstruct", particle_radius, options)?;
+    reconstruct_options(py, "reconstruct", particle_radius.unwrap_or(1.0), options)?;
     let positions = positions_of(positions)?;
     let slice = positions.as_slice();
+    let particle_radius = resolve_radius(
+        py,
+        particle_radius,
+        radius_check,
+        std::path::Path::new("particles in memory"),
+        || meniscus::radius::estimate_radius(slice),
+    )?;
+    let options = reconstruct_options(py, "reconstruct", particle_radius, options)?;
     let mut columns = Vec::new();
     if let Some(d) = attributes {
         for (k, v) in d.iter() {
@@ -474,6 +522,18 @@ fn reconstruct(
     ))
 }
 
+/// The particle radius the spacing of the particles at `positions` ((N, 3) float32 or
+/// float64) implies, world units: what `reconstruct` takes without `particle_radius`
+/// (meniscus::radius::estimate_radius).
+#[pyfunction]
+fn estimate_radius(py: Python<'_>, positions: &Bound<'_, PyAny>) -> PyResult<f32> {
+    let positions = positions_of(positions)?;
+    let slice = positions.as_slice();
+    py.allow_threads(|| meniscus::radius::estimate_radius(slice))
+        .map(|e| e.radius)
+        .map_err(to_py)
+}
+
 fn check_threads(threads: Option<usize>) -> PyResult<()> {
     if threads == Some(0) {
         return Err(PyValueError::new_err(
@@ -483,7 +543,7 @@ fn check_threads(threads: Option<usize>) -> PyResult<()> {
     Ok(())
 }
 
-/// Reads a particle file (.xyz, .vtk, .ply, .bgeo, by extension): positions (N, 3)
+/// Reads a particle file (.xyz, .vtk, .vtu, .vtp, .ply, .bgeo, by extension): positions (N, 3)
 /// float32 and every point attribute, name → (N,) or (N, k) float32.
 #[pyfunction]
 fn read_particles<'py>(
@@ -534,7 +594,7 @@ fn selection(attributes: Option<&Bound<'_, PyAny>>) -> PyResult<AttributeSelecti
 /// (dicts as the CLI's `--stats` JSON); with `keep_going`, a failed frame is one with
 /// status "failed" and an error, and the call returns normally.
 #[pyfunction]
-#[pyo3(signature = (input, output, particle_radius, *, attributes = None, threads = None,
+#[pyo3(signature = (input, output, particle_radius = None, *, attributes = None, threads = None, radius_check = true,
     frames = None, shard = None, start = None, end = None, keep_going = false,
     progress = None, skip_existing = false, normals = true, error_bound = None,
     attribute_error_bound = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND, fps = 24.0,
@@ -544,9 +604,10 @@ fn reconstruct_file<'py>(
     py: Python<'py>,
     input: String,
     output: String,
-    particle_radius: f32,
+    particle_radius: Option<f32>,
     attributes: Option<&Bound<'_, PyAny>>,
     threads: Option<usize>,
+    radius_check: bool,
     frames: Option<&Bound<'_, PyAny>>,
     shard: Option<&Bound<'_, PyAny>>,
     start: Option<i64>,
@@ -572,13 +633,26 @@ fn reconstruct_file<'py>(
     let up_axis: UpAxis = up_axis
         .parse()
         .map_err(|e| PyValueError::new_err(format!("invalid up_axis: {e}")))?;
-    let options = reconstruct_options(py, "reconstruct_file", particle_radius, options)?;
+    reconstruct_options(
+        py,
+        "reconstruct_file",
+        particle_radius.unwrap_or(1.0),
+        options,
+    )?;
     let attributes = selection(attributes)?;
     let choice = options::frame_choice(start, end, frames, shard)?;
     let input_format = input_format
         .map(|f| f.parse::<ParticleFormat>())
         .transpose()
         .map_err(|e| PyValueError::new_err(format!("invalid input_format: {e}")))?;
+    let first = plan_frames(&input, &output, &choice).map_err(to_py)?[0]
+        .0
+        .input
+        .clone();
+    let particle_radius = resolve_radius(py, particle_radius, radius_check, &first, || {
+        meniscus::radius::estimate_radius_of_file(&first, input_format)
+    })?;
+    let options = reconstruct_options(py, "reconstruct_file", particle_radius, options)?;
     let progress = progress.filter(|p| !p.is_none()).map(Bound::unbind);
     // An exception of the progress callback: it stops the run and is raised.
     let raised: Mutex<Option<PyErr>> = Mutex::new(None);
@@ -642,6 +716,7 @@ fn meniscus_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("FormatError", m.py().get_type_bound::<FormatError>())?;
     m.add_class::<Mesh>()?;
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
+    m.add_function(wrap_pyfunction!(estimate_radius, m)?)?;
     m.add_function(wrap_pyfunction!(read_particles, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct_file, m)?)?;
     m.add_class::<archive::Archive>()?;

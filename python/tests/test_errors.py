@@ -1,3 +1,5 @@
+import warnings
+
 import numpy as np
 import pytest
 
@@ -62,3 +64,20 @@ def test_ctrl_c_interrupts_a_run(frame25):
     full = time.perf_counter() - full
     print(f"interrupted after {elapsed:.2f} s; a whole run takes {full:.2f} s")
     assert elapsed < full
+
+
+def test_the_radius_is_estimated_and_checked(frame25):
+    # Frame 25 of the small dam break: r = 0.012.
+    r = meniscus.estimate_radius(frame25)
+    assert abs(r / RADIUS - 1) < 0.1
+    estimated = meniscus.reconstruct(frame25)
+    given = meniscus.reconstruct(frame25, r)
+    assert np.array_equal(estimated.triangles, given.triangles)
+    assert np.array_equal(estimated.vertices, given.vertices)
+    with pytest.raises(ValueError, match="the particles' spacing implies"):
+        meniscus.reconstruct(frame25, 100 * RADIUS)
+    with pytest.warns(UserWarning, match="radius_check=False"):
+        meniscus.reconstruct(frame25, 6 * RADIUS)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        meniscus.reconstruct(frame25, 6 * RADIUS, radius_check=False)

@@ -6,12 +6,13 @@
 //! | legacy VTK | `.vtk` | ASCII and BINARY (big-endian), POLYDATA / UNSTRUCTURED_GRID / any dataset with `POINTS`, float or double; `POINT_DATA` SCALARS / VECTORS / NORMALS / FIELD kept as attributes | binary POLYDATA |
 //! | PLY | `.ply` | ASCII, binary LE / BE; `vertex` x, y, z of any scalar type; other vertex properties kept | binary LE |
 //! | Houdini classic BGEO | `.bgeo`, `.bgeo.gz` | version 5 as partio / SPlisHSPlasH write it, plain or gzip (detected by content); float, int and vector point attributes | — |
+//! | VTK XML | `.vtu`, `.vtp` | UnstructuredGrid / PolyData; ascii, inline binary, appended raw or base64; zlib or LZ4 blocks; UInt32 / UInt64 headers; point data kept as attributes | appended raw |
 //!
 //! Positions are world units as stored. Every reader rejects empty files
 //! ([`Error::EmptyInput`]), truncated data, non-finite coordinates and malformed headers
 //! with a [`Error::Parse`] naming the file and the line or byte offset.
 //!
-//! One file per format (`xyz.rs`, `vtk.rs`, `ply.rs`, `bgeo.rs`), each implementing
+//! One file per format (`xyz.rs`, `vtk.rs`, `ply.rs`, `bgeo.rs`, `vtk_xml/`), each implementing
 //! `ParticleCodec`: the whole-file reader, the streaming reader (chunks from disk, for
 //! tiled runs: [`SpooledParticles`], [`stream_positions`]) and the writer. A new format is
 //! such a file plus its lines in [`ParticleFormat`] (variant, extension, name, codec).
@@ -25,6 +26,7 @@ mod source;
 mod spool;
 mod vtk;
 mod vtk_scan;
+mod vtk_xml;
 mod xyz;
 
 pub use source::{MappedXyz, ParticleChunk, ParticleSlices, ParticleSource};
@@ -79,10 +81,13 @@ pub enum ParticleFormat {
     Ply,
     /// Houdini classic BGEO (plain or gzip).
     Bgeo,
+    /// VTK XML UnstructuredGrid (`.vtu`); the reader takes PolyData too.
+    Vtu,
+    /// VTK XML PolyData (`.vtp`); the reader takes UnstructuredGrid too.
+    Vtp,
 }
 
-const SUPPORTED: &str =
-    "supported: .xyz, .vtk, .ply, .bgeo, .bgeo.gz (or name the format: xyz, vtk, ply, bgeo)";
+const SUPPORTED: &str = "supported: .xyz, .vtk, .vtu, .vtp, .ply, .bgeo, .bgeo.gz (or name the format: xyz, vtk, vtu, vtp, ply, bgeo)";
 
 impl ParticleFormat {
     /// The format named by a file's extension.
@@ -100,6 +105,10 @@ impl ParticleFormat {
             ParticleFormat::Ply
         } else if name.ends_with(".bgeo") || name.ends_with(".bgeo.gz") {
             ParticleFormat::Bgeo
+        } else if name.ends_with(".vtu") {
+            ParticleFormat::Vtu
+        } else if name.ends_with(".vtp") {
+            ParticleFormat::Vtp
         } else {
             return Err(Error::UnsupportedFormat {
                 path: path.to_path_buf(),
@@ -116,6 +125,8 @@ impl ParticleFormat {
             ParticleFormat::Vtk => &vtk::Vtk,
             ParticleFormat::Ply => &ply::Ply,
             ParticleFormat::Bgeo => &bgeo::Bgeo,
+            ParticleFormat::Vtu => &vtk_xml::VtkXml { polydata: false },
+            ParticleFormat::Vtp => &vtk_xml::VtkXml { polydata: true },
         }
     }
 }
@@ -128,6 +139,8 @@ impl std::str::FromStr for ParticleFormat {
             "vtk" => Ok(ParticleFormat::Vtk),
             "ply" => Ok(ParticleFormat::Ply),
             "bgeo" | "bgeo.gz" => Ok(ParticleFormat::Bgeo),
+            "vtu" => Ok(ParticleFormat::Vtu),
+            "vtp" => Ok(ParticleFormat::Vtp),
             other => Err(format!("unknown particle format {other:?}; {SUPPORTED}")),
         }
     }
@@ -221,7 +234,8 @@ pub fn write_particles(path: &Path, particles: &Particles, format: ParticleForma
 /// `format` or the extension. Streams: BGEO (plain or gzip); PLY, binary or ASCII, whose
 /// first element is `vertex` with scalar properties only (the rest of the file is not
 /// read); legacy VTK, binary or ASCII, whose first data section is `POINTS n float|double`
-/// (what SPlisHSPlasH and DualSPHysics write; the rest of the file is not read). Returns
+/// (what SPlisHSPlasH and DualSPHysics write; the rest of the file is not read); VTK XML
+/// (`.vtu`, `.vtp`) of one piece, in any encoding (the points array alone is read). Returns
 /// the particle count, or `Ok(None)` for any other layout, which [`read_particles`]
 /// handles and reports on (and for `.xyz`, which [`MappedXyz`] maps as it is). Memory: one
 /// chunk (and, for ASCII, one line), whatever the file size.
