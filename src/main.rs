@@ -3,9 +3,12 @@
 
 #[path = "cli/archive.rs"]
 mod archive_command;
+#[path = "cli/radius.rs"]
+mod radius_check;
+#[path = "cli/warnings.rs"]
+mod warnings;
 
 use archive_command::{archive, ArchiveCommand};
-use clap::parser::ValueSource;
 use clap::{ArgMatches, Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use meniscus::attributes::AttributeSelection;
@@ -13,11 +16,12 @@ use meniscus::io::mesh::MeshWriteOptions;
 use meniscus::io::particles::ParticleFormat;
 use meniscus::io::usd::UpAxis;
 use meniscus::job::{
-    check_outputs, output_profile, peak_rss_bytes, plan_frames, run_frames, FrameReport,
-    FrameStatus, JobOptions,
+    check_outputs, peak_rss_bytes, plan_frames, run_frames, FrameReport, FrameStatus, JobOptions,
 };
 use meniscus::pipeline::ReconstructOptions;
-use meniscus::settings::{Decimation, ReconstructSettings};
+use meniscus::settings::ReconstructSettings;
+use radius_check::resolve_radius;
+use warnings::ineffective_options;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -517,52 +521,6 @@ fn reconstruct(
     check_failed(&reports)
 }
 
-/// The particle radius of the run: `-r` after checking it against the first frame's
-/// spacing (a warning outside 0.25×–4×, a usage error outside 0.05×–20×), or without `-r`
-/// the estimate, printed. `--no-radius-check` takes `-r` as given, unread; so does a
-/// first frame the estimate cannot read or measure.
-fn resolve_radius(args: &ReconstructArgs, first: &Path) -> Result<f32, Failure> {
-    use meniscus::radius::{estimate_radius_of_file, verify_radius, RadiusCheck};
-    let given = match args.particle_radius {
-        Some(r) if args.no_radius_check => return Ok(r),
-        given => given,
-    };
-    let estimate = match (estimate_radius_of_file(first, args.input_format), given) {
-        (Ok(estimate), _) => estimate,
-        // A frame that cannot be read or measured: with -r, the run reports it as it
-        // reads it (with --keep-going, as that frame's failure).
-        (Err(_), Some(r)) => return Ok(r),
-        (Err(e), None) => return Err(e.into()),
-    };
-    let shown = format!("{:?}", estimate.radius);
-    let Some(r) = given else {
-        if !args.quiet {
-            eprintln!(
-                "particle radius r = {:?} (estimated from the spacing of {} of {}'s particles; -r sets it)",
-                estimate.radius,
-                estimate.sample,
-                first.display()
-            );
-        }
-        return Ok(estimate.radius);
-    };
-    match verify_radius(first, r, &estimate) {
-        Ok(RadiusCheck::Plausible) => {}
-        Ok(_) => eprintln!(
-            "warning: -r {r:?} is {:.2} × the particle radius the spacing of {}'s particles implies ({}); r is half the rest spacing (--no-radius-check silences this)",
-            r / estimate.radius,
-            first.display(),
-            shown
-        ),
-        Err(e) => {
-            return Err(Failure::Usage(format!(
-                "{e}\nhint: give -r about {shown} (half the particle spacing), or --no-radius-check to run with -r {r:?} anyway"
-            )))
-        }
-    }
-    Ok(r)
-}
-
 /// The options of a run that the library does not check: `--threads`, `--fps`.
 fn check_run_options(args: &ReconstructArgs) -> Result<(), Failure> {
     if args.threads == Some(0) {
@@ -711,111 +669,6 @@ fn check_failed(reports: &[FrameReport]) -> Result<(), Failure> {
         if failed.len() == 1 { "" } else { "s" },
         numbers.join(", ")
     )))
-}
-
-/// Options the user gave that the chosen output makes pointless, each with the reason;
-/// the run proceeds without them.
-fn ineffective_options(
-    args: &ReconstructArgs,
-    given: &ArgMatches,
-    plan: &[(meniscus::sequence::Frame, PathBuf)],
-    attributes: &AttributeSelection,
-) -> Vec<String> {
-    let given = |id: &str| given.value_source(id) == Some(ValueSource::CommandLine);
-    let profile = output_profile(plan);
-    let output = &args.output;
-    let mut warnings = Vec::new();
-    // Raw .xyz holds no attributes (a list of names is an error when it is read).
-    let raw_positions = args
-        .input_format
-        .or_else(|| {
-            let (frame, _) = plan.first()?;
-            ParticleFormat::from_path(&frame.input).ok()
-        })
-        .is_some_and(|f| f == ParticleFormat::Xyz);
-    if raw_positions && *attributes == AttributeSelection::All {
-        warnings.push("--attributes all has no effect: raw .xyz input holds positions only".into());
-    }
-    if !profile.quantized {
-        for (id, option) in [
-            ("error_bound", "--error-bound"),
-            ("attribute_error_bound", "--attribute-error-bound"),
-        ] {
-            if given(id) {
-                warnings.push(format!(
-                    "{option} has no effect: it quantizes a .mseq archive, and {output:?} is not one"
-                ));
-            }
-        }
-    } else if given("attribute_error_bound") {
-        if *attributes == AttributeSelection::None {
-            warnings.push(
-                "--attribute-error-bound has no effect: --attributes none carries no attributes"
-                    .into(),
-            );
-        } else if raw_positions {
-            warnings.push(
-                "--attribute-error-bound has no effect: raw .xyz input holds positions only".into(),
-            );
-        }
-    }
-    if given("no_normals") && !profile.normals {
-        warnings.push(format!(
-            "--no-normals has no effect: {output:?} stores no normals (they are computed when frames are extracted)"
-        ));
-    }
-    // An error bound of world units given as multiples of r (as it once was).
-    if let (true, Some(bound)) = (profile.quantized, args.error_bound) {
-        let r = args.radius as f64;
-        if bound > 0.1 * r {
-            warnings.push(format!(
-                "--error-bound is in world units: {bound} is {:.3} × the particle radius (default {} = {} r)",
-                bound / r,
-                meniscus::archive::default_error_bound(args.radius),
-                meniscus::archive::DEFAULT_ERROR_BOUND_RADII
-            ));
-        }
-    }
-    if given("fps") {
-        match profile.animated {
-            true if plan.len() == 1 && !profile.stage_metadata => warnings.push(format!(
-                "--fps has no effect: {output:?} holds a single frame, which does not play"
-            )),
-            true => {}
-            false => warnings.push(format!(
-                "--fps has no effect: only a {{}} sequence written into one .glb/.gltf, or a USD stage, is animated, and {output:?} is neither"
-            )),
-        }
-    }
-    for (id, option) in [
-        ("up_axis", "--up-axis"),
-        ("meters_per_unit", "--meters-per-unit"),
-    ] {
-        if given(id) && !profile.stage_metadata {
-            warnings.push(format!(
-                "{option} has no effect: it is recorded in a USD stage (.usdc, .usda, .usd), and {output:?} is not one"
-            ));
-        }
-    }
-    if given("skip_existing") && profile.written_whole {
-        warnings.push(format!(
-            "--skip-existing has no effect: {output:?} holds the whole sequence and is written whole"
-        ));
-    }
-    let single_file = plan.len() == 1 && plan[0].0.label.is_empty();
-    if given("keep_going") && single_file {
-        warnings.push(
-            "--keep-going has no effect: a single file has no other frames to go on with".into(),
-        );
-    }
-    if let (true, Some(decimate)) = (given("decimate_error"), &args.decimate) {
-        if decimate.parse() == Ok(Decimation::Off) {
-            warnings.push(format!(
-                "--decimate-error has no effect: decimation is off (--decimate {decimate})"
-            ));
-        }
-    }
-    warnings
 }
 
 /// The run's summary line: frames, time, triangles, where they went (`output` as given
