@@ -8,12 +8,13 @@
 #   benches/budget_rss.sh [-r RADIUS] [-n RUNS] [-t "1 2"] \
 #       [-b "256MiB 384MiB 512MiB 1GiB 2GiB"] SCENE...
 #
-# Defaults: -r 0.025 (the /work/scenes frames), 5 runs, 1 and 2 threads, the budgets
-# above. Uses target/release/meniscus (MENISCUS to override); outputs go to a temporary
-# directory that is removed.
+# Defaults: -r 0.012 (the 4M scenes are frame 25 tiled by examples/tile_scene, as
+# benches/peers.py builds them), 5 runs, 1 and 2 threads, the budgets above. Uses
+# target/release/meniscus (MENISCUS to override); outputs go to a temporary directory
+# that is removed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-radius=0.025
+radius=0.012
 runs=5
 threads="1 2"
 budgets="256MiB 384MiB 512MiB 1GiB 2GiB"
