@@ -117,6 +117,7 @@ pub(crate) fn plan_tiles<S: ParticleSource + ?Sized>(
         decimated_in_tiles,
     };
     let (tile_blocks, estimated_peak_bytes) = choose_tile_blocks(&budget, tile_options)?;
+    crate::allocator::fit_retention_to_budget(tile_options.memory_budget_bytes);
     let kept_freed_memory =
         crate::allocator::keep_freed_memory(crate::allocator::may_keep_freed_memory(
             estimated_peak_bytes,
