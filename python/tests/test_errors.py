@@ -52,12 +52,19 @@ def test_ctrl_c_interrupts_a_run(frame25):
     import time
 
     big = np.concatenate([frame25 + np.float32(dx) for dx in (0.0, 1.0, 2.0, 3.0, 4.0, 5.0)])
+    # Ctrl-C as a terminal delivers it, to Python's own handler: a shell that starts a
+    # job in the background (`cmd &`, as CI scripts may) starts it with SIGINT ignored,
+    # and Python then keeps it ignored, so no KeyboardInterrupt could come.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(0.1, lambda: os.kill(os.getpid(), signal.SIGINT))
-    start = time.perf_counter()
-    timer.start()
-    with pytest.raises(KeyboardInterrupt):
-        meniscus.reconstruct(big, RADIUS, subdivide=2)
-    timer.join()
+    try:
+        start = time.perf_counter()
+        timer.start()
+        with pytest.raises(KeyboardInterrupt):
+            meniscus.reconstruct(big, RADIUS, subdivide=2)
+        timer.join()
+    finally:
+        signal.signal(signal.SIGINT, previous)
     elapsed = time.perf_counter() - start
     full = time.perf_counter()
     meniscus.reconstruct(big, RADIUS, subdivide=2)
