@@ -26,16 +26,7 @@ fn the_stream_of_positions_agrees_with_the_whole_reader_on_mutated_files() {
         write_particles(&path, &small, format).unwrap();
         bases.push((format!("m.{ext}"), std::fs::read(&path).unwrap()));
     }
-    let mut xml: Vec<PathBuf> = std::fs::read_dir(root.join("tests/data/vtk_xml"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| {
-            let name = p.file_name().unwrap().to_str().unwrap();
-            name.starts_with("dd9_") && (name.ends_with(".vtu") || name.ends_with(".vtp"))
-        })
-        .collect();
-    xml.sort();
-    for p in xml {
+    for p in support::vtk_xml_fixtures() {
         let ext = p.extension().unwrap().to_str().unwrap();
         bases.push((format!("m.{ext}"), std::fs::read(&p).unwrap()));
     }

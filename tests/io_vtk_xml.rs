@@ -21,20 +21,6 @@ fn fixture(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// The VTK-written fixtures of the first 40 particles of double dam break frame 9.
-fn fixtures() -> Vec<PathBuf> {
-    let mut names: Vec<PathBuf> = std::fs::read_dir(fixture(""))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| {
-            let name = p.file_name().unwrap().to_str().unwrap();
-            name.starts_with("dd9_") && (name.ends_with(".vtu") || name.ends_with(".vtp"))
-        })
-        .collect();
-    names.sort();
-    names
-}
-
 fn bits(p: &[Vec3]) -> Vec<[u32; 3]> {
     p.iter().map(|v| v.to_array().map(f32::to_bits)).collect()
 }
@@ -63,7 +49,7 @@ fn each_vtk_xml_encoding_reads_like_the_legacy_file() {
     let n = 40;
     let velocity = &legacy.attributes[0];
     assert_eq!(velocity.name, "velocity");
-    let files = fixtures();
+    let files = support::vtk_xml_fixtures();
     // Every data mode × compressor VTK writes, both header sizes, both point types, both
     // dataset types, both byte orders.
     assert_eq!(files.len(), 13, "{files:?}");
@@ -424,7 +410,7 @@ fn a_reconstruction_from_the_vtu_equals_the_legacy_files() {
 #[test]
 fn mutated_vtk_xml_files_are_read_or_rejected_never_panic() {
     let dir = tempfile::tempdir().unwrap();
-    let bases: Vec<(String, Vec<u8>)> = fixtures()
+    let bases: Vec<(String, Vec<u8>)> = support::vtk_xml_fixtures()
         .iter()
         .map(|p| {
             let ext = p.extension().unwrap().to_str().unwrap();

@@ -56,6 +56,22 @@ pub fn shipped_frames() -> Vec<(String, f32)> {
         .collect()
 }
 
+/// The VTK-written VTK XML fixtures (`tests/data/vtk_xml/dd9_*.vtu|vtp`, the first 40
+/// particles of double dam break frame 9), sorted by name.
+pub fn vtk_xml_fixtures() -> Vec<PathBuf> {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/vtk_xml");
+    let mut names: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| {
+            let name = p.file_name().unwrap().to_str().unwrap();
+            name.starts_with("dd9_") && (name.ends_with(".vtu") || name.ends_with(".vtp"))
+        })
+        .collect();
+    names.sort();
+    names
+}
+
 /// The `meniscus` binary of this build.
 pub fn meniscus() -> Command {
     Command::new(env!("CARGO_BIN_EXE_meniscus"))
