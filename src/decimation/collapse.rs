@@ -10,8 +10,7 @@ use glam::{DVec3, Vec3};
 
 /// An edge collapse candidate of one pass, with the placement computed when it was
 /// costed: still valid when it is taken, since a collapse is taken only while neither end
-/// has moved in the pass. `u == u32::MAX` marks a candidate the parallel walk has already
-/// decided.
+/// has moved in the pass.
 #[derive(Clone, Copy)]
 pub(super) struct Candidate {
     /// Squared RMS distance of the collapse, `Q(p) / area` (unit-box units).
@@ -20,6 +19,56 @@ pub(super) struct Candidate {
     pub(super) target: DVec3,
     pub(super) u: u32,
     pub(super) v: u32,
+    /// The triangle whose side `u → v` the candidate came from (the next pass finds the
+    /// candidate again by it, to reuse its cost).
+    pub(super) triangle: u32,
+    /// [`Mark::NONE`], [`Mark::DECIDED`] by the parallel walk in this pass, or the clock
+    /// of the state when the collapse was last refused.
+    pub(super) mark: u32,
+}
+
+/// Values of [`Candidate::mark`] besides a refusal's clock.
+pub(super) struct Mark;
+
+impl Mark {
+    /// Never refused (clocks start at 1).
+    pub(super) const NONE: u32 = 0;
+    /// Decided by the parallel walk of this pass.
+    pub(super) const DECIDED: u32 = u32::MAX;
+}
+
+impl Candidate {
+    /// The edge `u → v` of `triangle`, not costed yet.
+    pub(super) fn edge(triangle: u32, u: u32, v: u32) -> Candidate {
+        Candidate {
+            cost: 0.0,
+            target: DVec3::ZERO,
+            u,
+            v,
+            triangle,
+            mark: Mark::NONE,
+        }
+    }
+}
+
+/// The rules of one attempt: the pass (a vertex moves at most once per pass), the error
+/// bound (unit-box units) and the clock a collapse stamps its one-ring with.
+#[derive(Clone, Copy)]
+pub(super) struct Attempt {
+    pub(super) pass: u32,
+    pub(super) max_cost_error: Option<f64>,
+    pub(super) clock: u32,
+}
+
+/// What [`View::try_collapse`] did.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(super) enum Outcome {
+    Collapsed,
+    /// Refused by the link condition, the valence rule or the geometry tests: refused
+    /// again as long as no collapse stamps `u` or `v` (see [`View::collapse`]).
+    Refused,
+    /// Not tried: an end is gone or moved in this pass, or the cost is over the bound.
+    Passed,
 }
 
 const MIN_NORMAL_DOT: f64 = 0.5;
@@ -53,6 +102,7 @@ pub(super) struct View {
     vert_tris: *mut TriList,
     alive: *mut bool,
     touched: *mut u32,
+    stamp: *mut u32,
     owner: *const u32,
 }
 
@@ -72,6 +122,7 @@ impl View {
             vert_tris: state.vert_tris.as_mut_ptr(),
             alive: state.alive.as_mut_ptr(),
             touched: state.touched.as_mut_ptr(),
+            stamp: state.stamp.as_mut_ptr(),
             owner: state.owner.as_ptr(),
         }
     }
@@ -99,6 +150,19 @@ impl View {
         *self.owner.add(v as usize)
     }
 
+    /// Whether a collapse refused at `clock` would be refused again: no collapse since
+    /// has stamped either end. A collapse changes the positions, triangles and valences of
+    /// the closed one-ring of the merged vertex alone, and stamps it all; the test of an
+    /// edge reads its ends' one-rings and its opposite vertices' valences, and an
+    /// unstamped opposite vertex can only have lost triangles, which never turns a refusal
+    /// into a collapse.
+    pub(super) unsafe fn refused_since(&self, c: &Candidate) -> bool {
+        c.mark != Mark::NONE
+            && c.mark != Mark::DECIDED
+            && *self.stamp.add(c.u as usize) <= c.mark
+            && *self.stamp.add(c.v as usize) <= c.mark
+    }
+
     /// Walks one chunk's candidates, taking at most `share` collapses whose closed
     /// one-rings the chunk owns; marks every candidate it decided.
     pub(super) unsafe fn walk_chunk(
@@ -107,20 +171,19 @@ impl View {
         candidates: &mut [Candidate],
         cost_limit: f64,
         share: usize,
-        pass: u32,
-        max_cost_error: Option<f64>,
+        attempt: Attempt,
     ) -> WalkTally {
         let mut tally = WalkTally::default();
         for c in candidates.iter_mut() {
             if tally.collapses >= share {
                 break;
             }
-            if c.cost > cost_limit || !self.owns_rings(chunk, c.u, c.v) {
+            if c.cost > cost_limit || self.refused_since(c) || !self.owns_rings(chunk, c.u, c.v) {
                 continue;
             }
             let candidate = *c;
-            c.u = u32::MAX;
-            self.try_collapse(&candidate, pass, max_cost_error, &mut tally);
+            c.mark = Mark::DECIDED;
+            self.try_collapse(&candidate, attempt, &mut tally);
         }
         tally
     }
@@ -137,37 +200,47 @@ impl View {
         })
     }
 
-    /// Collapses the candidate if it is still valid and allowed; counts what happened.
+    /// Collapses the candidate if it is still valid and allowed, stamping the merged
+    /// vertex's closed one-ring with the attempt's clock; counts what happened.
     pub(super) unsafe fn try_collapse(
         &self,
         c: &Candidate,
-        pass: u32,
-        max_cost_error: Option<f64>,
+        attempt: Attempt,
         tally: &mut WalkTally,
-    ) -> bool {
+    ) -> Outcome {
+        let Attempt {
+            pass,
+            max_cost_error,
+            clock,
+        } = attempt;
         let (u, v) = (c.u, c.v);
         if !self.alive(u) || !self.alive(v) || self.touched(u) == pass || self.touched(v) == pass {
-            return false;
+            return Outcome::Passed;
         }
         // Neither end has moved since the candidate was costed: its placement holds.
         let (target_point, error) = (c.target, c.cost.sqrt());
         if max_cost_error.is_some_and(|m| error > m) {
-            return false;
+            return Outcome::Passed;
         }
         if !self.link_ok(u, v) {
             tally.refused_topology += 1;
-            return false;
+            return Outcome::Refused;
         }
         if !self.geometry_ok(u, v, target_point) {
             tally.refused_geometry += 1;
-            return false;
+            return Outcome::Refused;
         }
         tally.removed_triangles += self.collapse(u, v, target_point);
         *self.touched.add(u as usize) = pass;
         *self.touched.add(v as usize) = pass;
+        for &t in self.vert_tris(u) {
+            for &w in &self.tri(t) {
+                *self.stamp.add(w as usize) = clock;
+            }
+        }
         tally.collapses += 1;
         tally.max_error = tally.max_error.max(error);
-        true
+        Outcome::Collapsed
     }
 
     unsafe fn is_neighbour(&self, a: u32, b: u32) -> bool {

@@ -11,6 +11,16 @@
 //! in mesh order, each vertex at most once per pass (several passes approximate the
 //! greedy order of a heap, without the heap's cache misses) → compact.
 //!
+//! **Reuse between passes.** An edge's cost and placement are a function of its two
+//! ends' positions and quadrics, so a pass takes them from the previous pass's candidate
+//! of the same triangle side when neither end moved (the tail passes of a decimation cost
+//! few edges anew). A refused collapse is not tried again until a collapse has changed the
+//! one-ring of one of its ends: every collapse stamps the closed one-ring of the merged
+//! vertex, which is all it changes. Both are exact: the output is the same as costing and
+//! trying everything every pass (a unit test compares them). On the 168k-particle splash's
+//! raw surface (707k triangles, error-bounded) this halves the edges costed and the
+//! refusals tried (143k → 62k), −9 % of the decimation's instructions.
+//!
 //! **Parallel walk** (meshes decimated whole, not region by region). The triangles are
 //! cut into fixed chunks of `CHUNK_TRIANGLES` in mesh order (spatially coherent:
 //! marching cubes emits them block by block). At the start of a pass every vertex is
@@ -77,11 +87,11 @@ mod quadric;
 mod tri_list;
 
 use crate::mesh::TriMesh;
-use collapse::{Candidate, View, WalkTally};
+use collapse::{Attempt, Candidate, Mark, Outcome, View, WalkTally};
 use glam::{DVec3, Vec3};
 pub(crate) use pieces::decimate_band;
 pub(crate) use pieces::place_survivors;
-use placement::place_candidates;
+use placement::place_candidates_at;
 use quadric::{Plane, Quadric};
 use rayon::prelude::*;
 use tri_list::TriList;
@@ -274,6 +284,28 @@ pub(crate) fn decimate_locked_walk(
     extra_locked: &[bool],
     walk: Walk,
 ) -> (DecimateStats, Vec<u32>) {
+    decimate_with(mesh, target, max_error, extra_locked, walk, Reuse::Yes)
+}
+
+/// Whether a pass reuses what the previous one learnt: the costs of edges whose ends did
+/// not move, and the refusals of collapses whose one-rings did not change. Either way the
+/// output is the same (a unit test compares them); `No` is the reference.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Reuse {
+    Yes,
+    #[cfg(test)]
+    No,
+}
+
+/// [`decimate_locked_walk`], reusing or not.
+fn decimate_with(
+    mesh: &mut TriMesh,
+    target: usize,
+    max_error: Option<f32>,
+    extra_locked: &[bool],
+    walk: Walk,
+    reuse: Reuse,
+) -> (DecimateStats, Vec<u32>) {
     let before = mesh.triangle_count();
     let mut stats = DecimateStats {
         triangles_before: before,
@@ -284,6 +316,7 @@ pub(crate) fn decimate_locked_walk(
         return (stats, (0..mesh.vertex_count() as u32).collect());
     }
     let (mut s, frame) = State::from_mesh(mesh, extra_locked, &mut stats);
+    s.reuse = reuse;
     let mut progress = Progress {
         stats,
         alive_tris: before,
@@ -295,9 +328,12 @@ pub(crate) fn decimate_locked_walk(
     let mut stalled = false;
     // Multiple of the pass goal that sets the cost limit; grows when passes stall.
     let mut limit_factor = 2usize;
+    // The candidates of the previous pass, whose costs the next pass reuses where neither
+    // end moved.
+    let mut previous = Vec::new();
     while progress.alive_tris > target {
         pass += 1;
-        let mut chunks = s.candidates();
+        let mut chunks = s.candidates(std::mem::take(&mut previous), pass);
         // Collapse every edge cheaper than the cost of the (2·goal)-th cheapest candidate,
         // walking the edges in mesh order (spatially coherent, so the walk stays in cache),
         // each vertex at most once per pass; several passes approximate the greedy order
@@ -314,13 +350,13 @@ pub(crate) fn decimate_locked_walk(
         }
         done += sequential_walk(
             &mut s,
-            &chunks,
+            &mut chunks,
             cost_limit,
             goal - done.min(goal),
             pass,
             &mut progress,
         );
-        drop(chunks);
+        previous = chunks;
         if done == 0 {
             if stalled {
                 break;
@@ -335,6 +371,7 @@ pub(crate) fn decimate_locked_walk(
             limit_factor = limit_factor.saturating_mul(4);
         }
     }
+    drop(previous);
     let mut stats = progress.stats;
     stats.passes = pass;
     let remap = s.compact_into(mesh, frame);
@@ -414,6 +451,9 @@ fn parallel_walk(
     // most the goal, so the parallel walk cannot overshoot the target.
     let budget = goal.min((progress.alive_tris - progress.target) / 2);
     let max_cost_error = progress.max_cost_error;
+    // Every collapse of the parallel walk stamps with the same clock, newer than every
+    // refusal so far.
+    let clock = s.clock + 1;
     let view = View::new(s);
     let tallies: Vec<WalkTally> = chunks
         .par_iter_mut()
@@ -430,12 +470,16 @@ fn parallel_walk(
                     candidates,
                     cost_limit,
                     share,
-                    pass,
-                    max_cost_error,
+                    Attempt {
+                        pass,
+                        max_cost_error,
+                        clock,
+                    },
                 )
             }
         })
         .collect();
+    s.clock = clock;
     tallies
         .iter()
         .map(|t| {
@@ -446,31 +490,48 @@ fn parallel_walk(
 }
 
 /// The sequential walk over all candidates in mesh order, skipping those the parallel walk
-/// decided, until `goal` more collapses are made or the target is reached. Returns the
-/// collapses made.
+/// decided and those refused before whose ends no collapse has stamped since (they would
+/// be refused again), until `goal` more collapses are made or the target is reached.
+/// Returns the collapses made.
 fn sequential_walk(
     s: &mut State,
-    chunks: &[Vec<Candidate>],
+    chunks: &mut [Vec<Candidate>],
     cost_limit: f64,
     goal: usize,
     pass: u32,
     progress: &mut Progress,
 ) -> usize {
+    let mut clock = s.clock;
+    let reuse = s.reuse;
     let view = View::new(s);
     let mut done = 0;
-    for c in chunks.iter().flatten() {
+    for c in chunks.iter_mut().flatten() {
         if done >= goal || progress.alive_tris <= progress.target {
             break;
         }
-        if c.u == u32::MAX || c.cost > cost_limit {
+        // SAFETY (here and below): one thread; `view` is the only access to the state.
+        if c.mark == Mark::DECIDED || c.cost > cost_limit || unsafe { view.refused_since(c) } {
             continue;
         }
         let mut tally = WalkTally::default();
-        // SAFETY: one thread; `view` is the only access to the state.
-        let collapsed = unsafe { view.try_collapse(c, pass, progress.max_cost_error, &mut tally) };
+        let attempt = Attempt {
+            pass,
+            max_cost_error: progress.max_cost_error,
+            clock: clock + 1,
+        };
+        let outcome = unsafe { view.try_collapse(c, attempt, &mut tally) };
+        match outcome {
+            Outcome::Collapsed => {
+                clock += 1;
+                done += 1;
+            }
+            Outcome::Refused if reuse == Reuse::Yes => c.mark = clock,
+            Outcome::Refused => {}
+            Outcome::Passed => {}
+        }
         progress.record(&tally);
-        done += collapsed as usize;
     }
+    s.clock = clock;
     done
 }
 
@@ -488,6 +549,12 @@ struct State {
     alive: Vec<bool>,
     /// Pass in which the vertex last moved (each vertex moves at most once per pass).
     touched: Vec<u32>,
+    /// Clock of the last collapse that changed the vertex's closed one-ring (0: none).
+    stamp: Vec<u32>,
+    /// The clock: the stamp of the last collapse, and what a refusal is marked with.
+    /// Starts at 1 ([`Mark::NONE`] is 0).
+    clock: u32,
+    reuse: Reuse,
     /// Chunk owning the vertex during the parallel walk of a pass.
     owner: Vec<u32>,
 }
@@ -525,28 +592,67 @@ impl State {
         (s, frame)
     }
 
-    /// The candidates of a pass: every live interior edge once (as the directed side
-    /// u → v, u < v), costed in parallel, in mesh order, per chunk.
-    fn candidates(&self) -> Vec<Vec<Candidate>> {
+    /// The candidates of pass `pass`: every live interior edge once (as the directed side
+    /// u → v, u < v), in mesh order, per chunk. An edge of the same triangle among the
+    /// `previous` pass's candidates keeps its cost and placement when neither end moved in
+    /// that pass (they are a function of the two ends' positions and quadrics alone); the
+    /// others are costed, in parallel. The tail of a decimation costs few edges anew: its
+    /// passes make few collapses.
+    fn candidates(&self, mut previous: Vec<Vec<Candidate>>, pass: u32) -> Vec<Vec<Candidate>> {
+        let moved_last_pass = |w: u32| self.touched[w as usize] + 1 == pass;
+        // Each chunk's old list is dropped as its new one is made: no more memory than one
+        // list.
+        previous.resize_with(self.tris.len().div_ceil(CHUNK_TRIANGLES), Vec::new);
         self.tris
             .par_chunks(CHUNK_TRIANGLES)
             .zip(self.tri_alive.par_chunks(CHUNK_TRIANGLES))
-            .map(|(tris, alive)| {
+            .zip(previous)
+            .enumerate()
+            .map(|(chunk, ((tris, alive), old))| {
+                let first = (chunk * CHUNK_TRIANGLES) as u32;
                 let mut out = Vec::with_capacity(tris.len() * 3 / 2);
-                for (tri, _) in tris.iter().zip(alive).filter(|(_, a)| **a) {
+                // Where the candidates to cost are in `out`.
+                let mut fresh = Vec::with_capacity(out.capacity());
+                let mut o = 0;
+                for (i, (tri, _)) in tris.iter().zip(alive).enumerate().filter(|(_, (_, a))| **a) {
+                    let t = first + i as u32;
+                    while o < old.len() && old[o].triangle < t {
+                        o += 1;
+                    }
                     for k in 0..3 {
                         let (u, v) = (tri[k], tri[(k + 1) % 3]);
-                        if u < v && !self.locked[u as usize] && !self.locked[v as usize] {
-                            out.push(Candidate {
-                                cost: 0.0,
-                                target: DVec3::ZERO,
-                                u,
-                                v,
-                            });
+                        if u >= v || self.locked[u as usize] || self.locked[v as usize] {
+                            continue;
+                        }
+                        let edge = Candidate::edge(t, u, v);
+                        let kept = (self.reuse == Reuse::Yes
+                            && !moved_last_pass(u)
+                            && !moved_last_pass(v))
+                        .then(|| {
+                            old[o..]
+                                .iter()
+                                .take_while(|c| c.triangle == t)
+                                .find(|c| c.u == u && c.v == v)
+                        })
+                        .flatten();
+                        match kept {
+                            Some(c) => out.push(Candidate {
+                                mark: if c.mark == Mark::DECIDED {
+                                    Mark::NONE
+                                } else {
+                                    c.mark
+                                },
+                                ..*c
+                            }),
+                            None => {
+                                fresh.push(out.len() as u32);
+                                out.push(edge);
+                            }
                         }
                     }
                 }
-                place_candidates(&self.pos, &self.quadric, &mut out);
+                drop(old);
+                place_candidates_at(&self.pos, &self.quadric, &mut out, &fresh);
                 out
             })
             .collect()
@@ -651,6 +757,9 @@ impl State {
             locked,
             alive: vec![true; nv],
             touched: vec![0; nv],
+            stamp: vec![0; nv],
+            clock: 1,
+            reuse: Reuse::Yes,
             owner: vec![u32::MAX; nv],
         }
     }
@@ -664,5 +773,59 @@ impl State {
                 .min()
                 .map_or(u32::MAX, |&t| (t as usize / CHUNK_TRIANGLES) as u32);
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_rng::TestRng;
+
+    /// An icosphere of 20·4^level triangles, every vertex pushed in or out by up to
+    /// `noise` (the bumps decimation removes).
+    fn noisy_sphere(level: u32, noise: f32) -> TriMesh {
+        let mut mesh = crate::isolated::icosphere(level, 1.0);
+        let mut rng = TestRng::new(3);
+        for p in &mut mesh.positions {
+            *p *= 1.0 + noise * (rng.unit_f64() as f32 * 2.0 - 1.0);
+        }
+        mesh
+    }
+
+    #[test]
+    fn reusing_costs_and_refusals_gives_the_same_decimation() {
+        // Five chunks (the parallel walk runs), with and without an error bound.
+        let mesh = noisy_sphere(6, 0.01);
+        let n = mesh.triangle_count();
+        assert!(n > 4 * CHUNK_TRIANGLES);
+        for (walk, target, max_error) in [
+            (Walk::Chunked, n / 5, None),
+            (Walk::Sequential, n / 5, None),
+            (Walk::Chunked, n / 10, Some(0.004)),
+            (Walk::Sequential, 0, Some(0.004)),
+        ] {
+            let mut reused = mesh.clone();
+            let (stats, remap) =
+                decimate_with(&mut reused, target, max_error, &[], walk, Reuse::Yes);
+            let mut fresh = mesh.clone();
+            let (reference, reference_remap) =
+                decimate_with(&mut fresh, target, max_error, &[], walk, Reuse::No);
+            assert!(reused == fresh, "{target} {max_error:?}: the meshes differ");
+            assert_eq!(remap, reference_remap);
+            assert_eq!(stats.collapses, reference.collapses);
+            assert_eq!(stats.passes, reference.passes);
+            assert!(stats.collapses > n / 4, "{stats:?}");
+            // Refusals are tried again only where a collapse changed the one-rings: the
+            // tail of a bounded decimation, pass after pass over the same refused edges,
+            // tries fewer (the parallel walk's refusals are tried again next pass).
+            let refused = |s: &DecimateStats| s.refused_geometry + s.refused_topology;
+            assert!(refused(&stats) <= refused(&reference));
+            if walk == Walk::Sequential && max_error.is_some() {
+                assert!(
+                    refused(&stats) < refused(&reference),
+                    "{stats:?} against {reference:?}"
+                );
+            }
+        }
     }
 }

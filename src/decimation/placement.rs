@@ -37,19 +37,32 @@ pub(super) fn candidate(pos: &[DVec3], quadric: &[Quadric], u: u32, v: u32) -> C
     Candidate {
         cost: if weight > 0.0 { cost / weight } else { 0.0 },
         target,
-        u,
-        v,
+        ..Candidate::edge(0, u, v)
     }
 }
 
 /// Fills in the target and cost of every candidate (its `u`, `v` set), exactly as
 /// [`candidate`] would one by one.
+#[cfg(test)]
 pub(super) fn place_candidates(pos: &[DVec3], quadric: &[Quadric], candidates: &mut [Candidate]) {
+    let all: Vec<u32> = (0..candidates.len() as u32).collect();
+    place_candidates_at(pos, quadric, candidates, &all);
+}
+
+/// [`place_candidates`] on the candidates at the indices `at` only.
+pub(super) fn place_candidates_at(
+    pos: &[DVec3],
+    quadric: &[Quadric],
+    candidates: &mut [Candidate],
+    at: &[u32],
+) {
     #[cfg(target_arch = "x86_64")]
-    lanes::place_candidates(pos, quadric, candidates);
+    lanes::place_candidates_at(pos, quadric, candidates, at);
     #[cfg(not(target_arch = "x86_64"))]
-    for c in candidates {
-        *c = candidate(pos, quadric, c.u, c.v);
+    for &i in at {
+        let c = &mut candidates[i as usize];
+        let placed = candidate(pos, quadric, c.u, c.v);
+        (c.cost, c.target) = (placed.cost, placed.target);
     }
 }
 
@@ -273,15 +286,17 @@ mod lanes {
         }
     }
 
-    /// Costs `candidates` group by group; a short last group repeats its first candidate in
-    /// the spare lanes.
-    pub(super) fn place_candidates(
+    /// Costs the candidates at the indices `at`, group by group; a short last group
+    /// repeats its first candidate in the spare lanes.
+    pub(super) fn place_candidates_at(
         pos: &[DVec3],
         quadric: &[Quadric],
         candidates: &mut [Candidate],
+        at: &[u32],
     ) {
-        for group in candidates.chunks_mut(LANES) {
-            let (a, b) = (&group[0], &group[group.len() - 1]);
+        for group in at.chunks(LANES) {
+            let at = [group[0], group[group.len() - 1]].map(|i| i as usize);
+            let (a, b) = (&candidates[at[0]], &candidates[at[1]]);
             let (ua, va, ub, vb) = (a.u as usize, a.v as usize, b.u as usize, b.v as usize);
             let vector = |p: &DVec3, o: &DVec3| V {
                 x: F::new([p.x, o.x]),
@@ -317,7 +332,8 @@ mod lanes {
                 target.y.lanes(),
                 target.z.lanes(),
             );
-            for (i, c) in group.iter_mut().enumerate() {
+            for (i, &c) in at.iter().enumerate() {
+                let c = &mut candidates[c];
                 c.cost = cost[i];
                 c.target = DVec3::new(x[i], y[i], z[i]);
             }
@@ -433,8 +449,7 @@ mod tests {
                     Candidate {
                         cost: f64::NAN,
                         target: DVec3::NAN,
-                        u,
-                        v: if u == v { (v + 1) % n } else { v },
+                        ..Candidate::edge(0, u, if u == v { (v + 1) % n } else { v })
                     }
                 })
                 .collect();
