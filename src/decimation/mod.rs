@@ -356,13 +356,21 @@ fn decimate_with(
             pass,
             &mut progress,
         );
-        previous = chunks;
         if done == 0 {
-            if stalled {
+            // Nothing changed: a pass with no limit would try the same collapses again
+            // unless some were over this pass's limit and under the error bound.
+            let bound = progress.max_cost_error;
+            let tried_all = chunks
+                .iter()
+                .flatten()
+                .all(|c| c.cost <= cost_limit || bound.is_some_and(|m| c.cost.sqrt() > m));
+            if stalled || tried_all {
                 break;
             }
+            previous = chunks;
             stalled = true;
         } else {
+            previous = chunks;
             stalled = false;
         }
         // A pass that reached under a quarter of its goal spent a full costing for little:
