@@ -139,6 +139,7 @@ def reconstruct(
     attributes: Mapping[str, npt.ArrayLike] | None = None,
     threads: int | None = None,
     radius_check: bool = True,
+    radius_attribute: str | None = None,
     **options: Unpack[ReconstructOptions],
 ) -> Mesh:
     """Reconstructs the surface of the particles at ``positions``.
@@ -153,6 +154,12 @@ def reconstruct(
             carried to the surface vertices (``Mesh.attributes``).
         threads: worker threads (default: all cores). The output does not depend on it.
         radius_check: False takes ``particle_radius`` as given, unchecked.
+        radius_attribute: the attribute of ``attributes`` holding each particle's radius
+            (``"none"``: none). Default: Houdini's ``pscale`` when present. Without
+            ``particle_radius``, ``r`` is its median; a given one is checked against the
+            median. Radii must be finite and > 0 (``FormatError`` naming the particle);
+            radii that differ give a ``UserWarning``: every particle is still meshed with
+            the one radius ``r``.
         **options: the reconstruction settings (``ReconstructOptions``): influence_radius,
             cell_size, t_low, t_high, particle_coverage, iso_offset, isolated_spheres,
             decimate, decimate_error, smooth, subdivide, defer_subdivision, keep_inside, tile_size,
@@ -176,6 +183,7 @@ def reconstruct_file(
     attributes: str | Sequence[str] | None = None,
     threads: int | None = None,
     radius_check: bool = True,
+    radius_attribute: str | None = None,
     frames: str | Sequence[int] | None = None,
     shard: str | tuple[int, int] | None = None,
     start: int | None = None,
@@ -199,8 +207,8 @@ def reconstruct_file(
     stored, subdivided when read).
 
     Args:
-        particle_radius, radius_check: as for ``reconstruct``; estimated from the first
-            frame.
+        particle_radius, radius_check, radius_attribute: as for ``reconstruct``; from
+            the first frame (every frame's radii are checked as it is read).
         attributes: None (the velocity when the input has one), ``"none"``, ``"all"``,
             ``"a,b"`` or a list of names.
         threads: worker threads (default: all cores).

@@ -134,6 +134,20 @@ pub enum Error {
         /// Particles sampled.
         sample: usize,
     },
+    /// A particle radius attribute ([`crate::radius::ParticleRadii`]) that is not one
+    /// finite number > 0 per particle.
+    #[error("{}: radius attribute {attribute:?}{}: {message}", path.display(), particle.map(|i| format!(", particle {i}")).unwrap_or_default())]
+    InvalidRadius {
+        /// The input.
+        path: PathBuf,
+        /// The attribute's name.
+        attribute: String,
+        /// The first particle (input index) with a bad radius; `None` when the
+        /// attribute as a whole is wrong (its length or components).
+        particle: Option<usize>,
+        /// What was wrong.
+        message: String,
+    },
     /// The input holds no particles.
     #[error("{path}: the file holds no particles")]
     EmptyInput {

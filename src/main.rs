@@ -108,6 +108,11 @@ struct ReconstructArgs {
     /// Take `-r` as given, without comparing it with the particles' spacing.
     #[arg(long)]
     no_radius_check: bool,
+    /// The point attribute holding each particle's radius (`none`: ignore it). Default:
+    /// Houdini's `pscale` when the input has it. Without `-r`, r is its median; a given
+    /// `-r` is checked against that median.
+    #[arg(long, value_name = "NAME")]
+    radius_attribute: Option<meniscus::radius::RadiusAttribute>,
     /// The radius the run uses: `-r`, or the estimate.
     #[arg(skip)]
     radius: f32,
@@ -556,6 +561,7 @@ fn job_options(
         up_axis: args.stage.up_axis,
         meters_per_unit: args.stage.meters_per_unit,
         attributes,
+        radius_attribute: args.radius_attribute.clone().unwrap_or_default(),
         cancel: cancel.clone(),
         keep_going: args.keep_going,
     }

@@ -469,6 +469,7 @@ fn run_into_archive(
         up_axis: Default::default(),
         meters_per_unit: 1.0,
         attributes: Default::default(),
+        radius_attribute: Default::default(),
         keep_going: false,
         cancel: cancel.clone(),
     };

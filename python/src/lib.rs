@@ -16,6 +16,7 @@ use meniscus::io::usd::{write_stage, UpAxis, UsdFormat, UsdOptions};
 use meniscus::job::{plan_frames, run_frames, FrameReport, JobOptions};
 use meniscus::mesh::Surface;
 use meniscus::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
+use meniscus::radius::{radii_of, read_radii, ParticleRadii, RadiusAttribute};
 use options::Keywords;
 
 mod archive;
@@ -64,6 +65,7 @@ pub(crate) fn to_py(e: Error) -> PyErr {
         Error::Parse { .. }
         | Error::UnsupportedFormat { .. }
         | Error::Attribute { .. }
+        | Error::InvalidRadius { .. }
         | Error::EmptyInput { .. } => FormatError::new_err(message),
         Error::FramesExist { .. } => PyFileExistsError::new_err(message),
         Error::Interrupted => PyKeyboardInterrupt::new_err(message),
@@ -258,17 +260,23 @@ fn attribute_of(name: String, array: &Bound<'_, PyAny>, count: usize) -> PyResul
 
 use pyo3::types::IntoPyDict;
 
-/// The particle radius of a run: `given` after checking it against the estimate (a
-/// `UserWarning` outside 0.25×–4×, a `ValueError` outside 0.05×–20×) unless not
-/// `radius_check`; without `given`, the estimate. `input` names the particles in errors.
+/// The particle radius of a run. With `radii` (a radius attribute) their median, or
+/// `given` checked against it ([`radius_from_attribute`]). Otherwise `given` after
+/// checking it against the estimate (a `UserWarning` outside 0.25×–4×, a `ValueError`
+/// outside 0.05×–20×) unless not `radius_check`; without `given`, the estimate. `input`
+/// names the particles in errors.
 fn resolve_radius(
     py: Python<'_>,
     given: Option<f32>,
     radius_check: bool,
     input: &std::path::Path,
+    radii: Option<&ParticleRadii>,
     estimate: impl FnOnce() -> meniscus::Result<meniscus::radius::RadiusEstimate> + Send,
 ) -> PyResult<f32> {
     use meniscus::radius::{verify_radius, RadiusCheck};
+    if let Some(radii) = radii {
+        return radius_from_attribute(py, given, radius_check, input, radii);
+    }
     if let (Some(r), false) = (given, radius_check) {
         return Ok(r);
     }
@@ -283,14 +291,74 @@ fn resolve_radius(
             input.display(),
             estimate.radius
         );
-        PyErr::warn_bound(
-            py,
-            &py.get_type_bound::<pyo3::exceptions::PyUserWarning>(),
-            &message,
-            1,
-        )?;
+        user_warning(py, &message)?;
     }
     Ok(r)
+}
+
+/// The particle radius of a run whose particles carry a radius attribute: without
+/// `given` the median; `given` checked against the median as against the estimate
+/// (unless not `radius_check`). A `UserWarning` when the radii differ: the field does
+/// not yet give each particle its own.
+fn radius_from_attribute(
+    py: Python<'_>,
+    given: Option<f32>,
+    radius_check: bool,
+    input: &std::path::Path,
+    radii: &ParticleRadii,
+) -> PyResult<f32> {
+    use meniscus::radius::{check_radius, RadiusCheck};
+    let median = radii.median();
+    let source = format!("attribute {:?} of {}", radii.attribute, input.display());
+    if !radii.is_uniform() {
+        let (lo, hi) = radii.range();
+        user_warning(
+            py,
+            &format!(
+                "the particle radii of {source} range from {lo:?} to {hi:?}; every particle is meshed with one radius r = {:?} (per-particle radii are not used yet)",
+                given.unwrap_or(median)
+            ),
+        )?;
+    }
+    let Some(r) = given else {
+        return Ok(median);
+    };
+    if !radius_check {
+        return Ok(r);
+    }
+    let ratio = r / median;
+    match check_radius(r, median) {
+        RadiusCheck::Plausible => {}
+        RadiusCheck::Doubtful => user_warning(
+            py,
+            &format!("particle_radius {r:?} is {ratio:.3} × the median radius {median:?} of {source}; radius_check=False silences this"),
+        )?,
+        RadiusCheck::Implausible => {
+            return Err(PyValueError::new_err(format!(
+                "particle_radius {r:?} is {ratio:.3e} × the median radius {median:?} of {source}; leave it out (the median is taken), or radius_check=False"
+            )))
+        }
+    }
+    Ok(r)
+}
+
+/// Issues a Python `UserWarning`.
+fn user_warning(py: Python<'_>, message: &str) -> PyResult<()> {
+    PyErr::warn_bound(
+        py,
+        &py.get_type_bound::<pyo3::exceptions::PyUserWarning>(),
+        message,
+        1,
+    )
+}
+
+/// The radius attribute of a function's `radius_attribute`: None (Houdini's `pscale`
+/// when present), "none", or a name.
+fn radius_attribute(name: Option<String>) -> PyResult<RadiusAttribute> {
+    name.map(|n| n.parse())
+        .transpose()
+        .map(Option::unwrap_or_default)
+        .map_err(|e| PyValueError::new_err(format!("invalid radius_attribute: {e}")))
 }
 
 /// The library's options of a function's `**options` (see [`options::settings`]).
@@ -472,7 +540,8 @@ impl Mesh {
 /// reconstruction settings ([`options::SETTINGS`]).
 #[pyfunction]
 #[pyo3(signature = (positions, particle_radius = None, *, attributes = None, threads = None,
-    radius_check = true, **options))]
+    radius_check = true, radius_attribute = None, **options))]
+#[allow(clippy::too_many_arguments)]
 fn reconstruct(
     py: Python<'_>,
     positions: &Bound<'_, PyAny>,
@@ -480,20 +549,14 @@ fn reconstruct(
     attributes: Option<&Bound<'_, PyDict>>,
     threads: Option<usize>,
     radius_check: bool,
+    radius_attribute: Option<String>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Mesh> {
     check_threads(threads)?;
     reconstruct_options(py, "reconstruct", particle_radius.unwrap_or(1.0), options)?;
+    let which = self::radius_attribute(radius_attribute)?;
     let positions = positions_of(positions)?;
     let slice = positions.as_slice();
-    let particle_radius = resolve_radius(
-        py,
-        particle_radius,
-        radius_check,
-        std::path::Path::new("particles in memory"),
-        || meniscus::radius::estimate_radius(slice),
-    )?;
-    let options = reconstruct_options(py, "reconstruct", particle_radius, options)?;
     let mut columns = Vec::new();
     if let Some(d) = attributes {
         for (k, v) in d.iter() {
@@ -503,6 +566,17 @@ fn reconstruct(
             columns.push(attribute_of(name, &v, slice.len())?);
         }
     }
+    let input = std::path::Path::new("particles in memory");
+    let radii = radii_of(input, &columns, slice.len(), &which).map_err(to_py)?;
+    let particle_radius = resolve_radius(
+        py,
+        particle_radius,
+        radius_check,
+        input,
+        radii.as_ref(),
+        || meniscus::radius::estimate_radius(slice),
+    )?;
+    let options = reconstruct_options(py, "reconstruct", particle_radius, options)?;
     let source = ParticleSlices {
         positions: slice,
         attributes: &columns,
@@ -595,6 +669,7 @@ fn selection(attributes: Option<&Bound<'_, PyAny>>) -> PyResult<AttributeSelecti
 /// status "failed" and an error, and the call returns normally.
 #[pyfunction]
 #[pyo3(signature = (input, output, particle_radius = None, *, attributes = None, threads = None, radius_check = true,
+    radius_attribute = None,
     frames = None, shard = None, start = None, end = None, keep_going = false,
     progress = None, skip_existing = false, normals = true, error_bound = None,
     attribute_error_bound = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND, fps = 24.0,
@@ -608,6 +683,7 @@ fn reconstruct_file<'py>(
     attributes: Option<&Bound<'_, PyAny>>,
     threads: Option<usize>,
     radius_check: bool,
+    radius_attribute: Option<String>,
     frames: Option<&Bound<'_, PyAny>>,
     shard: Option<&Bound<'_, PyAny>>,
     start: Option<i64>,
@@ -649,9 +725,22 @@ fn reconstruct_file<'py>(
         .0
         .input
         .clone();
-    let particle_radius = resolve_radius(py, particle_radius, radius_check, &first, || {
-        meniscus::radius::estimate_radius_of_file(&first, input_format)
-    })?;
+    let which = self::radius_attribute(radius_attribute)?;
+    let radii = match py.allow_threads(|| read_radii(&first, input_format, &which)) {
+        Ok(radii) => radii,
+        // With a given radius the run reports the frame as it reads it (with
+        // keep_going, as that frame's failure).
+        Err(_) if particle_radius.is_some() => None,
+        Err(e) => return Err(to_py(e)),
+    };
+    let particle_radius = resolve_radius(
+        py,
+        particle_radius,
+        radius_check,
+        &first,
+        radii.as_ref(),
+        || meniscus::radius::estimate_radius_of_file(&first, input_format),
+    )?;
     let options = reconstruct_options(py, "reconstruct_file", particle_radius, options)?;
     let progress = progress.filter(|p| !p.is_none()).map(Bound::unbind);
     // An exception of the progress callback: it stops the run and is raised.
@@ -672,6 +761,7 @@ fn reconstruct_file<'py>(
             up_axis,
             meters_per_unit,
             attributes,
+            radius_attribute: which.clone(),
             cancel: cancel.clone(),
             keep_going,
         };

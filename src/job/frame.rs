@@ -11,6 +11,7 @@ use crate::io::particles::SpooledParticles;
 use crate::io::particles::{read_particles, MappedXyz, ParticleFormat, Particles};
 use crate::mesh::Surface;
 use crate::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
+use crate::radius::read_radii;
 use crate::sequence::Frame;
 use std::path::Path;
 use std::time::Instant;
@@ -114,6 +115,7 @@ pub(crate) fn run_frame(
 ) -> Result<FrameReport> {
     on_stage("read");
     let started = Instant::now();
+    read_radii(&frame.input, job.input_format, &job.radius_attribute)?;
     let particles = read_input(&frame.input, options, job)?;
     let read_seconds = started.elapsed().as_secs_f64();
     on_stage("reconstruct");

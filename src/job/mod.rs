@@ -26,6 +26,7 @@ use crate::io::mesh::MeshWriteOptions;
 use crate::io::particles::ParticleFormat;
 use crate::io::usd::UpAxis;
 use crate::pipeline::ReconstructOptions;
+use crate::radius::RadiusAttribute;
 use crate::sequence::Frame;
 use sink::FrameSink;
 use std::cell::RefCell;
@@ -57,6 +58,13 @@ pub struct JobOptions {
     pub meters_per_unit: f64,
     /// The point attributes carried to the surface.
     pub attributes: AttributeSelection,
+    /// The point attribute holding each particle's radius (default Houdini's `pscale`
+    /// when present). Every frame's radii are read and checked before the frame is
+    /// reconstructed (a bad radius fails the frame, with no output); the caller takes
+    /// the reference radius `r` of the options from them
+    /// ([`crate::radius::ParticleRadii::median`]). The field still gives every particle
+    /// the radius `r`.
+    pub radius_attribute: RadiusAttribute,
     /// Stops the job between tiles, stages and frames ([`crate::Error::Interrupted`]).
     pub cancel: CancelToken,
     /// A frame that fails is reported (status [`FrameStatus::Failed`]) and the run goes

@@ -13,6 +13,9 @@
 //! shipped frames and splashsurf's examples, where this estimate is within 8 % (0.3 % on
 //! the dam break; the analytic sheet, two particles thick, 8.6 % high).
 //! [`check_radius`] compares a given radius with it.
+//!
+//! Particles of several sizes carry their own radius in a point attribute:
+//! [`RadiusAttribute`] says which, [`read_radii`] and [`radii_of`] read and check it.
 
 use crate::error::{Error, Result};
 use crate::io::particles::{
@@ -22,6 +25,9 @@ use glam::Vec3;
 use hashbrown::HashMap;
 use rayon::prelude::*;
 use std::path::Path;
+
+mod attribute;
+pub use attribute::{radii_of, read_radii, ParticleRadii, RadiusAttribute, HOUDINI_RADIUS};
 
 /// Particles sampled at most (evenly through the input).
 pub const SAMPLE: usize = 4096;
