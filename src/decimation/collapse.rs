@@ -49,6 +49,17 @@ impl Candidate {
             mark: Mark::NONE,
         }
     }
+
+    /// The candidate as the next pass takes it over (its cost, placement and refusal
+    /// kept; a decision of this pass's parallel walk forgotten).
+    pub(super) fn carried(&self) -> Candidate {
+        let mark = if self.mark == Mark::DECIDED {
+            Mark::NONE
+        } else {
+            self.mark
+        };
+        Candidate { mark, ..*self }
+    }
 }
 
 /// The rules of one attempt: the pass (a vertex moves at most once per pass), the error

@@ -533,8 +533,7 @@ fn sequential_walk(
                 done += 1;
             }
             Outcome::Refused if reuse == Reuse::Yes => c.mark = clock,
-            Outcome::Refused => {}
-            Outcome::Passed => {}
+            Outcome::Refused | Outcome::Passed => {}
         }
         progress.record(&tally);
     }

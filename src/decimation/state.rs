@@ -2,7 +2,7 @@
 //! their reference normals, vertex → triangle lists, flags, and the candidates of a pass
 //! (with the reuse of what the previous pass learnt, see the module docs of [`super`]).
 
-use super::collapse::{Candidate, Mark};
+use super::collapse::Candidate;
 use super::placement::place_candidates_at;
 use super::quadric::{Plane, Quadric};
 use super::tri_list::TriList;
@@ -104,29 +104,20 @@ impl State {
                         if u >= v || self.locked[u as usize] || self.locked[v as usize] {
                             continue;
                         }
-                        let edge = Candidate::edge(t, u, v);
-                        let kept = (self.reuse == Reuse::Yes
-                            && !moved_last_pass(u)
-                            && !moved_last_pass(v))
-                        .then(|| {
+                        let unmoved = !moved_last_pass(u) && !moved_last_pass(v);
+                        let kept = if self.reuse == Reuse::Yes && unmoved {
                             old[o..]
                                 .iter()
                                 .take_while(|c| c.triangle == t)
                                 .find(|c| c.u == u && c.v == v)
-                        })
-                        .flatten();
+                        } else {
+                            None
+                        };
                         match kept {
-                            Some(c) => out.push(Candidate {
-                                mark: if c.mark == Mark::DECIDED {
-                                    Mark::NONE
-                                } else {
-                                    c.mark
-                                },
-                                ..*c
-                            }),
+                            Some(c) => out.push(c.carried()),
                             None => {
                                 fresh.push(out.len() as u32);
-                                out.push(edge);
+                                out.push(Candidate::edge(t, u, v));
                             }
                         }
                     }
