@@ -10,6 +10,11 @@ trimesh).
 Runs: `default` (the defaults: anisotropic kernels), `isotropic` (`--kernel isotropic`, the
 other defaults), `paper` (`--paper`: the pipeline of Akinci et al. 2013 exactly).
 
+With `--multiscale ../shared/eval/multiscale_bump.py` a *dimples* column is added: the 90th
+percentile, over the flattest three quarters of the surface (gently curved parts included),
+of the mean angle between the surface normals and the best-fitting plane in a 3 r ball
+(issue 36: what a render of gently curved water shows, which the flat bumpiness misses).
+
 Splash frames are made with `examples/tile_scene` (`cargo build --release --example
 tile_scene`). Times are the CLI's own stage total (one run; for comparisons only within
 one table).
@@ -59,10 +64,12 @@ def main():
     ap.add_argument("--binary", default=os.path.join(ROOT, "target", "release", "meniscus"))
     ap.add_argument("--tile-scene", default=os.path.join(ROOT, "target", "release", "examples", "tile_scene"))
     ap.add_argument("--runs", nargs="+", default=list(RUNS), choices=list(RUNS))
+    ap.add_argument("--multiscale", help="the ruler multiscale_bump.py: adds the dimples column (issue 36)")
     ap.add_argument("--out")
     args = ap.parse_args()
-    rows = ["| case | run | triangles | flat bumpiness [r] | normal error [°] | volume | mean \\|d − r\\| [r] | depth bias [r] | centres outside | time [ms] |",
-            "|---|---|---|---|---|---|---|---|---|---|"]
+    dimples = ["dimples [°] |", "---|"] if args.multiscale else ["", ""]
+    rows = ["| case | run | triangles | flat bumpiness [r] | " + dimples[0] + " normal error [°] | volume | mean \\|d − r\\| [r] | depth bias [r] | centres outside | time [ms] |",
+            "|---|---|---|---|" + dimples[1] + "---|---|---|---|---|---|"]
     with tempfile.TemporaryDirectory() as tmp:
         for name, path, r, ref in cases(tmp, args.tile_scene):
             for run in args.runs:
@@ -78,8 +85,13 @@ def main():
                 refq = q.get("reference") or {}
                 nerr = f"{refq['normal_error']['mean_deg']:.2f}" if refq else "–"
                 vol = f"{100 * refq['volume']['rel_error']:+.2f} %" if refq else "–"
+                dimple = ""
+                if args.multiscale:
+                    m = json.loads(subprocess.run([args.python, args.multiscale, mesh, str(r), "3"], check=True,
+                                                  capture_output=True, text=True).stdout.splitlines()[-1])
+                    dimple = f" {m['3r']['normal_dev_q75_p90_deg']:.2f} |"
                 row = (f"| {name} | {run} | {q['size']['triangles']} | "
-                       f"{q['smoothness']['bumpiness']['flat_bumpiness_median_r']:.4f} | {nerr} | {vol} | "
+                       f"{q['smoothness']['bumpiness']['flat_bumpiness_median_r']:.4f} |{dimple} {nerr} | {vol} | "
                        f"{p['surface_abs_dev_mean_r']:.3f} | {p['surface_depth_bias_r']:+.3f} | "
                        f"{p['outside_count']} | {ms:.0f} |")
                 rows.append(row)
