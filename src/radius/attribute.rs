@@ -222,10 +222,6 @@ struct RadiusColumn<'a> {
 }
 
 impl StreamSink for RadiusColumn<'_> {
-    fn wants_attributes(&self) -> bool {
-        true
-    }
-
     fn select(&mut self, count: usize, declared: &[AttributeLayout]) -> Result<Vec<usize>> {
         let names: Vec<&str> = declared.iter().map(|a| a.name.as_str()).collect();
         let Some(k) = self.which.resolve(self.path, &names)? else {

@@ -129,9 +129,6 @@ struct Collect {
 }
 
 impl StreamSink for Collect {
-    fn wants_attributes(&self) -> bool {
-        true
-    }
     fn select(&mut self, _: usize, declared: &[AttributeLayout]) -> Result<Vec<usize>> {
         self.particles.attributes = declared
             .iter()

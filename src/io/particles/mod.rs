@@ -166,10 +166,6 @@ pub(crate) trait ParticleCodec: Sync {
 
 /// Receives what a streaming reader ([`ParticleCodec::stream`]) decodes, in file order.
 pub(crate) trait StreamSink {
-    /// Whether any attribute can be selected: when not, a reader may take a path that reads
-    /// the positions alone.
-    fn wants_attributes(&self) -> bool;
-
     /// The header is read: it announces `count` particles and declares the attributes
     /// `declared`, in file order. Returns the indices of those to stream, in payload order.
     fn select(&mut self, count: usize, declared: &[AttributeLayout]) -> Result<Vec<usize>>;
@@ -189,9 +185,6 @@ pub(crate) trait StreamSink {
 struct PositionsOnly<'a>(&'a mut dyn FnMut(&[Vec3]) -> Result<()>);
 
 impl StreamSink for PositionsOnly<'_> {
-    fn wants_attributes(&self) -> bool {
-        false
-    }
     fn select(&mut self, _: usize, _: &[AttributeLayout]) -> Result<Vec<usize>> {
         Ok(Vec::new())
     }
@@ -232,13 +225,15 @@ pub fn write_particles(path: &Path, particles: &Particles, format: ParticleForma
 /// Streams the positions of a particle file from disk in chunks of at most 65 536
 /// particles, decompressing as it goes; attributes are skipped. The format comes from
 /// `format` or the extension. Streams: BGEO (plain or gzip); PLY, binary or ASCII, whose
-/// first element is `vertex` with scalar properties only (the rest of the file is not
-/// read); legacy VTK, binary or ASCII, whose first data section is `POINTS n float|double`
-/// (what SPlisHSPlasH and DualSPHysics write; the rest of the file is not read); VTK XML
-/// (`.vtu`, `.vtp`) of one piece, in any encoding (the points array alone is read). Returns
-/// the particle count, or `Ok(None)` for any other layout, which [`read_particles`]
-/// handles and reports on (and for `.xyz`, which [`MappedXyz`] maps as it is). Memory: one
-/// chunk (and, for ASCII, one line), whatever the file size.
+/// first element is `vertex` of scalar properties (the rows of any later element are
+/// walked and checked); legacy VTK, binary or ASCII, whose sections the reader knows (a
+/// first pass finds the points, seeking over binary blocks and parsing ASCII values); VTK
+/// XML (`.vtu`, `.vtp`) of one piece, in any encoding (every array is decoded, the points
+/// kept). A file the stream takes is one [`read_particles`] takes, with the same
+/// positions: damage anywhere, also in what a run does not use, and a file of no particle
+/// are errors for both. Returns the particle count, or `Ok(None)` for any other layout,
+/// which [`read_particles`] handles and reports on (and for `.xyz`, which [`MappedXyz`]
+/// maps as it is). Memory: one chunk (and, for ASCII, one line), whatever the file size.
 pub fn stream_positions(
     path: &Path,
     format: Option<ParticleFormat>,
@@ -248,7 +243,13 @@ pub fn stream_positions(
         Some(f) => f,
         None => ParticleFormat::from_path(path)?,
     };
-    format.codec().stream(path, &mut PositionsOnly(positions))
+    let count = format.codec().stream(path, &mut PositionsOnly(positions))?;
+    if count == Some(0) {
+        return Err(Error::EmptyInput {
+            path: path.to_path_buf(),
+        });
+    }
+    Ok(count)
 }
 
 /// The bytes of a whole particle file; an empty file is [`Error::EmptyInput`].

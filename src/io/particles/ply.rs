@@ -24,8 +24,9 @@ impl ParticleCodec for Ply {
     }
 
     /// Streams a file (binary or ASCII) whose first element is `vertex` with scalar
-    /// properties only; the rest of the file is not read. `Ok(None)` for any other layout
-    /// (another element first, a list property, an unreadable header).
+    /// properties only; the rows of later elements are walked and checked as the
+    /// whole-file reader does. `Ok(None)` for any other layout (another element first, a
+    /// second vertex element, a list property, an unreadable header).
     fn stream(&self, path: &Path, sink: &mut dyn StreamSink) -> Result<Option<usize>> {
         stream(path, sink)
     }
@@ -182,6 +183,10 @@ fn stream(path: &Path, sink: &mut dyn StreamSink) -> Result<Option<usize>> {
     let Some(element) = h.elements.first().filter(|e| e.name == "vertex") else {
         return Ok(None);
     };
+    // The whole-file reader keeps the last vertex element.
+    if h.elements[1..].iter().any(|e| e.name == "vertex") {
+        return Ok(None);
+    }
     // The counts must fit in the file before anything is spooled (or room sought) for them.
     let file_bytes = std::fs::metadata(path)
         .map_err(|e| Error::io(path, e))?
@@ -236,7 +241,130 @@ fn stream(path: &Path, sink: &mut dyn StreamSink) -> Result<Option<usize>> {
             vertices.stream(path, &mut r, sink)?
         }
     }
+    check_tail(path, header_len, &h)?;
     Ok(Some(element.count))
+}
+
+/// Walks the rows of the elements after the vertex element (of `h`, whose header takes
+/// `header_len` bytes) as the whole-file reader does (`ply_header::skip_row`: list lengths
+/// read and checked, values skipped), so that the stream refuses what that reader refuses.
+/// One more pass over the file when there are such elements; memory: one buffer.
+fn check_tail(path: &Path, header_len: usize, h: &PlyHeader) -> Result<()> {
+    use std::io::Read;
+    if h.elements.len() == 1 {
+        return Ok(());
+    }
+    let mut r = open_buffered(path)?;
+    let fail = |message: String| Error::parse(path, "after the vertices", message);
+    let io = |e: std::io::Error| Error::io(path, e);
+    match h.binary {
+        Some(big_endian) => {
+            let vertex = &h.elements[0];
+            let stride: u64 = vertex
+                .properties
+                .iter()
+                .map(|p| p.scalar.size() as u64)
+                .sum();
+            let len = std::fs::metadata(path).map_err(io)?.len();
+            let mut pos =
+                (header_len as u64).saturating_add(stride.saturating_mul(vertex.count as u64));
+            let skip = |r: &mut std::io::BufReader<std::fs::File>, pos: &mut u64, n: u64| {
+                if len.saturating_sub(*pos) < n {
+                    return Err(fail(format!(
+                        "truncated: {n} bytes needed, {} left",
+                        len.saturating_sub(*pos)
+                    )));
+                }
+                r.seek_relative(n as i64).map_err(io)?;
+                *pos += n;
+                Ok(())
+            };
+            std::io::Seek::seek(&mut r, std::io::SeekFrom::Start(pos)).map_err(io)?;
+            let mut word = [0u8; 8];
+            for element in &h.elements[1..] {
+                for _ in 0..element.count {
+                    for p in &element.properties {
+                        let Some(count) = p.list_count else {
+                            skip(&mut r, &mut pos, p.scalar.size() as u64)?;
+                            continue;
+                        };
+                        let size = count.size();
+                        if len.saturating_sub(pos) < size as u64 {
+                            return Err(fail(format!(
+                                "truncated: a {size}-byte list length, {} bytes left",
+                                len.saturating_sub(pos)
+                            )));
+                        }
+                        r.read_exact(&mut word[..size]).map_err(io)?;
+                        pos += size as u64;
+                        // As `Cursor::value` reads it: a float.
+                        let n = count.decode(&word[..size], big_endian) as f32;
+                        if n.is_nan() || n < 0.0 {
+                            return Err(fail(format!("negative list length {n}")));
+                        }
+                        let bytes = (n as u64)
+                            .checked_mul(p.scalar.size() as u64)
+                            .ok_or_else(|| fail("value count overflows".into()))?;
+                        skip(&mut r, &mut pos, bytes)?;
+                    }
+                }
+            }
+        }
+        None => {
+            r.seek_relative(header_len as i64).map_err(io)?;
+            let mut token = Vec::new();
+            // The next whitespace-separated token (text), as `Cursor::token` reads it.
+            let mut next = |r: &mut std::io::BufReader<std::fs::File>| -> Result<String> {
+                token.clear();
+                loop {
+                    let buf = r.fill_buf().map_err(io)?;
+                    let Some(&b) = buf.first() else { break };
+                    if b.is_ascii_whitespace() {
+                        r.consume(1);
+                        if token.is_empty() {
+                            continue;
+                        }
+                        break;
+                    }
+                    token.push(b);
+                    r.consume(1);
+                }
+                if token.is_empty() {
+                    return Err(fail("unexpected end of file, expected a value".into()));
+                }
+                String::from_utf8(token.clone())
+                    .map_err(|_| fail("expected a value, found non-text bytes".into()))
+            };
+            let vertex = &h.elements[0];
+            for _ in 0..vertex.count.saturating_mul(vertex.properties.len()) {
+                next(&mut r)?;
+            }
+            for element in &h.elements[1..] {
+                for _ in 0..element.count {
+                    for p in &element.properties {
+                        let n = match p.list_count {
+                            None => 1.0,
+                            Some(_) => {
+                                let t = next(&mut r)?;
+                                let n = t
+                                    .parse::<f64>()
+                                    .map_err(|_| fail(format!("expected a number, found {t:?}")))?
+                                    as f32;
+                                if n.is_nan() || n < 0.0 {
+                                    return Err(fail(format!("negative list length {n}")));
+                                }
+                                n
+                            }
+                        };
+                        for _ in 0..n as u64 {
+                            next(&mut r)?;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Reads the header (at most 64 KiB, up to `end_header`) from `r`; returns its length in

@@ -258,11 +258,11 @@ impl SpooledParticles {
     /// The selection is resolved against the file's attribute names before any file is
     /// created, by the rules and with the errors of [`super::Particles::select`]; every
     /// value is checked finite. Gzip or plain BGEO always streams; PLY, binary or ASCII,
-    /// when its first element is `vertex`; VTK, binary or ASCII, positions only when its
-    /// points come first ([`super::stream_positions`]), with attributes when a scan of its
-    /// sections finds the points and the `POINT_DATA` arrays (one more pass over the file,
-    /// no value decoded). `Ok(None)` otherwise (and for `.xyz`, which is mapped as it is):
-    /// the caller parses the file.
+    /// when `vertex` is its first element; VTK when a scan of its sections finds the points
+    /// and the `POINT_DATA` arrays (one more pass over the file); VTK XML of one piece. A
+    /// file that streams is one [`super::read_particles`] takes
+    /// ([`super::stream_positions`]). `Ok(None)` otherwise (and for `.xyz`, which is mapped
+    /// as it is): the caller parses the file.
     pub fn from_file(
         path: &Path,
         format: ParticleFormat,
@@ -318,10 +318,6 @@ struct SpoolSink<'a> {
 }
 
 impl StreamSink for SpoolSink<'_> {
-    fn wants_attributes(&self) -> bool {
-        !self.selection.is_none()
-    }
-
     fn select(&mut self, count: usize, declared: &[AttributeLayout]) -> Result<Vec<usize>> {
         let names: Vec<&str> = declared.iter().map(|a| a.name.as_str()).collect();
         let chosen = self.selection.resolve(self.path, &names)?;

@@ -2,11 +2,9 @@
 //! whose points come in a `POINTS n type` section. Cell sections are skipped;
 //! `POINT_DATA` SCALARS, VECTORS, NORMALS and FIELD arrays become attributes.
 //!
-//! Streamed two ways: positions alone when the points come first (one pass that stops
-//! after them), or with attributes after `vtk_scan.rs` has found where every array is.
+//! Streamed after `vtk_scan.rs` has found where the points and every array are (and
+//! checked every value the whole-file reader would decode).
 
-use super::records::{open_buffered, stream_ascii_records, stream_records};
-use super::records::{AsciiRecords, Records};
 use super::vtk_scan;
 use super::{read_bytes, Attribute, ParticleCodec, Particles, StreamSink};
 use crate::error::{Error, Result};
@@ -14,7 +12,7 @@ use crate::io::atomic::write_atomically;
 use crate::io::text::Cursor;
 use crate::io::vtk_legacy;
 use glam::Vec3;
-use std::io::{BufRead, Write};
+use std::io::Write;
 use std::path::Path;
 
 /// The legacy VTK format.
@@ -25,15 +23,12 @@ impl ParticleCodec for Vtk {
         read(path, &read_bytes(path)?)
     }
 
-    /// Without attributes wanted: the positions of a file whose first data section is
-    /// `POINTS n float|double` (what SPlisHSPlasH and DualSPHysics write); the rest of the
-    /// file is not read. With attributes: the points and the `POINT_DATA` arrays, when a
-    /// scan of the sections finds them (one more pass over the file, no value decoded).
-    /// `Ok(None)` for any other layout.
+    /// The points and the selected `POINT_DATA` arrays, when a scan of the sections finds
+    /// them (one more pass over the file: binary blocks are seeked over, ASCII values
+    /// parsed as the whole-file reader parses them), so that the stream takes exactly the
+    /// files [`read_particles`](super::read_particles) takes. `Ok(None)` for any other
+    /// layout.
     fn stream(&self, path: &Path, sink: &mut dyn StreamSink) -> Result<Option<usize>> {
-        if !sink.wants_attributes() {
-            return stream_points_first(path, sink);
-        }
         let Some(layout) = vtk_scan::scan(path)? else {
             return Ok(None);
         };
@@ -221,132 +216,4 @@ fn write(path: &Path, particles: &Particles) -> Result<()> {
         Ok(())
     })
     .map(|_| ())
-}
-
-/// Where the points of a file whose first data section is `POINTS` start.
-struct PointsFirst {
-    /// Byte offset just past the `POINTS` line.
-    offset: u64,
-    /// Lines up to and including the `POINTS` line.
-    lines: usize,
-    count: usize,
-    /// `double` points, else `float`.
-    double: bool,
-    /// BINARY, else ASCII.
-    binary: bool,
-}
-
-/// Reads the header lines from `r` up to the `POINTS` line; `None` when the file is not
-/// laid out that way (another section first, another point type, a line over 4 KiB).
-fn points_first(path: &Path, r: &mut impl BufRead) -> Result<Option<PointsFirst>> {
-    let mut offset = 0u64;
-    let mut line = Vec::new();
-    let mut next_line = |r: &mut dyn BufRead, offset: &mut u64| -> Result<Option<String>> {
-        line.clear();
-        let n = r
-            .read_until(b'\n', &mut line)
-            .map_err(|e| Error::io(path, e))?;
-        *offset += n as u64;
-        if n == 0 || line.len() > 4096 {
-            return Ok(None);
-        }
-        Ok(Some(String::from_utf8_lossy(&line).trim().to_string()))
-    };
-    let header_ok =
-        matches!(next_line(r, &mut offset)?, Some(l) if l.starts_with("# vtk DataFile Version"));
-    let _title = next_line(r, &mut offset)?;
-    let encoding = next_line(r, &mut offset)?;
-    let binary = matches!(&encoding, Some(l) if l.eq_ignore_ascii_case("BINARY"));
-    let ascii = matches!(&encoding, Some(l) if l.eq_ignore_ascii_case("ASCII"));
-    if !(header_ok && (binary || ascii)) {
-        return Ok(None);
-    }
-    let mut lines = 3;
-    let (count, double) = loop {
-        let Some(l) = next_line(r, &mut offset)? else {
-            return Ok(None);
-        };
-        lines += 1;
-        let tokens: Vec<&str> = l.split_whitespace().collect();
-        match tokens.as_slice() {
-            [] => continue,
-            [k, _] if k.eq_ignore_ascii_case("DATASET") => continue,
-            [k, n, ty] if k.eq_ignore_ascii_case("POINTS") => {
-                let Ok(n) = n.parse::<usize>() else {
-                    return Ok(None);
-                };
-                match ty.to_ascii_lowercase().as_str() {
-                    "float" => break (n, false),
-                    "double" => break (n, true),
-                    _ => return Ok(None),
-                }
-            }
-            _ => return Ok(None),
-        }
-    };
-    Ok(Some(PointsFirst {
-        offset,
-        lines,
-        count,
-        double,
-        binary,
-    }))
-}
-
-/// Streams the positions of a file whose first data section is `POINTS n float|double`,
-/// telling [`StreamSink::select`] the count (no attributes) before the first chunk; the
-/// rest of the file is not read.
-fn stream_points_first(path: &Path, sink: &mut dyn StreamSink) -> Result<Option<usize>> {
-    let mut r = open_buffered(path)?;
-    let Some(points) = points_first(path, &mut r)? else {
-        return Ok(None);
-    };
-    let count = points.count;
-    sink.select(count, &[])?;
-    if !points.binary {
-        stream_ascii_records(
-            path,
-            &mut r,
-            AsciiRecords {
-                line: points.lines + 1,
-                count,
-                fields: 3,
-                xyz: Some([0, 1, 2]),
-                payload: &[],
-                one: "particle",
-                many: "points",
-            },
-            &mut |chunk, _| sink.records(chunk, &[]),
-        )?;
-        return Ok(Some(count));
-    }
-    let double = points.double;
-    let size = if double { 24 } else { 12 };
-    let coordinate = |record: &[u8], i: usize| -> f32 {
-        if double {
-            f64::from_be_bytes(record[8 * i..8 * i + 8].try_into().expect("8 bytes")) as f32
-        } else {
-            f32::from_be_bytes(record[4 * i..4 * i + 4].try_into().expect("4 bytes"))
-        }
-    };
-    stream_records(
-        path,
-        &mut r,
-        Records {
-            offset: points.offset,
-            count,
-            stride: size,
-            one: "particle",
-            many: "points",
-        },
-        &|record, _| {
-            Some(Vec3::new(
-                coordinate(record, 0),
-                coordinate(record, 1),
-                coordinate(record, 2),
-            ))
-        },
-        &mut |chunk, _| sink.records(chunk, &[]),
-    )?;
-    Ok(Some(count))
 }

@@ -166,8 +166,15 @@ impl Scanner {
     }
 
     /// Skips `count` values of `scalar`: binary by seeking (the file must hold them),
-    /// ASCII token by token.
+    /// ASCII token by token, each parsed as the whole-file reader parses a value
+    /// (`Cursor::values`, which refuses the same tokens).
     fn skip_values(&mut self, count: usize, scalar: Scalar, binary: bool) -> Scan<()> {
+        self.skip(count, scalar, binary, true)
+    }
+
+    /// [`Scanner::skip_values`]; `parse`: ASCII tokens must be numbers (cell lists are
+    /// skipped unparsed, as the whole-file reader skips them).
+    fn skip(&mut self, count: usize, scalar: Scalar, binary: bool, parse: bool) -> Scan<()> {
         if binary {
             let need = (count as u64)
                 .checked_mul(scalar.size() as u64)
@@ -187,10 +194,16 @@ impl Scanner {
             self.pos += need;
         } else {
             for _ in 0..count {
-                if self.token()?.is_none() {
-                    return Err(self
-                        .error("unexpected end of file, expected a number".into())
-                        .into());
+                match self.token()? {
+                    None => {
+                        return Err(self
+                            .error("truncated: the file ends before the values do".into())
+                            .into())
+                    }
+                    Some(t) if parse && t.parse::<f64>().is_err() => {
+                        return Err(self.error(format!("expected a number, found {t:?}")).into())
+                    }
+                    Some(_) => {}
                 }
             }
         }
@@ -225,7 +238,7 @@ impl Tokens for Scanner {
     }
 
     fn skip_block(&mut self, count: usize, scalar: Scalar, binary: bool) -> Scan<()> {
-        self.skip_values(count, scalar, binary)
+        self.skip(count, scalar, binary, false)
     }
 
     fn fail(&self, _message: String) -> ScanError {

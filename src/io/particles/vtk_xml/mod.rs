@@ -41,8 +41,9 @@ impl ParticleCodec for VtkXml {
     }
 
     /// A file of one piece: its points, then the selected point-data arrays, each from
-    /// where it is in the file (the structure is scanned first). `Ok(None)` for several
-    /// pieces.
+    /// where it is in the file (the structure is scanned first); the other arrays are
+    /// decoded and dropped, so that the stream takes exactly the files the whole-file
+    /// reader takes. `Ok(None)` for several pieces.
     fn stream(&self, path: &Path, sink: &mut dyn StreamSink) -> Result<Option<usize>> {
         let layout = scan::scan(path)?;
         let [piece] = layout.pieces.as_slice() else {
@@ -60,9 +61,16 @@ impl ParticleCodec for VtkXml {
             })
             .collect();
         let chosen = sink.select(count, &declared)?;
-        for &k in &chosen {
-            let a = &piece.point_data[k];
+        for a in &piece.point_data {
             layout.check(a, values(&layout, a, count)?)?;
+        }
+        // The arrays not streamed are decoded too (and dropped), as the whole-file reader
+        // decodes them: a file the stream takes is one `read_particles` takes. First, so
+        // that damage there fails the run before anything is spooled.
+        for (k, a) in piece.point_data.iter().enumerate() {
+            if !chosen.contains(&k) {
+                stream_array(&layout, a, count, false, &mut |_, _| Ok(()))?;
+            }
         }
         stream_array(&layout, points, count, true, &mut |p, _| {
             sink.records(p, &[])
