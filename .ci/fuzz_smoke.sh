@@ -22,7 +22,7 @@ if [ "${FUZZ_ALL:-0}" = 1 ] || grep -q '^src/archive/' <<<"$changed"; then
   targets+=(archive archive_payload)
 fi
 if [ "${FUZZ_ALL:-0}" = 1 ] || grep -q '^src/io/particles' <<<"$changed"; then
-  targets+=(particles_xyz particles_ply particles_bgeo particles_vtk)
+  targets+=(particles_xyz particles_ply particles_bgeo particles_vtk particles_vtk_xml)
 fi
 if [ "${FUZZ_ALL:-0}" = 1 ] || grep -Eq '^src/io/(mesh|[^/]*\.rs)' <<<"$changed"; then
   targets+=(mesh_ply mesh_obj mesh_gltf mesh_vtk)
