@@ -19,8 +19,11 @@
 //! control triangle they would turn by more than about 75°, so they never fold the
 //! surface. The watched centres (those within r of being too shallow) whose nearest
 //! surface lay where the pushes reach are measured again, against the one-step surface
-//! recomputed around them, for at most [`ContainmentOptions::max_rounds`] rounds; a
-//! push of more than r measures every centre again. Only control vertices move: the
+//! recomputed around them, for at most [`ContainmentOptions::max_rounds`] rounds. A
+//! push of more than r may bring a centre nobody watched too close: then every centre
+//! within `depth + r` of the surface the pushes moved is measured again too (on a 4M
+//! violent splash, 128k centres instead of 4M in the second round, and a few dozen in
+//! the later ones; measuring them all again took 2.4 s a round). Only control vertices move: the
 //! topology does not change, so a closed 2-manifold stays one, and subdivision then runs
 //! on the moved control mesh as always. With two or more steps the surface is measured
 //! after the first (the later ones move it far less: the edges halve each step).
@@ -157,6 +160,9 @@ pub struct ContainmentStats {
     pub moved_vertices: usize,
     /// Rounds of measuring (1 when nothing had to move).
     pub rounds: u32,
+    /// Centres measured again after the first round, summed over the rounds (a full
+    /// round counts every centre it visits).
+    pub remeasured: usize,
     /// Centres still less than the depth under the surface after the last round.
     pub remaining: usize,
     /// Seconds spent computing the one-step surface it measures (points and cells).
@@ -253,9 +259,24 @@ pub(crate) fn contain_centres<C: Centres + ?Sized>(
             watched,
             ..
         } = rounds.measure(control, input, cancel, &mut stats)?;
+        if stats.rounds > 1 {
+            stats.remeasured += if rounds.full_round {
+                near
+            } else {
+                rounds.measured.len()
+            };
+        }
+        // Those that a push could bring too close are watched after: after a full round
+        // all of them, else the latest measure of each centre measured again replaces
+        // the one before.
         if rounds.full_round {
-            // Those that a push could bring too close are watched after.
             rounds.watch = watched;
+        } else {
+            let measured = std::mem::take(&mut rounds.measured);
+            rounds
+                .watch
+                .retain(|w| measured.binary_search(&w.particle).is_err());
+            rounds.watch.extend(watched);
         }
         if stats.rounds == 1 {
             stats.near_centres = near;
@@ -268,12 +289,20 @@ pub(crate) fn contain_centres<C: Centres + ?Sized>(
         }
         let (moved, largest) = rounds.push_out(control, &mut shallow);
         stats.moved_vertices += moved;
-        // A push of more than r may reach centres nobody watched: measure every centre
-        // again.
-        rounds.full_round = largest > r;
-        if rounds.full_round {
+        // A push of more than r may reach centres nobody watched: measure again every
+        // centre near the surface the pushes moved (every centre when that region is too
+        // large to mark).
+        rounds.full_round = false;
+        rounds.near_pushes.clear();
+        if largest > r {
+            match rounds.centres_near_pushes(control, input, cancel)? {
+                Some(near) => rounds.near_pushes = near,
+                None => rounds.full_round = true,
+            }
+            // The many centres measured again take the tangent-plane shortcut too.
             control.compute_normals();
         }
+        rounds.fresh_normals = largest > r;
     }
     control.normals = Vec::new();
     Ok(stats)
@@ -305,8 +334,19 @@ struct Rounds {
     watch: Vec<Watched>,
     /// Control vertices whose one-ring holds a moved vertex (Loop's masks reach that far).
     reached: Vec<bool>,
-    /// Whether the next round measures every centre, or only the watched ones.
+    /// Whether the next round measures every centre, or only the watched ones (and
+    /// those of `near_pushes`).
     full_round: bool,
+    /// Centres near the surface the last pushes moved by more than r, measured again in
+    /// the next round with the watched ones ([`Rounds::centres_near_pushes`]).
+    near_pushes: Vec<Watched>,
+    /// The pushes of the last round: control vertex and how far it moved.
+    pushed: Vec<(u32, DVec3)>,
+    /// Particles measured in the last round that was not full, ascending.
+    measured: Vec<u32>,
+    /// Whether the control mesh's normals are those of its current positions (the
+    /// tangent-plane shortcut reads them).
+    fresh_normals: bool,
 }
 
 impl Rounds {
@@ -336,6 +376,10 @@ impl Rounds {
             watch: Vec::new(),
             reached: vec![false; control.positions.len()],
             full_round: true,
+            near_pushes: Vec::new(),
+            pushed: Vec::new(),
+            measured: Vec::new(),
+            fresh_normals: true,
         }
     }
 
@@ -352,15 +396,21 @@ impl Rounds {
         let again: Vec<Watched> = if self.full_round {
             Vec::new()
         } else {
-            self.watch
+            let mut again: Vec<Watched> = self
+                .watch
                 .iter()
                 .filter(|w| {
                     control.triangles[w.parent as usize]
                         .iter()
                         .any(|&v| self.reached[v as usize])
                 })
+                .chain(&self.near_pushes)
                 .copied()
-                .collect()
+                .collect();
+            again.sort_unstable_by_key(|w| w.particle);
+            again.dedup_by_key(|w| w.particle);
+            self.measured = again.iter().map(|w| w.particle).collect();
+            again
         };
         let near_again = (!self.full_round).then(|| {
             let ps: Vec<Vec3> = again.iter().map(|w| w.position).collect();
@@ -388,9 +438,9 @@ impl Rounds {
                 surface: &surface,
                 control,
                 control_tris: &self.tris,
-                // The tangent-plane shortcut needs normals, which are the control mesh's
-                // only as it was when last measured whole.
-                fast_depth: if self.full_round {
+                // The tangent-plane shortcut needs the control mesh's normals, which are
+                // computed after the first round only when the pushes were large.
+                fast_depth: if self.fresh_normals {
                     self.depth + FAST_MARGIN * self.r
                 } else {
                     f64::INFINITY
@@ -471,9 +521,88 @@ impl Rounds {
                 }
             }
         }
-        (push.len(), largest)
+        self.pushed = push;
+        (self.pushed.len(), largest)
+    }
+
+    /// Every centre that the last pushes may have brought within r of being too shallow,
+    /// or `None` when the region they moved spans more than [`NEAR_PUSH_MAX_CELLS`]
+    /// cells. The one-step surface over a control triangle lies in the hull of its
+    /// corners' one-rings, so the pushes moved it only within the one-rings of the
+    /// corners of the triangles with a `reached` vertex, between where their vertices
+    /// were and where they are: a centre farther than `depth + r` from all of those
+    /// (boxes of them, in cells of 2r) was not shallow or watched before the pushes and
+    /// is not now.
+    fn centres_near_pushes<C: Centres + ?Sized>(
+        &self,
+        control: &TriMesh,
+        input: &ContainmentInput<'_, C>,
+        cancel: &CancelToken,
+    ) -> Result<Option<Vec<Watched>>> {
+        let cell = (2.0 * self.r) as f32;
+        let margin = Vec3::splat((self.depth + self.r) as f32);
+        let cell_of = |p: Vec3| (p / cell).floor().as_ivec3();
+        let pushed: HashMap<u32, Vec3> =
+            self.pushed.iter().map(|&(v, d)| (v, d.as_vec3())).collect();
+        let mut corners: Vec<u32> = control
+            .triangles
+            .iter()
+            .filter(|t| t.iter().any(|&v| self.reached[v as usize]))
+            .flatten()
+            .copied()
+            .collect();
+        corners.sort_unstable();
+        corners.dedup();
+        let mut cells: HashSet<glam::IVec3> = HashSet::new();
+        for &u in &corners {
+            let (mut lo, mut hi) = (Vec3::MAX, Vec3::MIN);
+            for &t in self.tris.of(u) {
+                for w in control.triangles[t as usize] {
+                    let p = control.positions[w as usize];
+                    let before = pushed.get(&w).map_or(p, |&d| p - d);
+                    lo = lo.min(p).min(before);
+                    hi = hi.max(p).max(before);
+                }
+            }
+            let (a, b) = (cell_of(lo - margin), cell_of(hi + margin));
+            let span = (b - a + 1).as_i64vec3();
+            if cells.len() as i64 + span.x * span.y * span.z > NEAR_PUSH_MAX_CELLS as i64 {
+                return Ok(None);
+            }
+            for z in a.z..=b.z {
+                for y in a.y..=b.y {
+                    for x in a.x..=b.x {
+                        cells.insert(glam::IVec3::new(x, y, z));
+                    }
+                }
+            }
+        }
+        let mut near = Vec::new();
+        for slab in 0..self.slabs.count() {
+            self.visit_slab(slab, input.centres, cancel, &mut |ps, is| {
+                let found: Vec<Watched> = ps
+                    .par_iter()
+                    .zip(is)
+                    .filter(|(p, _)| cells.contains(&cell_of(**p)))
+                    .map(|(&position, &particle)| Watched {
+                        particle,
+                        position,
+                        parent: NO_PARENT,
+                    })
+                    .collect();
+                near.extend(found);
+            })?;
+        }
+        Ok(Some(near))
     }
 }
+
+/// Most cells of 2r that [`Rounds::centres_near_pushes`] marks before it measures every
+/// centre again instead (64 MiB of cells).
+const NEAR_PUSH_MAX_CELLS: usize = 1 << 22;
+
+/// The parent of a centre measured again for being near a push, not for being watched.
+const NO_PARENT: u32 = u32::MAX;
 
 /// What measuring some centres found.
 #[derive(Default)]
@@ -722,5 +851,142 @@ mod tests {
             assert!(moved > 0 && moved < before.positions.len() / 2, "{moved}");
             assert!(crate::mesh::validate(&surface).is_closed_manifold());
         }
+    }
+
+    /// Centres a little outside a sphere, and a grid of centres inside it at spacing
+    /// about r: the particles of [`pushes_of_more_than_r_measure_again_only_near_them`]
+    /// and of [`centres_near_pushes_hold_every_centre_near_the_moved_surface`].
+    fn ball_with_outsiders(r: f32) -> Vec<Vec3> {
+        let mut centres = Vec::new();
+        let steps = 20;
+        for z in -steps..=steps {
+            for y in -steps..=steps {
+                for x in -steps..=steps {
+                    let p = Vec3::new(x as f32, y as f32, z as f32) * (0.95 / steps as f32);
+                    if p.length() < 0.96 {
+                        centres.push(p);
+                    }
+                }
+            }
+        }
+        // Three centres 0.8 r outside, in different directions (pushes of about 1.5 r).
+        for d in [
+            Vec3::X,
+            Vec3::new(0.0, -0.6, 0.8),
+            Vec3::new(-0.5, 0.5, 0.7),
+        ] {
+            centres.push(d.normalize() * (1.0 + 0.8 * r));
+        }
+        centres
+    }
+
+    /// After pushes of more than r, the centres chosen to be measured again include every
+    /// centre within `depth + r` of a point of the one-step surface that moved, where it
+    /// was or where it is (the surface points checked one by one, against the choice made
+    /// from boxes of control vertices).
+    #[test]
+    fn centres_near_pushes_hold_every_centre_near_the_moved_surface() {
+        let r = 0.05f32;
+        let centres = ball_with_outsiders(r);
+        let mut control = icosphere(4, 1.0);
+        let input = ContainmentInput {
+            levels: 1,
+            centres: &centres[..],
+            isolated: &[],
+            particle_radius: r,
+            slab_triangles: usize::MAX,
+        };
+        let depth = 0.25 * r as f64;
+        let mut stats = ContainmentStats::default();
+        let mut rounds = Rounds::new(&mut control, &input, depth, &mut stats);
+        let mut found = rounds
+            .measure(&control, &input, &CancelToken::new(), &mut stats)
+            .unwrap();
+        assert_eq!(found.shallow.len(), 3);
+        let before = control.clone();
+        let (_, largest) = rounds.push_out(&mut control, &mut found.shallow);
+        assert!(largest > r as f64, "{largest}");
+        let chosen: HashSet<u32> = rounds
+            .centres_near_pushes(&control, &input, &CancelToken::new())
+            .unwrap()
+            .expect("a small region")
+            .iter()
+            .map(|w| w.particle)
+            .collect();
+        let one_step = |mesh: &TriMesh| {
+            let mut m = mesh.clone();
+            crate::subdivision::subdivide(
+                &mut m,
+                &crate::subdivision::SubdivideOptions { levels: 1 },
+            );
+            m.positions
+        };
+        let (old, new) = (one_step(&before), one_step(&control));
+        let moved: Vec<Vec3> = old
+            .iter()
+            .zip(&new)
+            .filter(|(a, b)| a != b)
+            .flat_map(|(a, b)| [*a, *b])
+            .collect();
+        assert!(!moved.is_empty());
+        let reach = (depth + r as f64) as f32;
+        let mut near = 0;
+        for (i, c) in centres.iter().enumerate() {
+            if moved.iter().any(|q| q.distance(*c) < reach) {
+                near += 1;
+                assert!(chosen.contains(&(i as u32)), "centre {i} at {c} not chosen");
+            }
+        }
+        // Some; the boxes of the moved control one-rings hold more (1359 against 41 when
+        // written), but a small part of all centres.
+        assert!(
+            near > 20 && chosen.len() * 10 < centres.len(),
+            "{near} near, {} chosen",
+            chosen.len()
+        );
+    }
+
+    /// Centres a little outside need pushes of more than r: the next round measures again the
+    /// centres near the moved surface only, not all of them, and every centre still ends
+    /// at the depth under the surface Loop makes.
+    #[test]
+    fn pushes_of_more_than_r_measure_again_only_near_them() {
+        let r = 0.05f32;
+        let centres = ball_with_outsiders(r);
+        let inside = centres.len() - 3;
+        let mut control = icosphere(4, 1.0);
+        let options = ContainmentOptions {
+            min_depth: 0.25,
+            max_rounds: 8,
+            ..Default::default()
+        };
+        let stats = contain(&mut control, 1, &centres, r, &options);
+        assert_eq!(stats.remaining, 0, "{stats:?}");
+        assert!(stats.outside >= 3 && stats.rounds >= 2, "{stats:?}");
+        // Measured again: some, far fewer than the near centres of the first round.
+        assert!(
+            stats.remeasured > 0 && stats.remeasured * 3 < stats.near_centres,
+            "{stats:?} ({inside} inside)"
+        );
+        let mut surface = control.clone();
+        crate::subdivision::subdivide(
+            &mut surface,
+            &crate::subdivision::SubdivideOptions { levels: 1 },
+        );
+        assert!(crate::mesh::validate(&surface).is_closed_manifold());
+        let depth = 0.25 * r as f64;
+        with_index(&surface, r as f64, false, |index| {
+            for p in &centres {
+                match index.probe(p.as_dvec3()) {
+                    Some(probe) => assert!(
+                        probe.signed_distance <= -depth + 2e-3 * r as f64,
+                        "{p}: {}",
+                        probe.signed_distance
+                    ),
+                    // No surface within r: deep inside (the pushes only moved it out).
+                    None => assert!(p.length() < 1.0 - r, "{p}"),
+                }
+            }
+        });
     }
 }

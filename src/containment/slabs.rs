@@ -129,13 +129,20 @@ impl Slabs {
         let Some(near) = near else {
             return members.to_vec();
         };
+        // Each vertex looked up once (not once per triangle at it).
+        let holds: Vec<bool> = control
+            .positions
+            .par_iter()
+            .zip(&self.reach)
+            .map(|(&p, &m)| near.holds(p, m))
+            .collect();
         members
             .par_iter()
             .copied()
             .filter(|&t| {
                 control.triangles[t as usize]
                     .iter()
-                    .any(|&v| near.holds(control.positions[v as usize], self.reach[v as usize]))
+                    .any(|&v| holds[v as usize])
             })
             .collect()
     }
