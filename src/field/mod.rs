@@ -350,11 +350,10 @@ pub(crate) fn compute_tile(
     // The particles are held only until the field has its own (`field_particles`, and the
     // kernels sorted by centre).
     drop(particles);
-    let (mut field, mut stats) = match &kernels {
+    let (mut field, mut stats) = match kernels {
         None => isotropic::compute_blocks(&field_particles, options, blocks),
         Some(kernels) => anisotropic::compute_blocks(kernels, options, blocks),
     };
-    drop(kernels);
     stats.uncovered_particles = apply_coverage(&mut field, &field_particles, options, counted);
     apply_iso_offset(&mut field, options);
     TileField {
