@@ -295,6 +295,12 @@ pub(crate) fn contain_centres<C: Centres + ?Sized>(
         rounds.full_round = false;
         rounds.near_pushes.clear();
         if largest > r {
+            // The pushes lengthened the edges at the pushed vertices: the slabs' reach
+            // (what a centre's measuring may read) is taken again, so that the surface
+            // built around the centres measured next holds all they read.
+            let clock = Instant::now();
+            rounds.slabs = Slabs::new(control, &rounds.tris, input.slab_triangles, r);
+            stats.surface_seconds += clock.elapsed().as_secs_f64();
             match rounds.centres_near_pushes(control, input, cancel)? {
                 Some(near) => rounds.near_pushes = near,
                 None => rounds.full_round = true,
