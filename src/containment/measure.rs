@@ -492,7 +492,7 @@ pub(super) fn with_index<T>(
         control: &control,
         control_tris: &tris,
         fast_depth: if fast {
-            0.25 * r + super::FAST_MARGIN * r
+            0.25 * r + super::rounds::FAST_MARGIN * r
         } else {
             f64::INFINITY
         },

@@ -292,7 +292,7 @@ const NEAR_CELL: f32 = 8.0;
 /// Most cells a [`Near`] marks for one dilation; a larger one lets every point through.
 const NEAR_MAX_CELLS: usize = 1 << 22;
 
-fn cell_of(p: Vec3, cell: f32) -> IVec3 {
+pub(super) fn cell_of(p: Vec3, cell: f32) -> IVec3 {
     (p / cell).floor().as_ivec3()
 }
 
