@@ -74,6 +74,7 @@ fn main() {
         template: icosphere(1, 0.05),
         attributes: attributes(&centers),
         centers,
+        scales: Vec::new(),
     };
     let surface = Surface { fluid, spheres };
     for ext in ["glb", "gltf", "ply", "vtk"] {

@@ -66,6 +66,7 @@ fn spheres(frame: i64, count: usize) -> SphereInstances {
             attribute("density", 1, count, 1000.0),
         ],
         centers,
+        scales: Vec::new(),
     }
 }
 

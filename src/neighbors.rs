@@ -93,18 +93,25 @@ const NEXT_IN_ORDER: usize = 4;
 /// second binning and no hash of cells: the cells of one (y, z) row are one run of the
 /// particles, found by one lookup and two binary searches. The same test on the same
 /// pairs, so the same flags.
-pub fn find_isolated_sorted(
+///
+/// With `sizes` (the particles' radius ratios and the largest, for particles of several
+/// sizes) particle i is isolated when no other lies within its own reach
+/// `radius·ratios[i]`: a small particle beside a large one can be isolated while the
+/// large one is not.
+pub(crate) fn find_isolated_sorted(
     positions: &[Vec3],
     cells: &[[i32; 3]],
     cell_size: f32,
     radius: f32,
+    sizes: Option<(&[f32], f32)>,
     wanted: &[bool],
 ) -> Vec<bool> {
     // The particles of every row of cells.
     let rows = crate::grid::row_ranges(cells.iter().copied());
+    let largest = sizes.map_or(radius, |(_, largest)| radius * largest.max(1.0));
     // Two points closer than d lie at most ⌊d / edge⌋ + 1 cells apart on every axis (a
     // hair more for d, against the rounding of their cells).
-    let reach = (radius as f64 / cell_size as f64 * (1.0 + 1e-6)).floor() as i32 + 1;
+    let reach = (largest as f64 / cell_size as f64 * (1.0 + 1e-6)).floor() as i32 + 1;
     // The rows searched, (dy, dz) from the particle's: its own row first, where most
     // particles have a neighbour.
     let row_offsets: Vec<(i32, i32)> = std::iter::once((0, 0))
@@ -123,6 +130,10 @@ pub fn find_isolated_sorted(
             if !wanted[i] {
                 return false;
             }
+            let r2 = match sizes {
+                None => r2,
+                Some((ratios, _)) => (radius * ratios[i]) * (radius * ratios[i]),
+            };
             let close = |j: usize| j != i && (positions[j] - p).length_squared() < r2;
             // The particles next to it in the sorted order first (mostly of its own cell),
             // then the rows.
@@ -207,7 +218,7 @@ mod tests {
             let sorted: Vec<Vec3> = order.iter().map(|&i| pts[i]).collect();
             let sorted_wanted: Vec<bool> = order.iter().map(|&i| wanted[i]).collect();
             let cells: Vec<[i32; 3]> = sorted.iter().map(bin).collect();
-            let flags = find_isolated_sorted(&sorted, &cells, edge, radius, &sorted_wanted);
+            let flags = find_isolated_sorted(&sorted, &cells, edge, radius, None, &sorted_wanted);
             for (k, &i) in order.iter().enumerate() {
                 assert_eq!(flags[k], expected[i], "particle {i}, bin edge {edge}");
             }

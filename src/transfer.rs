@@ -545,6 +545,7 @@ mod tests {
         let plan = plan_tiles(
             particles,
             &field,
+            None,
             &options,
             crate::tiles::OutputCost::NONE,
             false,

@@ -368,6 +368,7 @@ fn lattice_coordinates_that_overflow_are_decoded_or_refused_never_panic() {
     let spheres = SphereInstances {
         template: icosphere(0, 0.1),
         centers: vec![glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y],
+        scales: Vec::new(),
         attributes: Vec::new(),
     };
     let none = SphereInstances::default();

@@ -22,6 +22,7 @@ fn surface() -> Surface {
             template: icosphere(1, 0.1),
             centers: vec![Vec3::new(3.0, 0.0, 0.0), Vec3::new(-3.0, 1.0, 0.5)],
             attributes: Vec::new(),
+            scales: Vec::new(),
         },
     }
 }
@@ -563,6 +564,7 @@ fn mutated_mesh_files_are_read_or_rejected_never_panic() {
             template: icosphere(0, 0.1),
             centers: vec![Vec3::new(3.0, 0.0, 0.0)],
             attributes: Vec::new(),
+            scales: Vec::new(),
         },
     };
     let mut bases = Vec::new();

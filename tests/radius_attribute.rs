@@ -300,12 +300,12 @@ fn the_cli_reports_bad_and_differing_radii() {
         (
             &differing,
             &out,
-            vec!["-q"],
+            vec![],
             0,
             vec![
-                "warning: the particle radii of attribute \"pscale\"",
-                "range from 0.02 to 0.03",
-                "one radius r = 0.02",
+                "particle radii of attribute \"pscale\"",
+                "from 0.02 to 0.03: each particle meshed with its own",
+                "multiples of r = 0.02",
             ],
         ),
         (

@@ -15,7 +15,7 @@ use meniscus::io::particles::ParticleSlices;
 use meniscus::io::usd::{write_stage, UpAxis, UsdFormat, UsdOptions};
 use meniscus::job::{plan_frames, run_frames, FrameReport, JobOptions};
 use meniscus::mesh::Surface;
-use meniscus::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
+use meniscus::pipeline::{reconstruct_sized, ReconstructOptions, ReconstructionStats};
 use meniscus::radius::{radii_of, read_radii, ParticleRadii, RadiusAttribute};
 use options::Keywords;
 
@@ -298,8 +298,7 @@ fn resolve_radius(
 
 /// The particle radius of a run whose particles carry a radius attribute: without
 /// `given` the median; `given` checked against the median as against the estimate
-/// (unless not `radius_check`). A `UserWarning` when the radii differ: the field does
-/// not yet give each particle its own.
+/// (unless not `radius_check`).
 fn radius_from_attribute(
     py: Python<'_>,
     given: Option<f32>,
@@ -310,16 +309,6 @@ fn radius_from_attribute(
     use meniscus::radius::{check_radius, RadiusCheck};
     let median = radii.median();
     let source = format!("attribute {:?} of {}", radii.attribute, input.display());
-    if !radii.is_uniform() {
-        let (lo, hi) = radii.range();
-        user_warning(
-            py,
-            &format!(
-                "the particle radii of {source} range from {lo:?} to {hi:?}; every particle is meshed with one radius r = {:?} (per-particle radii are not used yet)",
-                given.unwrap_or(median)
-            ),
-        )?;
-    }
     let Some(r) = given else {
         return Ok(median);
     };
@@ -583,7 +572,7 @@ fn reconstruct(
     };
     let result = run_interruptible(py, |cancel| {
         with_threads(threads, || {
-            reconstruct_source(source, &options, &|_| {}, cancel)
+            reconstruct_sized(source, radii.as_ref(), &options, &|_| {}, cancel)
         })
     });
     py.allow_threads(malloc::release_free_memory);

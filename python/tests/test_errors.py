@@ -108,6 +108,14 @@ def test_the_radius_attribute_gives_r_and_is_checked(frame25):
     meniscus.reconstruct(frame25, RADIUS, attributes={"pscale": bad}, radius_attribute="none")
     with pytest.raises(ValueError, match="median radius"):
         meniscus.reconstruct(frame25, 100 * RADIUS, attributes=uniform)
-    varying = np.where(np.arange(n) % 2 == 0, RADIUS, 2 * RADIUS).astype(np.float32)
-    with pytest.warns(UserWarning, match="per-particle radii are not used yet"):
-        meniscus.reconstruct(frame25, attributes={"pscale": varying})
+    # Each particle meshed with its own radius: radii of 1.5 r reach farther and the
+    # surface encloses more, with r (the lattice) still the given one.
+    larger = np.full(n, 1.5 * RADIUS, dtype=np.float32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sized = meniscus.reconstruct(frame25, RADIUS, attributes={"pscale": larger})
+    def volume(mesh):
+        v = mesh.vertices.astype(np.float64)[mesh.triangles.astype(np.int64)]
+        return np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0
+
+    assert volume(sized) > 1.05 * volume(plain)

@@ -20,6 +20,7 @@ fn version_1_archives_are_read_and_appended_in_their_format() {
     let spheres = SphereInstances {
         template: icosphere(0, 0.1),
         centers: vec![glam::Vec3::new(5.0, 0.0, 0.0)],
+        scales: Vec::new(),
         attributes: Vec::new(),
     };
     let frame = ArchiveFrame {

@@ -65,7 +65,7 @@ pub(crate) fn resolve_radius(args: &ReconstructArgs, first: &Path) -> Result<f32
 /// The radius of a run whose first frame has a radius attribute: without `-r` the
 /// attribute's median, printed; `-r` checked against the median as against the estimate
 /// (unless `--no-radius-check`). Says when it took Houdini's `pscale` by default, and
-/// warns when the radii differ: the field does not yet give each particle its own.
+/// when the radii differ (each particle is meshed with its own).
 fn from_attribute(
     args: &ReconstructArgs,
     first: &Path,
@@ -81,9 +81,9 @@ fn from_attribute(
             "particle radii from Houdini's {source}, taken when present (--radius-attribute none ignores it)"
         );
     }
-    if !radii.is_uniform() {
+    if !radii.is_uniform() && !args.quiet {
         eprintln!(
-            "warning: the particle radii of {source} range from {lo:?} to {hi:?}; this version meshes every particle with one radius r = {:?} (per-particle radii are not used yet)",
+            "particle radii of {source} from {lo:?} to {hi:?}: each particle meshed with its own; cell size and options in multiples of r = {:?}",
             given.unwrap_or(median)
         );
     }

@@ -205,6 +205,7 @@ pub fn contain(
     options: &ContainmentOptions,
 ) -> ContainmentStats {
     let input = ContainmentInput {
+        sizes: None,
         levels,
         centres,
         isolated: &[],
@@ -226,6 +227,9 @@ pub(crate) struct ContainmentInput<'a, C: Centres + ?Sized> {
     pub isolated: &'a [Vec3],
     /// Particle radius `r`, world units.
     pub particle_radius: f32,
+    /// The particles' own radii by input index, when they have several sizes: each
+    /// centre's depth is `min_depth` times its own radius.
+    pub sizes: Option<crate::field::Sizes<'a>>,
     /// Control triangles per slab, about ([`ContainmentOptions::slab_triangles`]).
     pub slab_triangles: usize,
 }

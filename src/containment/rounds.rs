@@ -29,8 +29,17 @@ pub(crate) fn contain_centres<C: Centres + ?Sized>(
         stats.rounds = 1;
         return Ok(stats);
     }
-    let r = input.particle_radius as f64;
+    // Lengths of the whole surface (cells, slabs, margins) from the largest particle; each
+    // centre's own depth from its own radius ([`Need`]).
+    let largest = crate::field::largest_ratio(input.sizes) as f64;
+    let r = input.particle_radius as f64 * largest;
     let depth = options.min_depth.max(0.0) as f64 * r;
+    let need = Need {
+        depth: options.min_depth.max(0.0) as f64 * input.particle_radius as f64,
+        r: input.particle_radius as f64,
+        margin: r,
+        ratios: input.sizes.map(|s| s.ratios),
+    };
     let mut rounds = Rounds::new(control, input, depth, &mut stats);
     loop {
         stats.rounds += 1;
@@ -39,7 +48,7 @@ pub(crate) fn contain_centres<C: Centres + ?Sized>(
             mut shallow,
             watched,
             ..
-        } = rounds.measure(control, input, cancel, &mut stats)?;
+        } = rounds.measure(control, input, &need, cancel, &mut stats)?;
         if stats.rounds > 1 {
             stats.remeasured += if rounds.full_round {
                 near
@@ -97,12 +106,9 @@ pub(crate) fn contain_centres<C: Centres + ?Sized>(
 
 /// The state of containment's rounds.
 struct Rounds {
-    /// Least depth, world units.
+    /// Least depth, world units (of the largest particle).
     depth: f64,
-    /// Pushes aim a little deeper than required, so that rounding cannot leave a centre
-    /// a hair short of the depth for another round.
-    aim: f64,
-    /// Particle radius, world units.
+    /// Particle radius, world units (the largest particle's).
     r: f64,
     /// How much more than the surface must move a control vertex is pushed: Loop averages
     /// a push of a control triangle over its neighbours, so the surface over the triangle
@@ -153,7 +159,6 @@ impl Rounds {
         stats.surface_seconds += clock.elapsed().as_secs_f64();
         Rounds {
             depth,
-            aim: depth + AIM_BEYOND * r,
             r,
             gain: if input.levels == 0 { 1.0 } else { 1.4 },
             isolated: input.isolated.iter().map(|p| bits(*p)).collect(),
@@ -177,6 +182,7 @@ impl Rounds {
         &mut self,
         control: &TriMesh,
         input: &ContainmentInput<'_, C>,
+        need: &Need<'_>,
         cancel: &CancelToken,
         stats: &mut ContainmentStats,
     ) -> Result<Found> {
@@ -233,9 +239,9 @@ impl Rounds {
                     f64::INFINITY
                 },
             };
-            let (isolated, depth, r) = (&self.isolated, self.depth, self.r);
+            let isolated = &self.isolated;
             let mut gather = |ps: &[Vec3], is: &[u32]| {
-                found.extend(measure_centres(&index, isolated, depth, r, ps, is));
+                found.extend(measure_centres(&index, isolated, need, ps, is));
             };
             if self.full_round {
                 self.visit_slab(slab, input.centres, cancel, &mut gather)?;
@@ -244,7 +250,7 @@ impl Rounds {
                     again.iter().map(|w| (w.particle, w.position)).unzip();
                 gather(&ps, &is);
             }
-            settle(&index, &mut found, self.depth, self.r, self.aim);
+            settle(&index, &mut found, need);
             self.slots = surface.into_slots();
         }
         Ok(found)
@@ -412,9 +418,10 @@ impl Found {
         self.pending.extend(other.pending);
     }
 
-    /// Watches centre `i` at `p` if its `probe` lies within `r` of being too shallow.
-    fn watch(&mut self, i: u32, p: Vec3, probe: &Probe, depth: f64, r: f64) {
-        if probe.signed_distance > -(depth + r) {
+    /// Watches centre `i` at `p` if its `probe` lies within `margin` of being too shallow
+    /// (`depth`: its least depth).
+    fn watch(&mut self, i: u32, p: Vec3, probe: &Probe, depth: f64, margin: f64) {
+        if probe.signed_distance > -(depth + margin) {
             self.watched.push(Watched {
                 particle: i,
                 position: p,
@@ -424,14 +431,38 @@ impl Found {
     }
 }
 
+/// How deep each centre must lie, world units: `depth` (and the tolerances of `r`) times
+/// its radius ratio when the particles have several sizes; `margin` (the largest
+/// particle's r) within which a centre is watched, the most a push may move the surface
+/// without measuring again around it.
+struct Need<'a> {
+    depth: f64,
+    r: f64,
+    margin: f64,
+    ratios: Option<&'a [f32]>,
+}
+
+impl Need<'_> {
+    /// The least depth of centre `i` and its radius, world units.
+    #[inline]
+    fn of(&self, i: u32) -> (f64, f64) {
+        match self.ratios {
+            None => (self.depth, self.r),
+            Some(ratios) => {
+                let k = ratios[i as usize] as f64;
+                (self.depth * k, self.r * k)
+            }
+        }
+    }
+}
+
 /// Measures the centres `ps` (particle indices `is`) against `index`, in parallel,
-/// skipping those at the positions of `isolated`: those shallower than `depth` (world
-/// units) are left to [`settle`], those within `r` of that are watched.
+/// skipping those at the positions of `isolated`: those shallower than their depth
+/// ([`Need`]) are left to [`settle`], those within the margin of that are watched.
 fn measure_centres(
     index: &SurfaceIndex,
     isolated: &HashSet<[u32; 3]>,
-    depth: f64,
-    r: f64,
+    need: &Need<'_>,
     ps: &[Vec3],
     is: &[u32],
 ) -> Found {
@@ -445,10 +476,11 @@ fn measure_centres(
                 continue;
             }
             found.near += 1;
+            let (depth, r) = need.of(i);
             if shallow(&probe, depth, r) {
                 found.pending.push((i, p, probe));
             } else {
-                found.watch(i, p, &probe, depth, r);
+                found.watch(i, p, &probe, depth, need.margin);
             }
         }
         found
@@ -472,9 +504,10 @@ fn shallow(probe: &Probe, depth: f64, r: f64) -> bool {
 
 /// Measures the centres of `found.pending` again over every triangle that may pass nearer
 /// than their probes found (`SurfaceIndex::confirm`; once per slab, as it reads all of
-/// the slab's triangles), and files them: too shallow they are pushed to `aim`, within
-/// `r` of that they are watched.
-fn settle(index: &SurfaceIndex, found: &mut Found, depth: f64, r: f64, aim: f64) {
+/// the slab's triangles), and files them: too shallow they are pushed a little deeper than
+/// their depth (so that rounding cannot leave a centre a hair short of it for another
+/// round), within the margin of it they are watched.
+fn settle(index: &SurfaceIndex, found: &mut Found, need: &Need<'_>) {
     let pending = std::mem::take(&mut found.pending);
     let mut probes: Vec<(DVec3, Probe)> = pending
         .iter()
@@ -482,8 +515,10 @@ fn settle(index: &SurfaceIndex, found: &mut Found, depth: f64, r: f64, aim: f64)
         .collect();
     index.confirm(&mut probes);
     for ((i, p, _), (_, probe)) in pending.into_iter().zip(probes) {
-        found.watch(i, p, &probe, depth, r);
+        let (depth, r) = need.of(i);
+        found.watch(i, p, &probe, depth, need.margin);
         if shallow(&probe, depth, r) {
+            let aim = depth + AIM_BEYOND * r;
             found.shallow.push(Shallow {
                 particle: i,
                 push: probe.normal * (probe.signed_distance + aim),
@@ -678,6 +713,7 @@ mod tests {
         let centres = ball_with_outsiders(r);
         let mut control = icosphere(4, 1.0);
         let input = ContainmentInput {
+            sizes: None,
             levels: 1,
             centres: &centres[..],
             isolated: &[],
@@ -687,8 +723,14 @@ mod tests {
         let depth = 0.25 * r as f64;
         let mut stats = ContainmentStats::default();
         let mut rounds = Rounds::new(&mut control, &input, depth, &mut stats);
+        let need = Need {
+            depth,
+            r: r as f64,
+            margin: r as f64,
+            ratios: None,
+        };
         let mut found = rounds
-            .measure(&control, &input, &CancelToken::new(), &mut stats)
+            .measure(&control, &input, &need, &CancelToken::new(), &mut stats)
             .unwrap();
         assert_eq!(found.shallow.len(), 3);
         let before = control.clone();

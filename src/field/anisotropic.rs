@@ -24,6 +24,11 @@
 //! way spheres of radius `R` do. `phi` is a distance, so coverage and the iso offset work
 //! as with the isotropic field.
 //!
+//! **Particles of several sizes** (a radius attribute): each kernel was built at its own
+//! radius `r_i` ([`super::kernels`]), and the surface distance is `ρ_s·rbar(v)` with
+//! `rbar(v) = Σ w_i r_i / Σ w_i`, the weighted mean radius of the particles at `v` (one more
+//! running sum, `Σ w·ρ_i` with `ρ_i = r_i / r`).
+//!
 //! **Evaluation order:** kernels binned by the home half-block of their *centre*, in
 //! (z, y, x) order, then in the order given (the canonical order of the tile engine), as
 //! the isotropic field does; sums in f32 on block-local coordinates.
@@ -32,7 +37,7 @@ use super::candidates::candidate_blocks;
 use super::evaluate::{evaluate_blocks, BlockEvaluator, ROW, ROWS};
 use super::kernels::ParticleKernel;
 use super::rows::{transpose_bits, HalfRowIndex};
-use super::{kernel_reach, FieldOptions, FieldStats};
+use super::{kernel_reach, FieldOptions, FieldStats, Sizes};
 use crate::grid::{
     home_half_block, BlockKey, BlockRange, BlockValues, SparseField, BLOCK_EDGE, HALF_BLOCK_EDGE,
 };
@@ -47,30 +52,35 @@ struct Prepared {
     form: [f32; 6],
     /// Half-extents of the bounding box, cells.
     extent: [f32; 3],
+    /// The particle's radius, multiples of r (1 unless sized).
+    ratio: f32,
 }
 
 /// Number of running sums per vertex: Σw, Σw·r (3) and Σ(1 − s²)²·M r (3), with
-/// `r = v − c` in cells.
-const SUMS: usize = 7;
+/// `r = v − c` in cells, and for particles of several sizes Σw·ρ (left at 0 otherwise).
+const SUMS: usize = 8;
 
 /// Computes the blocks of the anisotropic field within `range` (all blocks when `None`)
 /// from `kernels`, which must include every kernel that reaches those blocks, in a
 /// canonical order. Coverage and the iso offset are applied afterwards, as for the
 /// isotropic field. Options must be valid. The kernels are dropped once prepared for the
 /// lattice, before the blocks are evaluated: they and their prepared copy (64 bytes a
-/// particle each) never sit beside the field's blocks together.
+/// particle each) never sit beside the field's blocks together. `sizes`: each kernel's
+/// particle radius, multiples of r, for particles of several sizes.
 pub(crate) fn compute_blocks(
     kernels: Vec<ParticleKernel>,
+    sizes: Option<Sizes<'_>>,
     options: &FieldOptions,
     range: Option<BlockRange>,
 ) -> (SparseField, FieldStats) {
-    compute_blocks_with(kernels, options, range, true)
+    compute_blocks_with(kernels, sizes, options, range, true)
 }
 
 /// [`compute_blocks`]; `simd`: the AVX2 copy of the kernel may be used (the values are
 /// the same either way).
 fn compute_blocks_with(
     kernels: Vec<ParticleKernel>,
+    sizes: Option<Sizes<'_>>,
     options: &FieldOptions,
     range: Option<BlockRange>,
     simd: bool,
@@ -93,26 +103,44 @@ fn compute_blocks_with(
                 centre: [c.x, c.y, c.z],
                 form: k.quadratic_form(h).map(|v| v as f32),
                 extent: k.half_extents(h).map(|v| v as f32),
+                ratio: sizes.map_or(1.0, |s| s.ratios[i as usize]),
             }
         })
         .collect();
     drop(order);
     let particles = kernels.len();
     drop(kernels);
-    let reach_cells = kernel_reach(options) / options.cell_size;
+    let reach_cells = kernel_reach(options, sizes) / options.cell_size;
     let half_reach = (reach_cells / HALF_BLOCK_EDGE as f32).ceil() as i32;
     let candidates = candidate_blocks(runs.iter().map(|r| r.0), half_reach, range);
     let index = HalfRowIndex::new(&runs);
     drop(runs);
-    let evaluator = Evaluator {
-        sorted: &sorted,
-        index: &index,
-        half_reach,
-        h,
-        outside: options.outside_value(),
-        surface: options.anisotropy.surface_distance as f64 * options.particle_radius as f64,
-    };
-    evaluate_blocks(&evaluator, &candidates, particles, options, simd)
+    let surface = options.anisotropy.surface_distance as f64 * options.particle_radius as f64;
+    let outside = options.outside_value();
+    match sizes {
+        None => {
+            let evaluator = Evaluator::<false> {
+                sorted: &sorted,
+                index: &index,
+                half_reach,
+                h,
+                outside,
+                surface,
+            };
+            evaluate_blocks(&evaluator, &candidates, particles, options, simd)
+        }
+        Some(_) => {
+            let evaluator = Evaluator::<true> {
+                sorted: &sorted,
+                index: &index,
+                half_reach,
+                h,
+                outside,
+                surface,
+            };
+            evaluate_blocks(&evaluator, &candidates, particles, options, simd)
+        }
+    }
 }
 
 /// Per-thread scratch of one block.
@@ -123,9 +151,12 @@ struct Scratch {
     /// Per group of 64 particles, per row: a bit per particle of the group whose
     /// bounding box meets the row.
     rows: Vec<[u64; ROWS]>,
+    /// The radius of each of `particles`, multiples of r (sized only).
+    ratios: Vec<f32>,
 }
 
-struct Evaluator<'a> {
+/// `SIZED`: particles of several sizes (the mean radius is summed).
+struct Evaluator<'a, const SIZED: bool> {
     sorted: &'a [Prepared],
     index: &'a HalfRowIndex,
     /// Half-blocks, per axis, beyond a block's own two whose kernels can reach it.
@@ -136,7 +167,7 @@ struct Evaluator<'a> {
     surface: f64,
 }
 
-impl BlockEvaluator for Evaluator<'_> {
+impl<const SIZED: bool> BlockEvaluator for Evaluator<'_, SIZED> {
     type Scratch = Scratch;
 
     fn scratch(&self) -> Scratch {
@@ -155,6 +186,7 @@ impl BlockEvaluator for Evaluator<'_> {
     ) -> Option<usize> {
         scratch.particles.clear();
         scratch.rows.clear();
+        scratch.ratios.clear();
         let origin = [0, 1, 2].map(|a| key[a] as f64 * BLOCK_EDGE as f64);
         let (first, last) = (
             key.map(|k| 2 * k - self.half_reach),
@@ -181,6 +213,9 @@ impl BlockEvaluator for Evaluator<'_> {
                     let group = scratch.rows.last_mut().expect("a group");
                     group[index % 64] = (y_bits * 0x0101_0101_0101_0101) & z_bytes;
                     scratch.particles.push((x, p.form));
+                    if SIZED {
+                        scratch.ratios.push(p.ratio);
+                    }
                 }
             }
         }
@@ -198,11 +233,18 @@ impl BlockEvaluator for Evaluator<'_> {
             }
             let (b, c) = ((row % ROW) as f32, (row / ROW) as f32);
             let mut sums = [[0.0f32; ROW]; SUMS];
-            for (group, members) in scratch.particles.chunks(64).zip(&scratch.rows) {
+            for (g, (group, members)) in scratch.particles.chunks(64).zip(&scratch.rows).enumerate()
+            {
                 let mut bits = members[row];
                 while bits != 0 {
-                    let (x, form) = &group[bits.trailing_zeros() as usize];
-                    accumulate_row(&mut sums, x, b, c, form);
+                    let k = bits.trailing_zeros() as usize;
+                    let (x, form) = &group[k];
+                    let ratio = if SIZED {
+                        scratch.ratios[g * 64 + k]
+                    } else {
+                        1.0
+                    };
+                    accumulate_row::<SIZED>(&mut sums, x, b, c, form, ratio);
                     bits &= bits - 1;
                 }
             }
@@ -212,7 +254,7 @@ impl BlockEvaluator for Evaluator<'_> {
     }
 }
 
-impl Evaluator<'_> {
+impl<const SIZED: bool> Evaluator<'_, SIZED> {
     /// Turns one row's sums into field values; returns how many of its vertices are in
     /// the band (`Σw > 0`).
     #[allow(clippy::needless_range_loop)]
@@ -241,18 +283,31 @@ impl Evaluator<'_> {
             } else {
                 (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
             };
-            values[idx] = (dist_cells * self.h - self.surface) as f32;
+            let surface = if SIZED {
+                self.surface * (sums[7][i] as f64 * inv_w)
+            } else {
+                self.surface
+            };
+            values[idx] = (dist_cells * self.h - surface) as f32;
         }
         in_band
     }
 }
 
 /// Adds one kernel's terms to one row of vertices' running sums (`x`: the kernel's
-/// block-local centre, cells; `b`, `c`: the row's y and z; `m`: its quadratic form).
+/// block-local centre, cells; `b`, `c`: the row's y and z; `m`: its quadratic form;
+/// `ratio`: its radius in multiples of r, summed when `SIZED`).
 /// Lanes outside the ellipsoid get zero weight, which leaves every sum as it was.
 #[allow(clippy::needless_range_loop)]
 #[inline(always)]
-fn accumulate_row(sums: &mut [[f32; ROW]; SUMS], x: &[f32; 3], b: f32, c: f32, m: &[f32; 6]) {
+fn accumulate_row<const SIZED: bool>(
+    sums: &mut [[f32; ROW]; SUMS],
+    x: &[f32; 3],
+    b: f32,
+    c: f32,
+    m: &[f32; 6],
+    ratio: f32,
+) {
     let (ry, rz) = (b - x[1], c - x[2]);
     // s² = m0 rx² + 2 (m1 ry + m2 rz) rx + (m3 ry² + 2 m4 ry rz + m5 rz²);
     // M r = (m0 rx + a_x, m1 rx + a_y, m2 rx + a_z).
@@ -261,7 +316,7 @@ fn accumulate_row(sums: &mut [[f32; ROW]; SUMS], x: &[f32; 3], b: f32, c: f32, m
     let a_z = m[4] * ry + m[5] * rz;
     let s_yz = m[3] * ry * ry + 2.0 * m[4] * ry * rz + m[5] * rz * rz;
     let s_x = 2.0 * a_x;
-    let [s0, s1, s2, s3, g0, g1, g2] = sums;
+    let [s0, s1, s2, s3, g0, g1, g2, s4] = sums;
     for i in 0..ROW {
         let rx = i as f32 - x[0];
         let s2_ = m[0].mul_add(rx, s_x).mul_add(rx, s_yz);
@@ -275,6 +330,9 @@ fn accumulate_row(sums: &mut [[f32; ROW]; SUMS], x: &[f32; 3], b: f32, c: f32, m
         g0[i] = q2.mul_add(m[0].mul_add(rx, a_x), g0[i]);
         g1[i] = q2.mul_add(m[1].mul_add(rx, a_y), g1[i]);
         g2[i] = q2.mul_add(m[2].mul_add(rx, a_z), g2[i]);
+        if SIZED {
+            s4[i] = w.mul_add(ratio, s4[i]);
+        }
     }
 }
 
@@ -303,14 +361,55 @@ mod tests {
         };
         let (kernels, stats) = crate::field::compute_kernels(&positions, &options).unwrap();
         assert!(stats.mean_stretch > 1.05, "{stats:?}");
-        let (portable, _) = compute_blocks_with(kernels.clone(), &options, None, false);
-        let (vector, _) = compute_blocks_with(kernels, &options, None, true);
-        assert!(portable.blocks().count() > 10);
-        assert_eq!(portable.blocks().count(), vector.blocks().count());
-        for (key, values) in portable.blocks() {
-            let other = vector.block(key).expect("same blocks");
+        // Plain, and with radii of 0.5–2 r (particles of several sizes).
+        let ratios: Vec<f32> = (0..kernels.len())
+            .map(|i| 0.5 + 1.5 * (i % 7) as f32 / 6.0)
+            .collect();
+        let sized = Sizes {
+            ratios: &ratios,
+            largest: 2.0,
+        };
+        for sizes in [None, Some(sized)] {
+            let (portable, _) = compute_blocks_with(kernels.clone(), sizes, &options, None, false);
+            let (vector, _) = compute_blocks_with(kernels.clone(), sizes, &options, None, true);
+            assert!(portable.blocks().count() > 10);
+            assert_eq!(portable.blocks().count(), vector.blocks().count());
+            for (key, values) in portable.blocks() {
+                let other = vector.block(key).expect("same blocks");
+                for (x, y) in values.iter().zip(other.iter()) {
+                    assert_eq!(x.to_bits(), y.to_bits(), "block {key:?}");
+                }
+            }
+        }
+    }
+
+    /// Radii all equal to r through the sized evaluation give the plain field's values
+    /// (the mean radius of equal radii is r to within f32 rounding).
+    #[test]
+    fn ratios_of_one_give_the_plain_field() {
+        let r = 0.01f32;
+        let positions: Vec<glam::Vec3> = (0..600)
+            .map(|i| {
+                glam::Vec3::new((i % 10) as f32, (i / 10 % 6) as f32, (i / 60) as f32) * 2.0 * r
+            })
+            .collect();
+        let options = FieldOptions {
+            kernel: Kernel::Anisotropic,
+            ..FieldOptions::new(r)
+        };
+        let (kernels, _) = crate::field::compute_kernels(&positions, &options).unwrap();
+        let ones = vec![1.0f32; kernels.len()];
+        let sized = Sizes {
+            ratios: &ones,
+            largest: 1.0,
+        };
+        let (plain, _) = compute_blocks(kernels.clone(), None, &options, None);
+        let (same, _) = compute_blocks(kernels, Some(sized), &options, None);
+        assert_eq!(plain.blocks().count(), same.blocks().count());
+        for (key, values) in plain.blocks() {
+            let other = same.block(key).expect("same blocks");
             for (x, y) in values.iter().zip(other.iter()) {
-                assert_eq!(x.to_bits(), y.to_bits(), "block {key:?}");
+                assert!((x - y).abs() <= 1e-6 * r, "block {key:?}: {x} vs {y}");
             }
         }
     }

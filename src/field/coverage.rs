@@ -6,7 +6,7 @@
 //! blocks, lowered around uncovered particles; every other value unchanged. A minimum
 //! does not depend on order, so neither the thread count nor the tiling changes it.
 
-use super::FieldOptions;
+use super::{FieldOptions, Sizes};
 use crate::grid::BlockRange;
 use crate::grid::{local_index, split_coordinate, SparseField, BLOCK_EDGE};
 use glam::{DVec3, Vec3};
@@ -26,10 +26,12 @@ const UNCOVERED_MARGIN: f64 = 0.25;
 /// `positions` or on the thread count. Vertices within `c·r + h` are lowered (one ring
 /// beyond the sphere, so that its crossings interpolate the sphere on both ends). For
 /// exact tiling, `field` must hold every block within `c·r + 2h` of the blocks whose
-/// values are used.
+/// values are used. With `sizes` (aligned with `positions`), particle i is uncovered above
+/// `−r_i/4` and its ball has the radius `c·r_i`.
 pub(crate) fn apply_coverage(
     field: &mut SparseField,
     positions: &[Vec3],
+    sizes: Option<Sizes<'_>>,
     options: &FieldOptions,
     count_range: Option<BlockRange>,
 ) -> usize {
@@ -37,11 +39,17 @@ pub(crate) fn apply_coverage(
         return 0;
     }
     let h = field.cell_size;
-    let r = options.particle_radius as f64;
-    let threshold = -UNCOVERED_MARGIN * r;
-    let uncovered: Vec<Vec3> = positions
+    let reference = options.particle_radius as f64;
+    let radius_of = |k: usize| match sizes {
+        None => reference,
+        Some(s) => reference * s.ratios[k] as f64,
+    };
+    let uncovered: Vec<(Vec3, f64)> = positions
         .par_iter()
-        .filter(|p| {
+        .enumerate()
+        .map(|(k, p)| (*p, radius_of(k)))
+        .filter(|(p, r)| {
+            let threshold = -UNCOVERED_MARGIN * r;
             let g = p.as_dvec3() / h;
             let base = [g.x.floor(), g.y.floor(), g.z.floor()];
             let t = [g.x - base[0], g.y - base[1], g.z - base[2]];
@@ -80,12 +88,11 @@ pub(crate) fn apply_coverage(
             }
             value > threshold
         })
-        .copied()
         .collect();
-    let radius = options.particle_coverage as f64 * r;
-    let reach_cells = (radius / h).ceil() as i32 + 1;
     let mut counted = 0;
-    for p in &uncovered {
+    for (p, r) in &uncovered {
+        let radius = options.particle_coverage as f64 * r;
+        let reach_cells = (radius / h).ceil() as i32 + 1;
         let g = p.as_dvec3() / h;
         let home = [g.x, g.y, g.z].map(|c| (c.floor() as i32).div_euclid(BLOCK_EDGE));
         if count_range.is_none_or(|range| range.contains(home)) {

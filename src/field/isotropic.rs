@@ -1,12 +1,13 @@
 //! The Solenthaler et al. 2007 field ([`Kernel::Isotropic`](super::Kernel), the paper's):
 //! spherical kernels of radius `R`, `phi(v) = |v − vbar(v)| − r·f(v)` (see the formulas in
-//! [`super`]).
+//! [`super`]). Particles of several sizes each weigh with their own `R_i = R·ρ_i`
+//! and the surface lies at `rbar·f` with `rbar = Σ w_i r_i / Σ w_i` (one more sum).
 
 use super::candidates::candidate_blocks;
 use super::concavity::{concavity_factor, largest_eigenvalue_real_part_lanes};
 use super::evaluate::{evaluate_blocks, BlockEvaluator, ROW, ROWS};
 use super::rows::{row_mask, transpose_bits, HalfRowIndex, RowLists};
-use super::{FieldOptions, FieldStats};
+use super::{FieldOptions, FieldStats, Sizes};
 use crate::grid::{
     home_half_block, BlockKey, BlockRange, BlockValues, SparseField, BLOCK_EDGE, HALF_BLOCK_EDGE,
 };
@@ -17,19 +18,22 @@ use std::borrow::Cow;
 /// Computes the blocks of the pure Solenthaler field within `range` (all blocks when
 /// `None`) from `positions`, which must include every particle within `R` of those blocks,
 /// in a canonical order (the same relative order in every tiling). Coverage is applied
-/// afterwards by [`apply_coverage`]. Options must be valid.
+/// afterwards by [`apply_coverage`]. Options must be valid. `sizes`: each particle's
+/// radius in multiples of r, for particles of several sizes.
 pub(crate) fn compute_blocks(
     positions: &[Vec3],
+    sizes: Option<Sizes<'_>>,
     options: &FieldOptions,
     range: Option<BlockRange>,
 ) -> (SparseField, FieldStats) {
-    compute_blocks_with(positions, options, range, true)
+    compute_blocks_with(positions, sizes, options, range, true)
 }
 
 /// [`compute_blocks`]; `simd`: the AVX2 copy of the kernel may be used (the values are the
 /// same either way, which the tests check).
 fn compute_blocks_with(
     positions: &[Vec3],
+    sizes: Option<Sizes<'_>>,
     options: &FieldOptions,
     range: Option<BlockRange>,
     simd: bool,
@@ -49,36 +53,60 @@ fn compute_blocks_with(
         .map(|p| home_half_block(*p, inv_h))
         .collect();
     let zyx = |k: &BlockKey| [k[2], k[1], k[0]];
-    let (runs, sorted) = if halves.par_windows(2).all(|w| zyx(&w[0]) <= zyx(&w[1])) {
+    let ratios = sizes.map(|s| s.ratios);
+    let (runs, sorted, ratios) = if halves.par_windows(2).all(|w| zyx(&w[0]) <= zyx(&w[1])) {
         let runs = crate::grid::key_runs(halves.iter().copied());
-        (runs, Cow::Borrowed(positions))
+        (runs, Cow::Borrowed(positions), ratios.map(Cow::Borrowed))
     } else {
         let order = crate::grid::sort_by_key_zyx(&halves);
         let runs = crate::grid::key_runs(order.iter().map(|&i| halves[i as usize]));
         let sorted: Vec<Vec3> = order.par_iter().map(|&i| positions[i as usize]).collect();
-        (runs, Cow::Owned(sorted))
+        let ratios = ratios.map(|r| Cow::Owned(order.iter().map(|&i| r[i as usize]).collect()));
+        (runs, Cow::Owned(sorted), ratios)
     };
     drop(halves);
-    let half_reach = (radius_cells / HALF_BLOCK_EDGE as f32).ceil() as i32;
+    let reach_cells = radius_cells * super::largest_ratio(sizes);
+    let half_reach = (reach_cells / HALF_BLOCK_EDGE as f32).ceil() as i32;
     let candidates = candidate_blocks(runs.iter().map(|r| r.0), half_reach, range);
     let index = HalfRowIndex::new(&runs);
     drop(runs);
 
-    let kernel = BlockKernel {
-        sorted: &sorted,
-        index: &index,
-        half_reach,
-        inv_h,
-        radius_cells,
-        h,
-        options,
-    };
-    evaluate_blocks(&kernel, &candidates, positions.len(), options, simd)
+    match ratios.as_deref() {
+        None => {
+            let kernel = BlockKernel::<false> {
+                sorted: &sorted,
+                ratios: &[],
+                index: &index,
+                half_reach,
+                inv_h,
+                radius_cells,
+                h,
+                options,
+            };
+            evaluate_blocks(&kernel, &candidates, positions.len(), options, simd)
+        }
+        Some(ratios) => {
+            let kernel = BlockKernel::<true> {
+                sorted: &sorted,
+                ratios,
+                index: &index,
+                half_reach,
+                inv_h,
+                radius_cells,
+                h,
+                options,
+            };
+            evaluate_blocks(&kernel, &candidates, positions.len(), options, simd)
+        }
+    }
 }
 
-struct BlockKernel<'a> {
+/// `SIZED`: particles of several sizes (`ratios`).
+struct BlockKernel<'a, const SIZED: bool> {
     /// Particle positions (world units) sorted by home half-block (see [`HalfRowIndex`]).
     sorted: &'a [Vec3],
+    /// Their radii, multiples of r (`SIZED` only).
+    ratios: &'a [f32],
     index: &'a HalfRowIndex,
     /// Half-blocks, per axis, beyond a block's own two whose particles can reach it
     /// (`⌈R / 4h⌉`).
@@ -89,7 +117,7 @@ struct BlockKernel<'a> {
     options: &'a FieldOptions,
 }
 
-impl BlockEvaluator for BlockKernel<'_> {
+impl<const SIZED: bool> BlockEvaluator for BlockKernel<'_, SIZED> {
     type Scratch = RowLists;
 
     fn scratch(&self) -> RowLists {
@@ -113,6 +141,7 @@ impl BlockEvaluator for BlockKernel<'_> {
     ) -> Option<usize> {
         lists.particles.clear();
         lists.rows.clear();
+        lists.sizes.clear();
         let origin = [0, 1, 2].map(|a| key[a] as f64 * BLOCK_EDGE as f64);
         let rc = self.radius_cells;
         let rc2 = rc * rc;
@@ -125,7 +154,14 @@ impl BlockEvaluator for BlockKernel<'_> {
         );
         for hz in first[2]..=last[2] {
             for hy in first[1]..=last[1] {
-                for p in &self.sorted[self.index.run(hy, hz, first[0], last[0])] {
+                let run = self.index.run(hy, hz, first[0], last[0]);
+                for (k, p) in self.sorted[run.clone()].iter().enumerate() {
+                    let (rc, inv_rc2) = if SIZED {
+                        let rc = self.radius_cells * self.ratios[run.start + k];
+                        (rc, 1.0 / (rc * rc))
+                    } else {
+                        (rc, inv_rc2)
+                    };
                     let p = p.as_dvec3() * self.inv_h;
                     // Particle in block-local cell units.
                     let x = [
@@ -145,6 +181,9 @@ impl BlockEvaluator for BlockKernel<'_> {
                     let group = lists.rows.last_mut().expect("a group");
                     group[index % 64] = row_mask(x, lo, hi, inv_rc2);
                     lists.particles.push(x);
+                    if SIZED {
+                        lists.sizes.push([inv_rc2, self.ratios[run.start + k]]);
+                    }
                 }
             }
         }
@@ -164,11 +203,17 @@ impl BlockEvaluator for BlockKernel<'_> {
             }
             let (b, c) = ((row % ROW) as f32, (row / ROW) as f32);
             let mut sums = [[0.0f32; ROW]; SUMS];
-            for (group, members) in lists.particles.chunks(64).zip(&lists.rows) {
+            for (g, (group, members)) in lists.particles.chunks(64).zip(&lists.rows).enumerate() {
                 let mut bits = members[row];
                 while bits != 0 {
-                    let x = group[bits.trailing_zeros() as usize];
-                    accumulate_row(&mut sums, x[0], b - x[1], c - x[2], inv_rc2);
+                    let k = bits.trailing_zeros() as usize;
+                    let x = group[k];
+                    let [inv_rc2, ratio] = if SIZED {
+                        lists.sizes[g * 64 + k]
+                    } else {
+                        [inv_rc2, 1.0]
+                    };
+                    accumulate_row::<SIZED>(&mut sums, x[0], b - x[1], c - x[2], inv_rc2, ratio);
                     bits &= bits - 1;
                 }
             }
@@ -178,7 +223,7 @@ impl BlockEvaluator for BlockKernel<'_> {
     }
 }
 
-impl BlockKernel<'_> {
+impl<const SIZED: bool> BlockKernel<'_, SIZED> {
     /// Turns one row's running sums into field values; returns how many of its vertices
     /// are in the band (`Σw > 0`).
     #[allow(clippy::needless_range_loop)]
@@ -239,6 +284,11 @@ impl BlockKernel<'_> {
             in_band += 1;
             let f = concavity_factor(ev[i], t_low, t_high);
             let dist_cells = (d[0][i] * d[0][i] + d[1][i] * d[1][i] + d[2][i] * d[2][i]).sqrt();
+            let r = if SIZED {
+                r * (sums[13][i] * inv_w[i])
+            } else {
+                r
+            };
             values[idx] = (dist_cells * self.h - r * f) as f32;
         }
         in_band
@@ -246,19 +296,28 @@ impl BlockKernel<'_> {
 }
 
 /// Number of running sums per vertex: Σw, Σw·r (3), Σ∇w (3), Σ g·r⊗r (6, symmetric),
-/// with `r = v − x_i` (cells) and `∇w_i = g·r`, `g = −6 (1 − s²)² / R²`.
-const SUMS: usize = 13;
+/// with `r = v − x_i` (cells) and `∇w_i = g·r`, `g = −6 (1 − s²)² / R²`; and for
+/// particles of several sizes Σw·ρ (left at 0 otherwise).
+const SUMS: usize = 14;
 
 /// Adds one particle's terms to one row of vertices' running sums (`x`: the particle's
 /// block-local x (cells), `ry`, `rz`: the row's offsets from it, `inv_rc2 = 1 / R²` in
-/// cells). Lanes outside the influence sphere get `q = 0`, hence
+/// cells; `ratio`: its radius in multiples of r, summed when `SIZED`). Lanes outside the
+/// influence sphere get `q = 0`, hence
 /// zero weight and zero gradient: adding them leaves every sum as it was.
 #[allow(clippy::needless_range_loop)]
 #[inline(always)]
-fn accumulate_row(sums: &mut [[f32; ROW]; SUMS], x: f32, ry: f32, rz: f32, inv_rc2: f32) {
+fn accumulate_row<const SIZED: bool>(
+    sums: &mut [[f32; ROW]; SUMS],
+    x: f32,
+    ry: f32,
+    rz: f32,
+    inv_rc2: f32,
+    ratio: f32,
+) {
     let ryz2 = ry * ry + rz * rz;
     let g_scale = -6.0 * inv_rc2;
-    let [s0, s1, s2, s3, s4, s5, s6, s7, s8, s9, s10, s11, s12] = sums;
+    let [s0, s1, s2, s3, s4, s5, s6, s7, s8, s9, s10, s11, s12, s13] = sums;
     for i in 0..ROW {
         let rx = i as f32 - x;
         let q = (1.0 - (rx * rx + ryz2) * inv_rc2).max(0.0);
@@ -279,6 +338,9 @@ fn accumulate_row(sums: &mut [[f32; ROW]; SUMS], x: f32, ry: f32, rz: f32, inv_r
         s10[i] = gy.mul_add(ry, s10[i]);
         s11[i] = gy.mul_add(rz, s11[i]);
         s12[i] = gz.mul_add(rz, s12[i]);
+        if SIZED {
+            s13[i] = w.mul_add(ratio, s13[i]);
+        }
     }
 }
 
@@ -307,9 +369,18 @@ mod tests {
             positions.push(Vec3::new(t.sin(), 0.3 * t.cos(), 0.6) * 0.3 + Vec3::splat(0.12));
         }
         let options = FieldOptions::new(r);
-        let (portable, _) = compute_blocks_with(&positions, &options, None, false);
-        let (vector, _) = compute_blocks_with(&positions, &options, None, true);
-        assert_same_blocks_bit_for_bit(&portable, &vector);
+        let ratios: Vec<f32> = (0..positions.len())
+            .map(|i| 0.5 + 1.5 * (i % 7) as f32 / 6.0)
+            .collect();
+        let sized = Sizes {
+            ratios: &ratios,
+            largest: 2.0,
+        };
+        for sizes in [None, Some(sized)] {
+            let (portable, _) = compute_blocks_with(&positions, sizes, &options, None, false);
+            let (vector, _) = compute_blocks_with(&positions, sizes, &options, None, true);
+            assert_same_blocks_bit_for_bit(&portable, &vector);
+        }
     }
 
     /// Both fields hold the same blocks (more than 10) with bit-identical values.
@@ -342,8 +413,8 @@ mod tests {
             (k[2], k[1], k[0], i)
         });
         let sorted: Vec<Vec3> = order.iter().map(|&i| shuffled[i]).collect();
-        let (from_shuffled, _) = compute_blocks(&shuffled, &options, None);
-        let (from_sorted, _) = compute_blocks(&sorted, &options, None);
+        let (from_shuffled, _) = compute_blocks(&shuffled, None, &options, None);
+        let (from_sorted, _) = compute_blocks(&sorted, None, &options, None);
         assert_same_blocks_bit_for_bit(&from_shuffled, &from_sorted);
     }
 }

@@ -243,19 +243,48 @@ pub struct FieldStats {
     pub block_bytes: usize,
 }
 
+/// Particles of several sizes (a radius attribute): each particle's radius `r_i` as a
+/// multiple `ρ_i = r_i / r` of the reference radius r ([`FieldOptions::particle_radius`],
+/// in which every option is given), aligned with the particles it is passed with. Every
+/// length of a particle's own (influence radius, kernel radius, coverage ball, surface
+/// distance) is then `ρ_i` times the option's; the lattice stays one cell size.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Sizes<'a> {
+    /// `ρ_i`, one per particle.
+    pub ratios: &'a [f32],
+    /// The largest `ρ_i` of the whole frame, at least 1: reaches grow by it.
+    pub largest: f32,
+}
+
+/// The largest radius as a multiple of r, at least 1 (1 without sizes).
+pub(crate) fn largest_ratio(sizes: Option<Sizes<'_>>) -> f32 {
+    sizes.map_or(1.0, |s| s.largest.max(1.0))
+}
+
 /// Blocks, per axis, between a block and the farthest block a particle of it can reach
-/// (`⌈R / (8h)⌉`).
-pub(crate) fn block_reach(options: &FieldOptions) -> i32 {
-    (kernel_reach(options) / options.cell_size / BLOCK_EDGE as f32).ceil() as i32
+/// (`⌈R / (8h)⌉`, R of the largest particle).
+pub(crate) fn block_reach(options: &FieldOptions, sizes: Option<Sizes<'_>>) -> i32 {
+    (kernel_reach(options, sizes) / options.cell_size / BLOCK_EDGE as f32).ceil() as i32
+}
+
+/// Blocks, per axis, that particle coverage needs around the blocks whose values are used
+/// (`c·r_max + 2h`, see [`apply_coverage`]): 1 unless particles are much larger than r.
+pub(crate) fn coverage_blocks(options: &FieldOptions, sizes: Option<Sizes<'_>>) -> i32 {
+    let reach = options.particle_coverage * largest_ratio(sizes) + 2.0 * options.cell_size;
+    ((reach / options.cell_size / BLOCK_EDGE as f32).ceil() as i32).max(1)
 }
 
 /// Farthest a particle's kernel reaches from the particle, multiples of `r`: `R`, or with
 /// anisotropic kernels the longer of `R` (the covariance neighbourhood) and the longest
-/// semi-axis plus the largest centre shift.
-pub(crate) fn kernel_reach(options: &FieldOptions) -> f32 {
-    match options.kernel {
+/// semi-axis plus the largest centre shift; times the largest particle's `ρ`.
+pub(crate) fn kernel_reach(options: &FieldOptions, sizes: Option<Sizes<'_>>) -> f32 {
+    let reach = match options.kernel {
         Kernel::Isotropic => options.influence_radius,
         Kernel::Anisotropic => options.influence_radius.max(options.anisotropy.reach()),
+    };
+    match sizes {
+        None => reach,
+        Some(_) => reach * largest_ratio(sizes),
     }
 }
 
@@ -287,6 +316,7 @@ pub fn compute_field(
         positions: sorted,
         halves: sorted_halves,
         in_field,
+        ratios: None,
     };
     let tile = compute_tile(particles, options, None, None);
     Ok((tile.field, tile.stats))
@@ -302,6 +332,9 @@ pub(crate) struct TileParticles {
     pub halves: Vec<BlockKey>,
     /// Whether each one enters the field (not isolated, and near enough to the tile).
     pub in_field: Vec<bool>,
+    /// For particles of several sizes, each one's radius in multiples of r, and the
+    /// largest of the frame ([`Sizes`]).
+    pub ratios: Option<(Vec<f32>, f32)>,
 }
 
 /// One tile's field and what it took.
@@ -330,31 +363,45 @@ pub(crate) fn compute_tile(
     counted: Option<BlockRange>,
 ) -> TileField {
     let clock = Instant::now();
+    let sizes = particles.ratios.as_ref().map(|(ratios, largest)| Sizes {
+        ratios,
+        largest: *largest,
+    });
     let kernels = (options.kernel == Kernel::Anisotropic).then(|| {
         kernels::kernels_sorted(
             &particles.positions,
             &particles.halves,
             options,
             &particles.in_field,
+            sizes,
         )
     });
     let kernel_seconds = clock.elapsed().as_secs_f64();
     let clock = Instant::now();
-    let field_particles: Vec<Vec3> = particles
-        .positions
-        .iter()
-        .zip(&particles.in_field)
-        .filter(|(_, &wanted)| wanted)
-        .map(|(p, _)| *p)
+    let wanted = |k: &usize| particles.in_field[*k];
+    let field_particles: Vec<Vec3> = (0..particles.positions.len())
+        .filter(wanted)
+        .map(|k| particles.positions[k])
         .collect();
+    let field_ratios: Option<Vec<f32>> = sizes.map(|s| {
+        (0..s.ratios.len())
+            .filter(wanted)
+            .map(|k| s.ratios[k])
+            .collect()
+    });
+    let largest = sizes.map_or(1.0, |s| s.largest);
     // The particles are held only until the field has its own (`field_particles`, and the
     // kernels sorted by centre).
     drop(particles);
+    let sizes = field_ratios
+        .as_deref()
+        .map(|ratios| Sizes { ratios, largest });
     let (mut field, mut stats) = match kernels {
-        None => isotropic::compute_blocks(&field_particles, options, blocks),
-        Some(kernels) => anisotropic::compute_blocks(kernels, options, blocks),
+        None => isotropic::compute_blocks(&field_particles, sizes, options, blocks),
+        Some(kernels) => anisotropic::compute_blocks(kernels, sizes, options, blocks),
     };
-    stats.uncovered_particles = apply_coverage(&mut field, &field_particles, options, counted);
+    stats.uncovered_particles =
+        apply_coverage(&mut field, &field_particles, sizes, options, counted);
     apply_iso_offset(&mut field, options);
     TileField {
         field,

@@ -16,6 +16,9 @@ pub(super) struct RowLists {
     /// group that meets the row. Built as one row mask per particle (bit `k` = row `k`)
     /// and transposed in place.
     pub(super) rows: Vec<[u64; ROWS]>,
+    /// For particles of several sizes: each one's `1 / R_i²` (cells) and radius in
+    /// multiples of r, in scan order.
+    pub(super) sizes: Vec<[f32; 2]>,
 }
 
 impl RowLists {
@@ -23,6 +26,7 @@ impl RowLists {
         RowLists {
             particles: Vec::new(),
             rows: Vec::new(),
+            sizes: Vec::new(),
         }
     }
 }

@@ -10,8 +10,8 @@ use crate::error::{Error, Result};
 use crate::io::particles::SpooledParticles;
 use crate::io::particles::{read_particles, MappedXyz, ParticleFormat, Particles};
 use crate::mesh::Surface;
-use crate::pipeline::{reconstruct_source, ReconstructOptions, ReconstructionStats};
-use crate::radius::read_radii;
+use crate::pipeline::{reconstruct_sized, ReconstructOptions, ReconstructionStats};
+use crate::radius::{read_radii, ParticleRadii};
 use crate::sequence::Frame;
 use std::path::Path;
 use std::time::Instant;
@@ -76,6 +76,7 @@ fn read_input(input: &Path, options: &ReconstructOptions, job: &JobOptions) -> R
 /// Reconstructs the particles of the file `input`; `on_stage` is told each stage.
 fn reconstruct_input(
     particles: Input,
+    radii: Option<&ParticleRadii>,
     input: &Path,
     options: &ReconstructOptions,
     cancel: &CancelToken,
@@ -84,9 +85,9 @@ fn reconstruct_input(
     let progress = std::cell::RefCell::new(on_stage);
     let progress = |stage: &str| (progress.borrow_mut())(stage);
     match particles {
-        Input::Mapped(file) => reconstruct_source(file, options, &progress, cancel),
-        Input::Spooled(file) => reconstruct_source(file, options, &progress, cancel),
-        Input::Parsed(particles) => reconstruct_source(particles, options, &progress, cancel),
+        Input::Mapped(file) => reconstruct_sized(file, radii, options, &progress, cancel),
+        Input::Spooled(file) => reconstruct_sized(file, radii, options, &progress, cancel),
+        Input::Parsed(particles) => reconstruct_sized(particles, radii, options, &progress, cancel),
     }
     .map_err(|e| match e {
         // The particles came from this file.
@@ -115,13 +116,19 @@ pub(crate) fn run_frame(
 ) -> Result<FrameReport> {
     on_stage("read");
     let started = Instant::now();
-    read_radii(&frame.input, job.input_format, &job.radius_attribute)?;
+    let radii = read_radii(&frame.input, job.input_format, &job.radius_attribute)?;
     let particles = read_input(&frame.input, options, job)?;
     let read_seconds = started.elapsed().as_secs_f64();
     on_stage("reconstruct");
     let options = sink.options(options);
-    let (surface, mut reconstruction) =
-        reconstruct_input(particles, &frame.input, &options, &job.cancel, on_stage)?;
+    let (surface, mut reconstruction) = reconstruct_input(
+        particles,
+        radii.as_ref(),
+        &frame.input,
+        &options,
+        &job.cancel,
+        on_stage,
+    )?;
     job.cancel.check()?;
     on_stage("write");
     let clock = Instant::now();

@@ -269,6 +269,8 @@ pub struct SphereInstances {
     pub template: TriMesh,
     /// One centre per isolated particle, world units.
     pub centers: Vec<Vec3>,
+    /// Per-instance scale of the template (the particle's radius / r); empty: all 1.
+    pub scales: Vec<f32>,
     /// Per-instance attributes (one item per centre: the value of its particle); empty
     /// when none were selected.
     pub attributes: Vec<Attribute>,

@@ -21,13 +21,16 @@
 use crate::cancel::CancelToken;
 use crate::containment::{contain_centres, ContainmentInput};
 use crate::decimation::{decimate, DecimateStats};
-use crate::error::Result;
+use crate::error::{Error, Result};
+use crate::field::Sizes;
 use crate::io::particles::ParticleSource;
 use crate::mesh::{SphereInstances, Surface, TriMesh};
+use crate::radius::ParticleRadii;
 use crate::smoothing::smooth;
 use crate::subdivision::subdivide;
 use crate::tiles::{
-    plan_tiles, run_tiles, ParticleStore, StitchSink, TileDecimation, TilePlan, TileSink, TileStats,
+    plan_tiles, run_tiles, Isolated, ParticleStore, StitchSink, TileDecimation, TilePlan, TileSink,
+    TileStats,
 };
 use crate::transfer::transfer;
 use glam::Vec3;
@@ -60,32 +63,101 @@ pub fn reconstruct_source<S: ParticleSource>(
     progress: &dyn Fn(&str),
     cancel: &CancelToken,
 ) -> Result<(Surface, ReconstructionStats)> {
+    reconstruct_sized(source, None, options, progress, cancel)
+}
+
+/// [`reconstruct_source`] for particles of several sizes: `radii` holds each particle's
+/// radius (world units, input order; see `docs/radius.md`). Every length of the options
+/// stays a multiple of the reference radius `options.field.particle_radius` (the cell
+/// size, the influence radius, the decimation's bound); each particle's influence
+/// radius, kernel, coverage ball, containment depth and isolated sphere follow its own
+/// radius. Radii all equal to the reference radius give [`reconstruct_source`]'s surface
+/// bit for bit. `None`: every particle has the reference radius.
+pub fn reconstruct_sized<S: ParticleSource>(
+    source: S,
+    radii: Option<&ParticleRadii>,
+    options: &ReconstructOptions,
+    progress: &dyn Fn(&str),
+    cancel: &CancelToken,
+) -> Result<(Surface, ReconstructionStats)> {
     let input = String::from("the particles given to reconstruct");
     crate::error::guard(
         move || input,
-        || reconstruct_source_unguarded(source, options, progress, cancel),
+        || reconstruct_source_unguarded(source, radii, options, progress, cancel),
     )
+}
+
+/// Each particle's radius as a multiple of the reference radius `reference`, and the
+/// largest; `None` when every radius is the reference (the plain run). Checks the count.
+fn radius_ratios(
+    radii: Option<&ParticleRadii>,
+    particles: usize,
+    reference: f32,
+) -> Result<Option<(Vec<f32>, f32)>> {
+    let Some(radii) = radii else {
+        return Ok(None);
+    };
+    let fail = |particle: Option<usize>, message: String| Error::InvalidRadius {
+        path: "the particles given to reconstruct".into(),
+        attribute: radii.attribute.clone(),
+        particle,
+        message,
+    };
+    if radii.values.len() != particles {
+        let n = radii.values.len();
+        return Err(fail(
+            None,
+            format!("holds {n} values for {particles} particles"),
+        ));
+    }
+    if let Some(i) = radii
+        .values
+        .iter()
+        .position(|&v| !(v.is_finite() && v > 0.0))
+    {
+        let v = radii.values[i];
+        return Err(fail(
+            Some(i),
+            format!("radius {v:?}; a radius must be a finite number > 0"),
+        ));
+    }
+    if radii.values.iter().all(|&v| v == reference) {
+        return Ok(None);
+    }
+    let ratios: Vec<f32> = radii.values.iter().map(|&v| v / reference).collect();
+    let largest = ratios.iter().copied().fold(1.0f32, f32::max);
+    Ok(Some((ratios, largest)))
 }
 
 /// The stage list.
 fn reconstruct_source_unguarded<S: ParticleSource>(
     source: S,
+    radii: Option<&ParticleRadii>,
     options: &ReconstructOptions,
     progress: &dyn Fn(&str),
     cancel: &CancelToken,
 ) -> Result<(Surface, ReconstructionStats)> {
     options.validate()?;
+    let ratios = radius_ratios(
+        radii,
+        source.particle_count(),
+        options.field.particle_radius,
+    )?;
+    let sizes = ratios.as_ref().map(|(ratios, largest)| Sizes {
+        ratios,
+        largest: *largest,
+    });
     let mut run = Recorder::new(source.particle_count(), progress, cancel);
     let layout = source.attribute_layout();
     let carries_payload = !layout.is_empty();
     // 1.–2. Plan the tiles and hold the particles for them.
-    let (plan, store) = plan_and_store(source, options, &mut run)?;
+    let (plan, store) = plan_and_store(source, sizes, options, &mut run)?;
     // 3. Isolated particles, field and marching cubes, tile by tile.
     let Tiles {
         mut fluid,
         isolated,
         decimated,
-    } = march_tiles(&plan, &store, options, &mut run)?;
+    } = march_tiles(&plan, &store, sizes, options, &mut run)?;
     // The particles are needed again to keep their centres under the surface and to
     // carry their payload to it.
     let store = (carries_payload || options.containment.is_some()).then_some(store);
@@ -104,8 +176,9 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
             let input = ContainmentInput {
                 levels: options.subdivide.levels + options.deferred_subdivision,
                 centres: store,
-                isolated: &isolated,
+                isolated: &isolated.centres,
                 particle_radius: options.field.particle_radius,
+                sizes,
                 slab_triangles: containment.slab_triangles(options.tiles.memory_budget_bytes),
             };
             let contained = contain_centres(fluid, &input, containment, cancel)?;
@@ -125,7 +198,7 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
     }
     // 8. Spheres.
     let mut spheres = run.stage("spheres", &mut fluid, |_, stats| {
-        let spheres = sphere_instances(isolated, options);
+        let spheres = sphere_instances(isolated, sizes, options);
         stats.sphere_triangles = spheres.template.triangle_count() * spheres.centers.len();
         Ok(spheres)
     })?;
@@ -154,6 +227,7 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
 /// itself, or a spill file on disk).
 fn plan_and_store<S: ParticleSource>(
     source: S,
+    sizes: Option<Sizes<'_>>,
     options: &ReconstructOptions,
     run: &mut Recorder,
 ) -> Result<(TilePlan, ParticleStore<S>)> {
@@ -161,6 +235,7 @@ fn plan_and_store<S: ParticleSource>(
     let plan = plan_tiles(
         &source,
         &options.field,
+        sizes,
         &options.tiles,
         options.post_processing_cost(),
         options.decimate.is_some(),
@@ -189,8 +264,8 @@ fn plan_and_store<S: ParticleSource>(
 struct Tiles {
     /// The surface: marching cubes stitched, or decimated tile by tile.
     fluid: TriMesh,
-    /// Centres of the isolated particles, in input order.
-    isolated: Vec<Vec3>,
+    /// The isolated particles, in input order.
+    isolated: Isolated,
     /// The decimation's figures when the tiles decimated their pieces.
     decimated: Option<DecimateStats>,
 }
@@ -201,6 +276,7 @@ struct Tiles {
 fn march_tiles<S: ParticleSource>(
     plan: &TilePlan,
     store: &ParticleStore<S>,
+    sizes: Option<Sizes<'_>>,
     options: &ReconstructOptions,
     run: &mut Recorder,
 ) -> Result<Tiles> {
@@ -222,6 +298,7 @@ fn march_tiles<S: ParticleSource>(
             store,
             plan,
             &options.field,
+            sizes,
             isolation_radius,
             sink,
             stats,
@@ -253,7 +330,7 @@ fn march_tiles<S: ParticleSource>(
     };
     let stats = &mut run.stats;
     stats.tiles = tile_stats;
-    stats.isolated_particles = tiles_run.isolated.len();
+    stats.isolated_particles = tiles_run.isolated.centres.len();
     stats.field = tiles_run.field;
     stats.marching_cubes_triangles = stats.marching_cubes.triangles;
     let kernels = options.field.kernel == crate::field::Kernel::Anisotropic;
@@ -296,12 +373,25 @@ fn decimation_stage(
     }
 }
 
-/// Stage 8: one icosphere of radius `r` per isolated particle (none without spheres).
-fn sphere_instances(isolated: Vec<Vec3>, options: &ReconstructOptions) -> SphereInstances {
+/// Stage 8: one icosphere of radius `r` per isolated particle (none without spheres),
+/// scaled to each particle's own radius when they differ.
+fn sphere_instances(
+    isolated: Isolated,
+    sizes: Option<Sizes<'_>>,
+    options: &ReconstructOptions,
+) -> SphereInstances {
     match options.isolated_sphere_level {
-        Some(level) if !isolated.is_empty() => SphereInstances {
+        Some(level) if !isolated.centres.is_empty() => SphereInstances {
             template: crate::isolated::icosphere(level, options.field.particle_radius),
-            centers: isolated,
+            scales: match sizes {
+                Some(s) => isolated
+                    .indices
+                    .iter()
+                    .map(|&i| s.ratios[i as usize])
+                    .collect(),
+                None => Vec::new(),
+            },
+            centers: isolated.centres,
             attributes: Vec::new(),
         },
         _ => SphereInstances::default(),

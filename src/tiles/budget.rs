@@ -216,7 +216,16 @@ pub(super) struct BudgetInput<'a> {
     pub kernel_bytes_per_particle: u64,
     /// Whether the tiles decimate their pieces (else the raw surface accumulates).
     pub decimated_in_tiles: bool,
+    /// Whether the particles carry their own radii: a column of 4 bytes per particle held
+    /// for the whole run, and 8 more per particle of a tile (its ratios, and those of the
+    /// field's particles).
+    pub radius_column: bool,
 }
+
+/// Bytes per particle of a radius column held for the run.
+const RADIUS_COLUMN_BYTES: u64 = 4;
+/// Bytes per particle of a tile that particles of several sizes add.
+const RADIUS_TILE_BYTES: u64 = 8;
 
 /// Picks the tile edge in blocks (`None`: one tile) and estimates the run's peak memory;
 /// refuses, before any work, a budget that the surface after the tiles or the smallest
@@ -228,15 +237,27 @@ pub(super) fn choose_tile_blocks(
     let shape = SceneShape::of(input.block_counts);
     let triangles = shape.marching_cubes_triangles();
     let particles = shape.particles;
+    let column = if input.radius_column {
+        RADIUS_COLUMN_BYTES * particles
+    } else {
+        0
+    };
+    let tile_radii = if input.radius_column {
+        RADIUS_TILE_BYTES
+    } else {
+        0
+    };
     let model = Model {
         block_counts: input.block_counts,
         origin: input.origin,
         reach: input.reach,
         shape,
         output: BASE_BYTES
+            + column
             + (particles * POST_TILES_BYTES_PER_PARTICLE).min(POST_TILES_MAX_BYTES)
             + (triangles * input.output_cost.bytes_per_triangle) as u64,
         produced: BASE_BYTES
+            + column
             + (triangles
                 * if input.decimated_in_tiles {
                     0.2 * crate::mesh::MESH_BYTES_PER_TRIANGLE
@@ -244,7 +265,13 @@ pub(super) fn choose_tile_blocks(
                     20.0
                 }) as u64,
         payload: 4 * input.payload_width as u64,
-        kernel_bytes_per_particle: input.kernel_bytes_per_particle,
+        kernel_bytes_per_particle: input.kernel_bytes_per_particle
+            + tile_radii
+            + if input.radius_column {
+                RADIUS_COLUMN_BYTES
+            } else {
+                0
+            },
     };
     if let Some(budget) = options.memory_budget_bytes {
         if model.output > budget {
@@ -430,6 +457,7 @@ mod tests {
                 payload_width: 0,
                 kernel_bytes_per_particle: 0,
                 decimated_in_tiles: true,
+                radius_column: false,
             };
             choose_tile_blocks(&input, &options)
         };

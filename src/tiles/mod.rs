@@ -62,7 +62,9 @@ pub(crate) mod store;
 
 use crate::cancel::CancelToken;
 use crate::error::Result;
-use crate::field::{compute_tile, FieldOptions, FieldStats, TileParticles};
+use crate::field::{
+    compute_tile, coverage_blocks, largest_ratio, FieldOptions, FieldStats, Sizes, TileParticles,
+};
 use crate::grid::{block_of_half, BlockKey, BlockRange, HALF_BLOCK_EDGE};
 use crate::io::particles::ParticleSource;
 use crate::marching_cubes::{march_blocks, stitch, BlockSurface, MarchingCubesStats};
@@ -210,10 +212,19 @@ impl TileSink for StitchSink {
     }
 }
 
+/// The isolated particles, in input order.
+#[derive(Default)]
+pub(crate) struct Isolated {
+    /// Their input indices.
+    pub indices: Vec<u32>,
+    /// Their centres, world units.
+    pub centres: Vec<Vec3>,
+}
+
 /// What the tile loop found besides the surfaces it handed to its sink.
 pub(crate) struct TileRun {
-    /// Centres of isolated particles, in input order.
-    pub isolated: Vec<Vec3>,
+    /// The isolated particles, in input order.
+    pub isolated: Isolated,
     /// Field figures summed over tiles (particles counts the field particles once).
     pub field: FieldStats,
 }
@@ -221,12 +232,14 @@ pub(crate) struct TileRun {
 /// Runs isolation, field and marching cubes tile by tile over the particles of `store`,
 /// as `plan` cuts them, and hands every tile's block surfaces to `sink`.
 /// `isolation_radius` (world units) is `None` to keep isolated particles in the field.
+/// `sizes`: the particles' own radii by input index, when they carry them.
 /// `on_tile(n, tiles)` is told before each tile; `stats` gets the loop's times.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn run_tiles<S: ParticleSource>(
     store: &ParticleStore<S>,
     plan: &TilePlan,
     field_options: &FieldOptions,
+    sizes: Option<Sizes<'_>>,
     isolation_radius: Option<f32>,
     sink: &mut dyn TileSink,
     stats: &mut TileStats,
@@ -245,7 +258,8 @@ pub(crate) fn run_tiles<S: ParticleSource>(
         let own = plan.own_blocks(tile);
         // Field blocks: the marching layer above, plus one block all round for coverage
         // (uncovered particles within c·r + 2h of the blocks whose values are used).
-        let field_range = own.grown(1, 2);
+        let coverage = coverage_blocks(field_options, sizes);
+        let field_range = own.grown(coverage, coverage + 1);
         let zone1 = field_range.grown(reach, reach);
         let zone2 = zone1.grown(reach, reach);
 
@@ -255,6 +269,9 @@ pub(crate) fn run_tiles<S: ParticleSource>(
         store.load(plan, zone2, &mut loaded)?;
         stats.max_tile_particles = stats.max_tile_particles.max(loaded.len());
         let local: Vec<Vec3> = loaded.iter().map(|r| r.2).collect();
+        let ratios: Option<Vec<f32>> =
+            sizes.map(|s| loaded.iter().map(|r| s.ratios[r.1 as usize]).collect());
+        let largest = largest_ratio(sizes);
 
         // Flags are needed for zone 1 only; zone 2 is there to complete their neighbours.
         let in_zone1: Vec<bool> = loaded
@@ -266,7 +283,8 @@ pub(crate) fn run_tiles<S: ParticleSource>(
             Some(radius) => {
                 let half_edge = (field_options.cell_size_world() * HALF_BLOCK_EDGE as f64) as f32;
                 let halves: Vec<BlockKey> = loaded.iter().map(|r| r.0).collect();
-                find_isolated_sorted(&local, &halves, half_edge, radius, &in_zone1)
+                let tile_sizes = ratios.as_deref().map(|r| (r, largest));
+                find_isolated_sorted(&local, &halves, half_edge, radius, tile_sizes, &in_zone1)
             }
             None => vec![false; local.len()],
         };
@@ -292,6 +310,7 @@ pub(crate) fn run_tiles<S: ParticleSource>(
             positions: local,
             halves,
             in_field,
+            ratios: ratios.map(|r| (r, largest)),
         };
         let tile_field = compute_tile(particles, field_options, Some(field_range), Some(own));
         stats.kernel_seconds += tile_field.kernel_seconds;
@@ -312,7 +331,10 @@ pub(crate) fn run_tiles<S: ParticleSource>(
     isolated.sort_unstable_by_key(|r| r.0);
     field_stats.particles = plan.particles - isolated.len();
     Ok(TileRun {
-        isolated: isolated.into_iter().map(|r| r.1).collect(),
+        isolated: Isolated {
+            indices: isolated.iter().map(|r| r.0).collect(),
+            centres: isolated.into_iter().map(|r| r.1).collect(),
+        },
         field: field_stats,
     })
 }

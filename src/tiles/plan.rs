@@ -6,7 +6,7 @@ use super::budget::{choose_tile_blocks, BudgetInput};
 use super::TileOptions;
 use crate::cancel::CancelToken;
 use crate::error::{Error, Result};
-use crate::field::{block_reach, FieldOptions};
+use crate::field::{block_reach, FieldOptions, Sizes};
 use crate::grid::BlockKey;
 use crate::grid::{check_positions, home_block, BlockRange};
 use crate::io::particles::ParticleSource;
@@ -86,16 +86,18 @@ const COUNT_PIECE: usize = 1 << 14;
 /// Checks every position of `source`, counts particles per home block and plans the
 /// tiles: the memory budget of `tile_options` picks their size, counting
 /// `output_cost` for the surface after the tiles and the payload the source carries.
-/// Options must be valid.
+/// Options must be valid. `sizes`: the particles' own radii (by input index), when they
+/// carry them: reaches grow with the largest, and the budget counts the column.
 pub(crate) fn plan_tiles<S: ParticleSource + ?Sized>(
     source: &S,
     field_options: &FieldOptions,
+    sizes: Option<Sizes<'_>>,
     tile_options: &TileOptions,
     output_cost: super::OutputCost,
     decimated_in_tiles: bool,
     cancel: &CancelToken,
 ) -> Result<TilePlan> {
-    let reach = block_reach(field_options);
+    let reach = block_reach(field_options, sizes);
     let inv_h = 1.0 / field_options.cell_size_world();
     let particles = source.particle_count();
     if particles > u32::MAX as usize {
@@ -115,6 +117,7 @@ pub(crate) fn plan_tiles<S: ParticleSource + ?Sized>(
         payload_width,
         kernel_bytes_per_particle: field_options.kernel_bytes_per_particle(),
         decimated_in_tiles,
+        radius_column: sizes.is_some(),
     };
     let (tile_blocks, estimated_peak_bytes) = choose_tile_blocks(&budget, tile_options)?;
     crate::allocator::fit_retention_to_budget(tile_options.memory_budget_bytes);

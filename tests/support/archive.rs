@@ -133,6 +133,7 @@ pub fn spheres_with_attributes(count: usize) -> SphereInstances {
             },
         ],
         centers,
+        scales: Vec::new(),
     }
 }
 
