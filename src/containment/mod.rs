@@ -55,6 +55,7 @@
 //! for each of the quarter of them near the surface; figures in
 //! `docs/performance-log.md`.
 
+mod centres;
 mod measure;
 mod rounds;
 mod slabs;

@@ -3,7 +3,8 @@
 //! again those the pushes may have brought too close, until none is shallow or the
 //! rounds run out.
 
-use super::measure::{CellIndex, Probe, SurfaceIndex};
+use super::centres::{bits, measure_centres, settle, Found, Need, Shallow, Watched};
+use super::measure::{CellIndex, SurfaceIndex};
 use super::slabs::Slabs;
 use super::surface::{LoopSurface, Slots};
 use super::{Centres, ContainmentInput, ContainmentOptions, ContainmentStats};
@@ -397,138 +398,6 @@ const NEAR_PUSH_MAX_CELLS: usize = 1 << 22;
 /// The parent of a centre measured again for being near a push, not for being watched.
 const NO_PARENT: u32 = u32::MAX;
 
-/// What measuring some centres found.
-#[derive(Default)]
-struct Found {
-    /// Centres with the surface near.
-    near: usize,
-    /// Centres less than the depth under it.
-    shallow: Vec<Shallow>,
-    /// Centres within r of that.
-    watched: Vec<Watched>,
-    /// Centres whose probe found them too shallow, to be confirmed ([`settle`]).
-    pending: Vec<(u32, Vec3, Probe)>,
-}
-
-impl Found {
-    fn extend(&mut self, other: Found) {
-        self.near += other.near;
-        self.shallow.extend(other.shallow);
-        self.watched.extend(other.watched);
-        self.pending.extend(other.pending);
-    }
-
-    /// Watches centre `i` at `p` if its `probe` lies within `margin` of being too shallow
-    /// (`depth`: its least depth).
-    fn watch(&mut self, i: u32, p: Vec3, probe: &Probe, depth: f64, margin: f64) {
-        if probe.signed_distance > -(depth + margin) {
-            self.watched.push(Watched {
-                particle: i,
-                position: p,
-                parent: probe.control_triangle,
-            });
-        }
-    }
-}
-
-/// How deep each centre must lie, world units: `depth` (and the tolerances of `r`) times
-/// its radius ratio when the particles have several sizes; `margin` (the largest
-/// particle's r) within which a centre is watched, the most a push may move the surface
-/// without measuring again around it.
-struct Need<'a> {
-    depth: f64,
-    r: f64,
-    margin: f64,
-    ratios: Option<&'a [f32]>,
-}
-
-impl Need<'_> {
-    /// The least depth of centre `i` and its radius, world units.
-    #[inline]
-    fn of(&self, i: u32) -> (f64, f64) {
-        match self.ratios {
-            None => (self.depth, self.r),
-            Some(ratios) => {
-                let k = ratios[i as usize] as f64;
-                (self.depth * k, self.r * k)
-            }
-        }
-    }
-}
-
-/// Measures the centres `ps` (particle indices `is`) against `index`, in parallel,
-/// skipping those at the positions of `isolated`: those shallower than their depth
-/// ([`Need`]) are left to [`settle`], those within the margin of that are watched.
-fn measure_centres(
-    index: &SurfaceIndex,
-    isolated: &HashSet<[u32; 3]>,
-    need: &Need<'_>,
-    ps: &[Vec3],
-    is: &[u32],
-) -> Found {
-    let measure = |ps: &[Vec3], is: &[u32]| {
-        let mut found = Found::default();
-        for (&p, &i) in ps.iter().zip(is) {
-            let Some(probe) = index.probe(p.as_dvec3()) else {
-                continue;
-            };
-            if !isolated.is_empty() && isolated.contains(&bits(p)) {
-                continue;
-            }
-            found.near += 1;
-            let (depth, r) = need.of(i);
-            if shallow(&probe, depth, r) {
-                found.pending.push((i, p, probe));
-            } else {
-                found.watch(i, p, &probe, depth, need.margin);
-            }
-        }
-        found
-    };
-    let parts: Vec<Found> = ps
-        .par_chunks(PROBE_CHUNK)
-        .zip(is.par_chunks(PROBE_CHUNK))
-        .map(|(ps, is)| measure(ps, is))
-        .collect();
-    let mut found = Found::default();
-    for part in parts {
-        found.extend(part);
-    }
-    found
-}
-
-/// Whether a centre at `probe` is to be pushed: less than `depth` under the surface.
-fn shallow(probe: &Probe, depth: f64, r: f64) -> bool {
-    probe.signed_distance > -depth + TOLERANCE * r
-}
-
-/// Measures the centres of `found.pending` again over every triangle that may pass nearer
-/// than their probes found (`SurfaceIndex::confirm`; once per slab, as it reads all of
-/// the slab's triangles), and files them: too shallow they are pushed a little deeper than
-/// their depth (so that rounding cannot leave a centre a hair short of it for another
-/// round), within the margin of it they are watched.
-fn settle(index: &SurfaceIndex, found: &mut Found, need: &Need<'_>) {
-    let pending = std::mem::take(&mut found.pending);
-    let mut probes: Vec<(DVec3, Probe)> = pending
-        .iter()
-        .map(|&(_, p, probe)| (p.as_dvec3(), probe))
-        .collect();
-    index.confirm(&mut probes);
-    for ((i, p, _), (_, probe)) in pending.into_iter().zip(probes) {
-        let (depth, r) = need.of(i);
-        found.watch(i, p, &probe, depth, need.margin);
-        if shallow(&probe, depth, r) {
-            let aim = depth + AIM_BEYOND * r;
-            found.shallow.push(Shallow {
-                particle: i,
-                push: probe.normal * (probe.signed_distance + aim),
-                outside: probe.signed_distance > 0.0,
-                control_triangle: probe.control_triangle,
-            });
-        }
-    }
-}
-
 /// Moves the control vertices by `push` (sorted by vertex), halving the pushes around
 /// any triangle they would turn by more than [`MAX_TURN_COS`] (up to three times, then
 /// leaving those vertices where they were), so that pushes never fold the surface; the
@@ -589,39 +458,6 @@ const MAX_TURN_COS: f64 = 0.25;
 /// Depth, beyond the required one and in multiples of r, under the tangent plane of the
 /// nearest vertex that counts as deep enough without measuring the triangles.
 pub(super) const FAST_MARGIN: f64 = 0.15;
-
-/// How much deeper than required a push aims, multiples of r.
-const AIM_BEYOND: f64 = 0.02;
-/// How much shallower than required a centre may be before it is pushed, multiples of r
-/// (float rounding of the pushed positions).
-const TOLERANCE: f64 = 1e-3;
-
-/// Centres per parallel task.
-const PROBE_CHUNK: usize = 4096;
-
-/// The exact bits of a position (isolated centres are matched by position).
-fn bits(p: Vec3) -> [u32; 3] {
-    p.to_array().map(f32::to_bits)
-}
-
-/// A centre found too close to the surface.
-struct Shallow {
-    particle: u32,
-    /// How its nearest surface point has to move, world units.
-    push: DVec3,
-    outside: bool,
-    /// Control triangle under its nearest surface point.
-    control_triangle: u32,
-}
-
-/// A centre that a push could bring too close to the surface.
-#[derive(Clone, Copy)]
-struct Watched {
-    particle: u32,
-    position: Vec3,
-    /// Control triangle over which its nearest surface point lay.
-    parent: u32,
-}
 
 #[cfg(test)]
 mod tests {
