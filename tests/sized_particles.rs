@@ -43,7 +43,7 @@ fn radii(values: Vec<f32>) -> ParticleRadii {
 fn run(positions: &[Vec3], radii: &ParticleRadii, options: &ReconstructOptions) -> TriMesh {
     let (surface, stats) = reconstruct_sized(
         positions,
-        Some(radii),
+        Some(radii.clone()),
         options,
         &|_| {},
         &CancelToken::new(),
@@ -205,7 +205,13 @@ fn tiles_and_threads_do_not_change_a_sized_run() {
     let radii = radii(values);
     let raw = ReconstructOptions::raw(0.0125);
     let untiled = in_pool(2, || {
-        reconstruct_sized(&positions, Some(&radii), &raw, &|_| {}, &CancelToken::new())
+        reconstruct_sized(
+            &positions,
+            Some(radii.clone()),
+            &raw,
+            &|_| {},
+            &CancelToken::new(),
+        )
     })
     .unwrap()
     .0;
@@ -214,7 +220,7 @@ fn tiles_and_threads_do_not_change_a_sized_run() {
     let tiled = in_pool(1, || {
         reconstruct_sized(
             &positions,
-            Some(&radii),
+            Some(radii.clone()),
             &tiled_options,
             &|_| {},
             &CancelToken::new(),
@@ -237,14 +243,21 @@ fn radii_equal_to_r_give_the_plain_run_and_bad_radii_are_refused() {
     let options = ReconstructOptions::new(0.0125);
     let uniform = radii(vec![0.0125; positions.len()]);
     let cancel = CancelToken::new();
-    let sized = reconstruct_sized(&positions, Some(&uniform), &options, &|_| {}, &cancel).unwrap();
+    let sized = reconstruct_sized(
+        &positions,
+        Some(uniform.clone()),
+        &options,
+        &|_| {},
+        &cancel,
+    )
+    .unwrap();
     let plain = reconstruct_sized(&positions, None, &options, &|_| {}, &cancel).unwrap();
     assert_eq!(sized.0, plain.0);
     let mut bad = uniform.clone();
     bad.values[5] = f32::NAN;
-    let e = reconstruct_sized(&positions, Some(&bad), &options, &|_| {}, &cancel).unwrap_err();
+    let e = reconstruct_sized(&positions, Some(bad), &options, &|_| {}, &cancel).unwrap_err();
     assert!(e.to_string().contains("particle 5"), "{e}");
     let short = radii(vec![0.0125; 3]);
-    let e = reconstruct_sized(&positions, Some(&short), &options, &|_| {}, &cancel).unwrap_err();
+    let e = reconstruct_sized(&positions, Some(short), &options, &|_| {}, &cancel).unwrap_err();
     assert!(e.to_string().contains("holds 3 values"), "{e}");
 }

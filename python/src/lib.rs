@@ -572,7 +572,7 @@ fn reconstruct(
     };
     let result = run_interruptible(py, |cancel| {
         with_threads(threads, || {
-            reconstruct_sized(source, radii.as_ref(), &options, &|_| {}, cancel)
+            reconstruct_sized(source, radii, &options, &|_| {}, cancel)
         })
     });
     py.allow_threads(malloc::release_free_memory);

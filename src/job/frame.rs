@@ -76,7 +76,7 @@ fn read_input(input: &Path, options: &ReconstructOptions, job: &JobOptions) -> R
 /// Reconstructs the particles of the file `input`; `on_stage` is told each stage.
 fn reconstruct_input(
     particles: Input,
-    radii: Option<&ParticleRadii>,
+    radii: Option<ParticleRadii>,
     input: &Path,
     options: &ReconstructOptions,
     cancel: &CancelToken,
@@ -123,7 +123,7 @@ pub(crate) fn run_frame(
     let options = sink.options(options);
     let (surface, mut reconstruction) = reconstruct_input(
         particles,
-        radii.as_ref(),
+        radii,
         &frame.input,
         &options,
         &job.cancel,

@@ -62,8 +62,8 @@ pub struct JobOptions {
     /// when present). Every frame's radii are read and checked before the frame is
     /// reconstructed (a bad radius fails the frame, with no output); the caller takes
     /// the reference radius `r` of the options from them
-    /// ([`crate::radius::ParticleRadii::median`]). The field still gives every particle
-    /// the radius `r`.
+    /// ([`crate::radius::ParticleRadii::median`]), and each particle is meshed with its
+    /// own radius ([`crate::pipeline::reconstruct_sized`]).
     pub radius_attribute: RadiusAttribute,
     /// Stops the job between tiles, stages and frames ([`crate::Error::Interrupted`]).
     pub cancel: CancelToken,

@@ -75,7 +75,7 @@ pub fn reconstruct_source<S: ParticleSource>(
 /// bit for bit. `None`: every particle has the reference radius.
 pub fn reconstruct_sized<S: ParticleSource>(
     source: S,
-    radii: Option<&ParticleRadii>,
+    radii: Option<ParticleRadii>,
     options: &ReconstructOptions,
     progress: &dyn Fn(&str),
     cancel: &CancelToken,
@@ -90,7 +90,7 @@ pub fn reconstruct_sized<S: ParticleSource>(
 /// Each particle's radius as a multiple of the reference radius `reference`, and the
 /// largest; `None` when every radius is the reference (the plain run). Checks the count.
 fn radius_ratios(
-    radii: Option<&ParticleRadii>,
+    radii: Option<ParticleRadii>,
     particles: usize,
     reference: f32,
 ) -> Result<Option<(Vec<f32>, f32)>> {
@@ -124,7 +124,11 @@ fn radius_ratios(
     if radii.values.iter().all(|&v| v == reference) {
         return Ok(None);
     }
-    let ratios: Vec<f32> = radii.values.iter().map(|&v| v / reference).collect();
+    // The radii become the ratios in place: the column is held once.
+    let mut ratios = radii.values;
+    for v in &mut ratios {
+        *v /= reference;
+    }
     let largest = ratios.iter().copied().fold(1.0f32, f32::max);
     Ok(Some((ratios, largest)))
 }
@@ -132,7 +136,7 @@ fn radius_ratios(
 /// The stage list.
 fn reconstruct_source_unguarded<S: ParticleSource>(
     source: S,
-    radii: Option<&ParticleRadii>,
+    radii: Option<ParticleRadii>,
     options: &ReconstructOptions,
     progress: &dyn Fn(&str),
     cancel: &CancelToken,
