@@ -72,6 +72,7 @@ fn main() {
     ];
     let spheres = SphereInstances {
         template: icosphere(1, 0.05),
+        scales: Vec::new(),
         attributes: attributes(&centers),
         centers,
     };

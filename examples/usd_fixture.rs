@@ -61,6 +61,7 @@ fn spheres(frame: i64, count: usize) -> SphereInstances {
         .collect();
     SphereInstances {
         template: icosphere(1, 0.05),
+        scales: Vec::new(),
         attributes: vec![
             attribute("velocity", 3, count, 10.0 + frame as f32),
             attribute("density", 1, count, 1000.0),

@@ -302,6 +302,7 @@ fn sphere_instances(isolated: Vec<Vec3>, options: &ReconstructOptions) -> Sphere
         Some(level) if !isolated.is_empty() => SphereInstances {
             template: crate::isolated::icosphere(level, options.field.particle_radius),
             centers: isolated,
+            scales: Vec::new(),
             attributes: Vec::new(),
         },
         _ => SphereInstances::default(),
