@@ -2,7 +2,9 @@
 //! attribute, on the fluid and on isolated-particle spheres, as `attributes.glb`,
 //! `attributes.gltf`, `attributes.ply` and `attributes.vtk`, plus `attributes.json` with
 //! the values every vertex should carry (per mesh: `fluid`, then `isolated_particles`, the
-//! spheres merged), for the glTF validator and the Blender import check in `.ci/`.
+//! spheres merged), for the glTF validator and the Blender import check in `.ci/`; and
+//! `scaled_spheres.glb` / `.gltf`, spheres of three sizes (instanced nodes with a scale),
+//! for the validator.
 //!
 //! `cargo run --release --example attribute_fixture -- OUT_DIR`
 
@@ -72,9 +74,9 @@ fn main() {
     ];
     let spheres = SphereInstances {
         template: icosphere(1, 0.05),
+        scales: Vec::new(),
         attributes: attributes(&centers),
         centers,
-        scales: Vec::new(),
     };
     let surface = Surface { fluid, spheres };
     for ext in ["glb", "gltf", "ply", "vtk"] {
@@ -82,6 +84,22 @@ fn main() {
         let stats = write_surface(&path, &surface, &MeshWriteOptions::default())
             .unwrap_or_else(|e| panic!("{e}"));
         assert!(stats.dropped_attributes.is_empty(), "{ext}");
+        println!("{}: {} bytes", path.display(), stats.bytes);
+    }
+    // Spheres of three sizes without attributes: instanced nodes with a scale each, for
+    // the glTF validator.
+    let sized = Surface {
+        fluid: surface.fluid.clone(),
+        spheres: SphereInstances {
+            scales: vec![1.0, 2.0, 0.5],
+            attributes: Vec::new(),
+            ..surface.spheres.clone()
+        },
+    };
+    for ext in ["glb", "gltf"] {
+        let path = dir.join(format!("scaled_spheres.{ext}"));
+        let stats = write_surface(&path, &sized, &MeshWriteOptions::default())
+            .unwrap_or_else(|e| panic!("{e}"));
         println!("{}: {} bytes", path.display(), stats.bytes);
     }
     let spheres = surface.spheres.merged();

@@ -4,7 +4,7 @@
 //! * `sequence.usdc` and `sequence.usda`: frames 1, 2 and 5 (a gap), a fluid whose
 //!   topology changes every frame, attributes of 1 to 4 components (velocity, density,
 //!   `tex-coord`, colour), isolated spheres in frames 1 and 5 only, with a velocity and a
-//!   density per instance;
+//!   density per instance, those of frame 1 of three sizes (scales 1, 2, 0.5);
 //! * `no_spheres.usdc`: two frames without spheres, up axis Z, 100 frames per second,
 //!   centimetres;
 //! * `wide.usdc`: one frame with a 6-component attribute (`elementSize` 6) and no normals;
@@ -54,19 +54,24 @@ fn fluid(frame: i64, layout: &[(&str, usize)], normals: bool) -> TriMesh {
     mesh
 }
 
-/// Isolated spheres of frame `frame`: `count` centres with a velocity and a density.
+/// Isolated spheres of frame `frame`: `count` centres with a velocity and a density;
+/// in frame 1 of three sizes (scales 1, 2 and 0.5).
 fn spheres(frame: i64, count: usize) -> SphereInstances {
     let centers: Vec<Vec3> = (0..count)
         .map(|i| Vec3::new(2.0 + i as f32, 0.5 * frame as f32, -(i as f32)))
         .collect();
     SphereInstances {
         template: icosphere(1, 0.05),
+        scales: if frame == 1 {
+            [1.0, 2.0, 0.5][..count].to_vec()
+        } else {
+            Vec::new()
+        },
         attributes: vec![
             attribute("velocity", 3, count, 10.0 + frame as f32),
             attribute("density", 1, count, 1000.0),
         ],
         centers,
-        scales: Vec::new(),
     }
 }
 
@@ -88,6 +93,7 @@ fn expected_frame(frame: i64, surface: &Surface) -> Value {
         "fluid": mesh(&surface.fluid),
         "spheres": {
             "centers": s.centers.iter().map(|p| p.to_array()).collect::<Vec<_>>(),
+            "scales": s.scales,
             "attributes": s.attributes.iter().map(|a| json!({
                 "name": a.name, "components": a.components, "values": a.values,
             })).collect::<Vec<_>>(),

@@ -121,6 +121,14 @@ class Mesh:
         """The run's figures as the CLI's ``--stats`` JSON: counts and ``stages`` (stage,
         seconds, triangles, peak_rss_bytes); empty for a mesh read from an archive."""
     @property
+    def sphere_centers(self) -> npt.NDArray[np.float32]:
+        """Centres of the isolated-particle spheres, (S, 3) float32 (their vertices are in
+        ``vertices`` after the fluid's)."""
+    @property
+    def sphere_scales(self) -> npt.NDArray[np.float32]:
+        """Each sphere's scale, (S,) float32: its radius over the particle radius (1 when the
+        particles share one radius)."""
+    @property
     def vertex_count(self) -> int:
         """Number of vertices."""
     @property

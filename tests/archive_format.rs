@@ -305,11 +305,11 @@ fn write_synthetic_archive(path: &Path) {
     let small = bumpy(3, 0.5);
     let spheres = SphereInstances {
         template: icosphere(1, 0.05),
+        scales: Vec::new(),
         centers: (0..20)
             .map(|i| glam::Vec3::new(2.0 + 0.1 * i as f32, (i % 3) as f32, 0.5))
             .collect(),
         attributes: Vec::new(),
-        scales: Vec::new(),
     };
     let mut open = bumpy(3, 0.7);
     open.triangles.truncate(open.triangles.len() - 9);

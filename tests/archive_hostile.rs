@@ -367,8 +367,8 @@ fn lattice_coordinates_that_overflow_are_decoded_or_refused_never_panic() {
     let zigzag_max = u64::MAX - 1; // zigzag(i64::MAX)
     let spheres = SphereInstances {
         template: icosphere(0, 0.1),
-        centers: vec![glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y],
         scales: Vec::new(),
+        centers: vec![glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y],
         attributes: Vec::new(),
     };
     let none = SphereInstances::default();

@@ -20,9 +20,9 @@ fn surface() -> Surface {
         fluid,
         spheres: SphereInstances {
             template: icosphere(1, 0.1),
+            scales: Vec::new(),
             centers: vec![Vec3::new(3.0, 0.0, 0.0), Vec3::new(-3.0, 1.0, 0.5)],
             attributes: Vec::new(),
-            scales: Vec::new(),
         },
     }
 }
@@ -562,9 +562,9 @@ fn mutated_mesh_files_are_read_or_rejected_never_panic() {
         fluid: icosphere(0, 1.0),
         spheres: SphereInstances {
             template: icosphere(0, 0.1),
+            scales: Vec::new(),
             centers: vec![Vec3::new(3.0, 0.0, 0.0)],
             attributes: Vec::new(),
-            scales: Vec::new(),
         },
     };
     let mut bases = Vec::new();

@@ -26,9 +26,9 @@ fn surface(level: u32) -> Surface {
         fluid,
         spheres: SphereInstances {
             template: icosphere(1, 0.05),
+            scales: Vec::new(),
             centers: vec![Vec3::new(3.0, 0.0, 0.0), Vec3::new(-3.0, 1.0, 0.5)],
             attributes: vec![attribute("velocity", 3, 2)],
-            scales: Vec::new(),
         },
     }
 }

@@ -261,3 +261,47 @@ fn radii_equal_to_r_give_the_plain_run_and_bad_radii_are_refused() {
     let e = reconstruct_sized(&positions, Some(short), &options, &|_| {}, &cancel).unwrap_err();
     assert!(e.to_string().contains("holds 3 values"), "{e}");
 }
+#[test]
+fn isolated_particles_get_spheres_of_their_own_radius() {
+    // Three lone particles of radii r, 2r and r/2 far apart, beside a small block.
+    let r = 0.01f32;
+    let mut positions = vec![
+        Vec3::new(1.0, 0.0, 0.0),
+        Vec3::new(0.0, 1.0, 0.0),
+        Vec3::new(0.0, 0.0, 1.0),
+    ];
+    let mut values = vec![r, 2.0 * r, 0.5 * r];
+    for i in 0..6 {
+        for j in 0..6 {
+            for k in 0..6 {
+                positions.push(Vec3::new(i as f32, j as f32, k as f32) * 2.0 * r);
+                values.push(r);
+            }
+        }
+    }
+    let (surface, _) = reconstruct_sized(
+        &positions,
+        Some(radii(values)),
+        &ReconstructOptions::new(r),
+        &|_| {},
+        &CancelToken::new(),
+    )
+    .unwrap();
+    let spheres = &surface.spheres;
+    assert_eq!(spheres.centers, positions[..3]);
+    assert_eq!(spheres.scales, [1.0, 2.0, 0.5]);
+    let merged = spheres.merged();
+    for (k, c) in spheres.centers.iter().enumerate() {
+        let farthest = merged
+            .positions
+            .iter()
+            .filter(|p| (**p - *c).length() < 0.2)
+            .map(|p| (*p - *c).length())
+            .fold(0.0f32, f32::max);
+        let want = r * spheres.scales[k];
+        assert!(
+            (farthest - want).abs() < 1e-3 * want.max(r),
+            "sphere {k}: {farthest} vs {want}"
+        );
+    }
+}

@@ -467,6 +467,24 @@ impl Mesh {
         }
     }
 
+    /// Centres of the isolated-particle spheres, (S, 3) float32.
+    #[getter]
+    fn sphere_centers<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f32>> {
+        vec3s(py, &self.surface.spheres.centers)
+    }
+
+    /// Each sphere's scale, (S,) float32: its radius over `particle_radius` (1 when the
+    /// particles share one radius).
+    #[getter]
+    fn sphere_scales<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
+        let s = &self.surface.spheres;
+        if s.scales.is_empty() {
+            PyArray1::from_vec_bound(py, vec![1.0; s.centers.len()])
+        } else {
+            PyArray1::from_slice_bound(py, &s.scales)
+        }
+    }
+
     /// Number of vertices.
     #[getter]
     fn vertex_count(&self) -> usize {

@@ -57,6 +57,19 @@ def test_options_off_and_spheres(frame25):
     assert len(raw.triangles) > 0
 
 
+def test_sphere_centers_and_scales(frame25):
+    mesh = meniscus.reconstruct(frame25, RADIUS)
+    centers = mesh.sphere_centers
+    count = len(centers)
+    assert centers.shape == (count, 3)
+    assert mesh.stats["sphere_triangles"] == count * 320  # level-2 icospheres
+    # Each centre is an input particle.
+    particles = {tuple(p) for p in np.asarray(frame25, dtype=np.float32)}
+    assert all(tuple(c) in particles for c in centers)
+    # One radius for every particle: every sphere at scale 1.
+    np.testing.assert_array_equal(mesh.sphere_scales, np.ones(count, dtype=np.float32))
+
+
 def test_attributes_from_arrays(frame25):
     n = len(frame25)
     velocity = np.tile(np.array([1.0, -2.0, 0.5]), (n, 1))

@@ -22,6 +22,10 @@ pub(crate) const VERSION: u32 = 3;
 /// else), so that readers that know no attributes refuse it instead of calling those
 /// frames damaged.
 pub(crate) const ATTRIBUTES_VERSION: u32 = 4;
+/// The version of an archive with a frame whose sphere instances carry scales (records
+/// flagged [`super::frame::HAS_SCALES`]): version 4 with that flag; any version from 2
+/// becomes version 5 when such a frame is appended, as for attributes.
+pub(crate) const SCALES_VERSION: u32 = 5;
 /// Bytes of the file header: magic, version, a reserved word.
 pub(crate) const HEADER_LEN: u64 = 16;
 /// Offset of the version field in the file header.

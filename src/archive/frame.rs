@@ -9,12 +9,15 @@
 //! coordinates are within the bound gives subdivided coordinates within the same bound of
 //! the subdivision of the exact control mesh. The isolated-particle spheres are stored as
 //! one template and their centres, each quantized with half the step so that template
-//! vertex plus centre stays within the bound.
+//! vertex plus centre stays within the bound; spheres with scales store them exactly
+//! (f32) and the template on a lattice finer by the largest scale, so that a scaled
+//! template vertex plus its centre stays within the bound too.
 //!
 //! ```text
 //! raw := varint(levels) u8(shape) varint(fluid vertices) varint(fluid triangles) fluid
 //!        varint(sphere count)
-//!        [ varint(template vertices) varint(template triangles) template_streams
+//!        [ [count × f32 scale]            (record flag HAS_SCALES, version 5)
+//!          varint(template vertices) varint(template triangles) template_streams
 //!          count × 3 zigzag varints: centre − previous centre, on the lattice step / 2 ]
 //! payload := zstd(raw)
 //! ```
@@ -45,6 +48,9 @@ const OPEN: u8 = 0;
 const CLOSED: u8 = 1;
 /// ... or closed, consistently oriented and stored in parts ([`super::parts`]).
 const CLOSED_IN_PARTS: u8 = 2;
+
+/// Record flag: the sphere instances carry scales (version 5).
+pub(crate) const HAS_SCALES: u32 = 2;
 
 /// A frame to archive.
 #[derive(Clone, Copy, Debug)]
@@ -85,13 +91,56 @@ pub(crate) fn has_attributes(frame: &ArchiveFrame) -> bool {
         || (stored_instances(frame.spheres) > 0 && !frame.spheres.attributes.is_empty())
 }
 
+/// True when the frame stores sphere scales: stored instances that carry them.
+pub(crate) fn has_scales(frame: &ArchiveFrame) -> bool {
+    stored_instances(frame.spheres) > 0 && !frame.spheres.scales.is_empty()
+}
+
+/// The lattice spacing of the sphere template: `half` (the centres' spacing) over the
+/// largest scale when one exceeds 1, so that a scaled template vertex stays within
+/// `half / 2` of the original.
+fn template_step(half: f64, scales: &[f32]) -> f64 {
+    half / scales.iter().fold(1.0f32, |m, &s| m.max(s)) as f64
+}
+
+/// Appends the stored sphere instances (at least one) to `raw`: their scales when they
+/// have them, the template and the centres. Returns the template's counts.
+fn encode_spheres(
+    spheres: &SphereInstances,
+    step: f64,
+    raw: &mut Vec<u8>,
+) -> super::codec::CodedMesh {
+    let half = step / 2.0;
+    for s in &spheres.scales {
+        raw.extend_from_slice(&s.to_le_bytes());
+    }
+    let mut template_streams = Vec::new();
+    let template = encode_streams(
+        &spheres.template,
+        template_step(half, &spheres.scales),
+        &mut template_streams,
+    );
+    put_varint(raw, template.vertices as u64);
+    put_varint(raw, template.triangles as u64);
+    raw.extend_from_slice(&template_streams);
+    let mut previous = [0i64; 3];
+    for c in &spheres.centers {
+        let q = c.to_array().map(|x| (x as f64 / half).round() as i64);
+        for k in 0..3 {
+            put_varint(raw, zigzag(q[k].wrapping_sub(previous[k])));
+        }
+        previous = q;
+    }
+    template
+}
+
 /// An encoded frame.
 pub(crate) struct EncodedFrame {
     pub(crate) payload: Vec<u8>,
     /// Vertices and triangles it decodes to.
     pub(crate) vertices: u32,
     pub(crate) triangles: u32,
-    /// Record flags ([`attributes::HAS_ATTRIBUTES`]).
+    /// Record flags ([`attributes::HAS_ATTRIBUTES`], [`HAS_SCALES`]).
     pub(crate) flags: u32,
 }
 
@@ -149,20 +198,7 @@ pub(crate) fn encode_frame(
     let count = stored_instances(spheres);
     put_varint(&mut raw, count as u64);
     if count > 0 {
-        let half = step / 2.0;
-        let mut template_streams = Vec::new();
-        let template = encode_streams(&spheres.template, half, &mut template_streams);
-        put_varint(&mut raw, template.vertices as u64);
-        put_varint(&mut raw, template.triangles as u64);
-        raw.extend_from_slice(&template_streams);
-        let mut previous = [0i64; 3];
-        for c in &spheres.centers {
-            let q = c.to_array().map(|x| (x as f64 / half).round() as i64);
-            for k in 0..3 {
-                put_varint(&mut raw, zigzag(q[k].wrapping_sub(previous[k])));
-            }
-            previous = q;
-        }
+        let template = encode_spheres(spheres, step, &mut raw);
         vertices += count as u64 * template.vertices as u64;
         triangles += count as u64 * template.triangles as u64;
     }
@@ -173,6 +209,7 @@ pub(crate) fn encode_frame(
     };
     let geometry = zstd::bulk::compress(&raw, zstd_level)?;
     drop(raw);
+    let scale_flag = if has_scales(frame) { HAS_SCALES } else { 0 };
     let (payload, flags) = if has_attributes(frame) {
         let sphere_attributes = if count > 0 {
             &spheres.attributes[..]
@@ -187,9 +224,9 @@ pub(crate) fn encode_frame(
             &geometry,
             zstd_level,
         )?;
-        (payload, attributes::HAS_ATTRIBUTES)
+        (payload, attributes::HAS_ATTRIBUTES | scale_flag)
     } else {
-        (geometry, 0)
+        (geometry, scale_flag)
     };
     Ok(EncodedFrame {
         payload,
@@ -201,13 +238,15 @@ pub(crate) fn encode_frame(
 
 /// Decodes a payload (the geometry) that the record header says holds `vertices`
 /// vertices and `triangles` triangles (after subdivision, spheres included), with the
-/// frame's attribute streams when it has them. No normals.
+/// frame's attribute streams when it has them and sphere scales when `scaled` (record
+/// flag [`HAS_SCALES`]). No normals.
 pub(crate) fn decode_frame(
     payload: &[u8],
     vertices: usize,
     triangles: usize,
     step: f64,
     attribute_streams: Option<(&Descriptor, &[u8])>,
+    scaled: bool,
 ) -> Result<Surface, String> {
     // The raw size is bounded by the stored (control) mesh, at most the final one.
     let raw = decompress(payload, raw_capacity(vertices, triangles))?;
@@ -229,7 +268,7 @@ pub(crate) fn decode_frame(
     if attribute_streams.is_none() {
         fluid.subdivide_rest();
     }
-    let spheres = decode_spheres(&raw, pos, nv, nt, step)?;
+    let spheres = decode_spheres(&raw, pos, (nv, nt), step, scaled)?;
     if *pos != raw.len() {
         return Err("trailing bytes after the frame".into());
     }
@@ -319,19 +358,23 @@ fn decode_fluid(
     })
 }
 
-/// Decodes the sphere instances: the template, on the lattice of half the step, and the
-/// centres (none when the count is 0).
+/// Decodes the sphere instances (none when the count is 0) of a frame of at most `nv`
+/// vertices and `nt` triangles: their scales when `scaled`, the template, on the lattice
+/// of half the step over the largest scale, and the centres, on that of half the step.
 fn decode_spheres(
     raw: &[u8],
     pos: &mut usize,
-    nv: u64,
-    nt: u64,
+    (nv, nt): (u64, u64),
     step: f64,
+    scaled: bool,
 ) -> Result<SphereInstances, String> {
     let count = read_count(raw, pos, "sphere count", nt)?;
     let mut spheres = SphereInstances::default();
     if count == 0 {
         return Ok(spheres);
+    }
+    if scaled {
+        spheres.scales = decode_scales(raw, pos, count)?;
     }
     let half = step / 2.0;
     let tv = read_count(raw, pos, "sphere template vertex count", nv)?;
@@ -343,7 +386,7 @@ fn decode_spheres(
             raw.len() - *pos
         ));
     }
-    spheres.template = decode_streams(raw, pos, tv, tt, half)?;
+    spheres.template = decode_streams(raw, pos, tv, tt, template_step(half, &spheres.scales))?;
     spheres.centers.reserve(count);
     let mut q = [0i64; 3];
     for _ in 0..count {
@@ -356,6 +399,26 @@ fn decode_spheres(
             .push(Vec3::from_array(q.map(|c| (c as f64 * half) as f32)));
     }
     Ok(spheres)
+}
+
+/// Reads `count` sphere scales (f32, little-endian), each finite and > 0.
+fn decode_scales(raw: &[u8], pos: &mut usize, count: usize) -> Result<Vec<f32>, String> {
+    let bytes = count
+        .checked_mul(4)
+        .and_then(|n| raw.get(*pos..pos.checked_add(n)?))
+        .ok_or_else(|| format!("{count} sphere scales cut off"))?;
+    *pos += bytes.len();
+    let scales: Vec<f32> = bytes
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
+        .collect();
+    match scales.iter().position(|s| !(s.is_finite() && *s > 0.0)) {
+        Some(k) => Err(format!(
+            "sphere scale {k} decodes to {}: not a finite number > 0 (damaged record)",
+            scales[k]
+        )),
+        None => Ok(scales),
+    }
 }
 
 /// Gives the decoded surface its attributes: the values `control` of the `v` control

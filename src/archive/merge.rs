@@ -51,8 +51,8 @@ impl Drop for TempFile {
 /// that exists and is none of the inputs. The output is written to a temporary file next
 /// to it and renamed into place when complete: on any error it is not created (nor an
 /// existing one changed). The archive's version is the highest of the inputs' (a
-/// version-4 input, whose frames carry attributes, makes it version 4, as appending such
-/// a frame would). Inputs are opened one at a time (each read whole, as
+/// version-4 input, whose frames carry attributes, makes it version 4, a version-5 one,
+/// with sphere scales, version 5, as appending such a frame would). Inputs are opened one at a time (each read whole, as
 /// [`ArchiveReader::open`] does), then their records are read one by one.
 pub fn merge(inputs: &[PathBuf], output: &Path) -> Result<MergeStats> {
     check_output(inputs, output)?;

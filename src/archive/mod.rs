@@ -39,6 +39,12 @@
 //! stays that function of the subdivided positions. Decoded items follow the decoded
 //! vertices (and instances) in order. A frame without attributes is stored exactly as
 //! before attributes existed; a frame with them makes the archive version 4.
+//!
+//! **Sphere scales** (isolated particles of different sizes,
+//! [`crate::mesh::SphereInstances::scales`]) are stored exactly, one f32 per instance,
+//! and the template on a lattice finer by the largest scale, so that every scaled sphere
+//! vertex stays within the error bound; a frame with them makes the archive version 5.
+//! Frames without them are stored as before (their spheres decode with empty scales).
 
 mod attributes;
 mod codec;

@@ -6,8 +6,8 @@ use super::attributes::{self, AttributeInfo};
 use super::codec;
 use super::container::{
     archive_error, claimed_frame, is_cut_off_record_or_index, read_index, scan_records,
-    true_payload_end, walk_end, RecordHeader, Span, ATTRIBUTES_VERSION, HEADER_LEN, MAGIC,
-    MAX_STEP, RECORD_HEADER_LEN,
+    true_payload_end, walk_end, RecordHeader, Span, HEADER_LEN, MAGIC, MAX_STEP, RECORD_HEADER_LEN,
+    SCALES_VERSION,
 };
 use super::frame;
 use crate::error::{Error, Result};
@@ -200,11 +200,11 @@ impl ArchiveReader {
             ));
         }
         let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
-        if !(1..=ATTRIBUTES_VERSION).contains(&version) {
+        if !(1..=SCALES_VERSION).contains(&version) {
             return Err(Error::UnsupportedFormat {
                 path: path.to_path_buf(),
                 message: format!(
-                    ".mseq version {version}; this build reads versions 1 to {ATTRIBUTES_VERSION}"
+                    ".mseq version {version}; this build reads versions 1 to {SCALES_VERSION}"
                 ),
             });
         }
@@ -430,7 +430,8 @@ impl ArchiveReader {
         self.recovered_by_scan
     }
 
-    /// Format version of the file (1 to 4; 4 when a frame stores attributes).
+    /// Format version of the file (1 to 5; 4 when a frame stores attributes, 5 when a
+    /// frame stores sphere scales).
     pub fn version(&self) -> u32 {
         self.version
     }
@@ -524,19 +525,29 @@ impl ArchiveReader {
             ));
         }
         let (vertices, triangles) = (f.vertices as usize, f.triangles as usize);
+        let scaled = flags & frame::HAS_SCALES != 0;
+        let known = attributes::HAS_ATTRIBUTES
+            | if self.version >= SCALES_VERSION {
+                frame::HAS_SCALES
+            } else {
+                0
+            };
         match (self.version, flags) {
             (1, 0) => codec::decode_v1(payload, vertices, triangles, f.step).map(|fluid| Surface {
                 fluid,
                 spheres: SphereInstances::default(),
             }),
-            (2.., 0) => frame::decode_frame(payload, vertices, triangles, f.step, None),
-            (2.., attributes::HAS_ATTRIBUTES) => attributes::split(payload).and_then(|s| {
+            (2.., _) if flags & !known == 0 && flags & attributes::HAS_ATTRIBUTES == 0 => {
+                frame::decode_frame(payload, vertices, triangles, f.step, None, scaled)
+            }
+            (2.., _) if flags & !known == 0 => attributes::split(payload).and_then(|s| {
                 frame::decode_frame(
                     s.geometry,
                     vertices,
                     triangles,
                     f.step,
                     Some((&s.descriptor, s.streams)),
+                    scaled,
                 )
             }),
             (version, _) => Err(format!(

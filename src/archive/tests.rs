@@ -19,8 +19,8 @@ fn version_1_archives_are_read_and_appended_in_their_format() {
     let control = icosphere(1, 1.0);
     let spheres = SphereInstances {
         template: icosphere(0, 0.1),
-        centers: vec![glam::Vec3::new(5.0, 0.0, 0.0)],
         scales: Vec::new(),
+        centers: vec![glam::Vec3::new(5.0, 0.0, 0.0)],
         attributes: Vec::new(),
     };
     let frame = ArchiveFrame {

@@ -6,7 +6,7 @@ use super::attributes;
 use super::codec;
 use super::container::{
     archive_error, file_header, index_bytes, repair_advice, RecordHeader, ATTRIBUTES_VERSION,
-    HEADER_LEN, MAX_SUBDIVISION_LEVELS, RECORD_HEADER_LEN, VERSION, VERSION_OFFSET,
+    HEADER_LEN, MAX_SUBDIVISION_LEVELS, RECORD_HEADER_LEN, SCALES_VERSION, VERSION, VERSION_OFFSET,
 };
 use super::frame::{self, ArchiveFrame};
 use super::options::ArchiveOptions;
@@ -229,7 +229,10 @@ impl ArchiveWriter {
     ///
     /// The first frame with attributes makes a version-2 or -3 archive version 4 (the
     /// header's version field is rewritten before the record is written); a version-1
-    /// archive cannot store attributes and refuses such a frame.
+    /// archive cannot store attributes and refuses such a frame. The first frame whose
+    /// spheres carry scales makes a version-2 to -4 archive version 5 the same way (a
+    /// version-1 archive stores them merged); scales that do not fit the centres (see
+    /// [`SphereInstances::scales`]) are refused.
     pub fn append_frame(&mut self, number: i64, frame: &ArchiveFrame) -> Result<u64> {
         let input = format!("{}: frame {number}", self.path.display());
         crate::error::guard(move || input, || self.append_frame_unguarded(number, frame))
@@ -238,12 +241,15 @@ impl ArchiveWriter {
     fn append_frame_unguarded(&mut self, number: i64, frame: &ArchiveFrame) -> Result<u64> {
         let with_attributes = self.check_frame(number, frame)?;
         // The archive's version once this frame is in it: the header is rewritten only
-        // when the frame is encoded, so that a frame that fails changes nothing.
-        let version = if with_attributes {
-            self.version.max(ATTRIBUTES_VERSION)
-        } else {
-            self.version
-        };
+        // when the frame is encoded, so that a frame that fails changes nothing. A
+        // version-1 archive stores the scaled spheres merged, as they are.
+        let mut version = self.version;
+        if with_attributes {
+            version = version.max(ATTRIBUTES_VERSION);
+        }
+        if frame::has_scales(frame) && version != 1 {
+            version = version.max(SCALES_VERSION);
+        }
         let encoded = self
             .encode(frame, version)
             .map_err(|e| Error::io(&self.path, e))?;
@@ -274,6 +280,10 @@ impl ArchiveWriter {
                 ),
             ));
         }
+        frame
+            .spheres
+            .check_scales()
+            .map_err(|m| archive_error(&self.path, Some(number), m))?;
         let with_attributes = frame::has_attributes(frame);
         if with_attributes {
             let attribute_step = 2.0 * self.options.attribute_error_bound;

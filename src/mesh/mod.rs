@@ -269,7 +269,9 @@ pub struct SphereInstances {
     pub template: TriMesh,
     /// One centre per isolated particle, world units.
     pub centers: Vec<Vec3>,
-    /// Per-instance scale of the template (the particle's radius / r); empty: all 1.
+    /// One factor per centre by which the template is scaled about that centre (the
+    /// particle's radius over the template's: `r_i / r`), finite and > 0; empty when every
+    /// instance has the template's size (scale 1).
     pub scales: Vec<f32>,
     /// Per-instance attributes (one item per centre: the value of its particle); empty
     /// when none were selected.
@@ -277,14 +279,59 @@ pub struct SphereInstances {
 }
 
 impl SphereInstances {
-    /// The instances merged into one mesh (template translated to every centre; every
-    /// vertex of a sphere takes its instance's attribute values).
+    /// Checks [`SphereInstances::scales`]: empty, or one finite factor > 0 per centre.
+    /// Writers call it before writing anything; the message says what is wrong.
+    pub(crate) fn check_scales(&self) -> Result<(), String> {
+        if self.scales.is_empty() {
+            return Ok(());
+        }
+        if self.scales.len() != self.centers.len() {
+            return Err(format!(
+                "the sphere instances have {} scales for {} centres (one per centre, or none)",
+                self.scales.len(),
+                self.centers.len()
+            ));
+        }
+        match self
+            .scales
+            .iter()
+            .position(|s| !(s.is_finite() && *s > 0.0))
+        {
+            Some(k) => Err(format!(
+                "sphere instance {k} has the scale {}; a scale must be a finite number > 0",
+                self.scales[k]
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// The scale of instance `k` (1 when the instances carry no scales).
+    pub(crate) fn scale(&self, k: usize) -> f32 {
+        debug_assert!(
+            self.scales.is_empty() || self.scales.len() == self.centers.len(),
+            "{} scales for {} centres",
+            self.scales.len(),
+            self.centers.len()
+        );
+        self.scales.get(k).copied().unwrap_or(1.0)
+    }
+
+    /// Template vertex `v` placed as instance `k`: scaled by the instance's scale (an
+    /// exact no-op at scale 1) and moved to its centre.
+    pub(crate) fn vertex(&self, k: usize, v: usize) -> Vec3 {
+        self.template.positions[v] * self.scale(k) + self.centers[k]
+    }
+
+    /// The instances merged into one mesh (template scaled by each instance's scale and
+    /// translated to its centre; normals as the template's; every vertex of a sphere
+    /// takes its instance's attribute values).
     pub fn merged(&self) -> TriMesh {
         let mut out = TriMesh::default();
         for (i, c) in self.centers.iter().enumerate() {
             let mut s = self.template.clone();
+            let scale = self.scale(i);
             for p in &mut s.positions {
-                *p += *c;
+                *p = *p * scale + *c;
             }
             s.attributes = self
                 .attributes

@@ -120,6 +120,7 @@ pub fn spheres_with_attributes(count: usize) -> SphereInstances {
         .collect();
     SphereInstances {
         template: icosphere(1, 0.05),
+        scales: Vec::new(),
         attributes: vec![
             Attribute {
                 name: "velocity".into(),
@@ -133,7 +134,6 @@ pub fn spheres_with_attributes(count: usize) -> SphereInstances {
             },
         ],
         centers,
-        scales: Vec::new(),
     }
 }
 

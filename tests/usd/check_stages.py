@@ -14,7 +14,8 @@ normals equal the mesh's, `velocities` has the points' length and equals the vel
 attribute, each other attribute is a `primvars:NAME` of its components (1-4 as
 float..float4, more as float[] with elementSize) with vertex interpolation and the same
 values, the extent is the points' bounding box; the spheres are a PointInstancer of the
-icosphere with the centres as positions, their velocity and density, and it is absent
+icosphere with the centres as positions, their velocity and density, their scales and
+each instance's size where a frame has them (`check_scales`), and it is absent
 from a stage without spheres. Floats must be equal to the bit (f32). Exits non-zero on the
 first failure.
 """
@@ -25,7 +26,7 @@ import struct
 import sys
 from pathlib import Path
 
-from pxr import Sdf, Tf, Usd, UsdGeom
+from pxr import Gf, Sdf, Tf, Usd, UsdGeom
 
 try:
     from pxr import UsdUtils
@@ -171,6 +172,31 @@ def check_fluid(stage, spec):
         check_extent(mesh.GetExtentAttr(), fluid["points"], t)
 
 
+def check_scales(instancer, s, t, pad, template):
+    """Spheres of their own sizes: `scales` (s, s, s) per instance, each instance's
+    transform (Pixar's `ComputeInstanceTransformsAtTime`) putting every prototype vertex at
+    its scaled distance from the centre, the extent holding every sphere at its size; a
+    frame without scales has none (an empty array when another frame has them)."""
+    scales = instancer.GetScalesAttr()
+    if not s["scales"]:
+        expect(not scales.HasAuthoredValue() or len(scales.Get(t)) == 0, f"frame {t}: scales without sizes")
+        return
+    same_floats(scales.Get(t), [x for k in s["scales"] for x in (k, k, k)], f"frame {t} scales")
+    transforms = instancer.ComputeInstanceTransformsAtTime(Usd.TimeCode(t), Usd.TimeCode(t))
+    expect(len(transforms) == len(s["centers"]), f"frame {t}: {len(transforms)} instance transforms")
+    radius = max(sum(c * c for c in p) ** 0.5 for p in template["points"])
+    for k, (m, c) in enumerate(zip(transforms, s["centers"])):
+        for p in template["points"]:
+            q = m.Transform(Gf.Vec3d(*p))
+            d = sum((q[i] - c[i]) ** 2 for i in range(3)) ** 0.5
+            want = sum(x * x for x in p) ** 0.5 * s["scales"][k]
+            expect(abs(d - want) < 1e-5 * max(1.0, radius), f"frame {t} sphere {k}: a vertex at {d}, expected {want}")
+    # Every centre moved by the prototype's corners times its scale, summed in f32.
+    lo = [f32(min(f32(c[i]) + f32(pad[0][i] * k) for c, k in zip(s["centers"], s["scales"]))) for i in range(3)]
+    hi = [f32(max(f32(c[i]) + f32(pad[1][i] * k) for c, k in zip(s["centers"], s["scales"]))) for i in range(3)]
+    same_floats(instancer.GetExtentAttr().Get(t), [*lo, *hi], f"frame {t} sphere extent")
+
+
 def check_spheres(stage, spec):
     numbers = [f["frame"] for f in spec["frames"]]
     prim = stage.GetPrimAtPath("/Surface/Spheres")
@@ -197,9 +223,11 @@ def check_spheres(stage, spec):
         n = len(s["centers"])
         same_floats(instancer.GetPositionsAttr().Get(t), flat(s["centers"]), f"frame {t} sphere positions")
         expect(list(instancer.GetProtoIndicesAttr().Get(t)) == [0] * n, f"frame {t}: protoIndices")
+        check_scales(instancer, s, t, pad, template)
         if n:
             check_primvars(prim, s["attributes"], t, n, "spheres")
-            check_extent(instancer.GetExtentAttr(), s["centers"], t, pad)
+            if not s["scales"]:
+                check_extent(instancer.GetExtentAttr(), s["centers"], t, pad)
         else:
             expect(len(instancer.GetVelocitiesAttr().Get(t)) == 0, f"frame {t}: velocities without spheres")
 

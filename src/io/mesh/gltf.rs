@@ -8,11 +8,14 @@
 //! go where, and writing streams them in chunks of [`CHUNK_BYTES`] (base64-encoded on the
 //! fly for `.gltf`), so a 70 M-triangle surface is written without a 1.7 GB copy.
 //!
-//! Attributes become application-specific vertex attributes (`_VELOCITY`, float
-//! accessors; names in [`super::columns`]). Spheres with attributes are written as one
-//! merged mesh (instances translated, each vertex with its particle's values) instead of
-//! one node per instance: glTF attributes belong to a mesh, and Blender's importer drops
-//! per-instance attributes of `EXT_mesh_gpu_instancing`.
+//! The isolated-particle spheres are one mesh and one node per instance, its
+//! `translation` the centre and, when the instances carry scales, its `scale` the
+//! instance's factor on all three axes. Attributes become application-specific vertex
+//! attributes (`_VELOCITY`, float accessors; names in [`super::columns`]). Spheres with
+//! attributes are written as one merged mesh (instances scaled and translated, each vertex
+//! with its particle's values) instead of one node per instance: glTF attributes belong
+//! to a mesh, and Blender's importer drops per-instance attributes of
+//! `EXT_mesh_gpu_instancing`.
 //!
 //! **Read** with the `gltf` crate (`.glb`, `.gltf` with embedded buffers), after
 //! [`gltf_check`]'s checks: every triangle primitive of the default scene, node transforms
@@ -408,14 +411,14 @@ impl<'a> Builder<'a> {
         }
     }
 
-    /// The sphere instances merged into one primitive: the template translated to every
-    /// centre (as [`SphereInstances::merged`] does), each vertex with its instance's
-    /// attribute values.
+    /// The sphere instances merged into one primitive: the template scaled by every
+    /// instance's scale and translated to its centre (as [`SphereInstances::merged`]
+    /// does), each vertex with its instance's attribute values.
     fn merged_spheres(&mut self, s: &'a SphereInstances, normals: bool) -> Value {
         let t = &s.template;
         let n = t.vertex_count();
         let count = n * s.centers.len();
-        let position = move |i: usize| t.positions[i % n] + s.centers[i / n];
+        let position = move |i: usize| s.vertex(i / n, i % n);
         let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
         for i in 0..count {
             for (k, v) in position(i).to_array().into_iter().enumerate() {
@@ -533,8 +536,12 @@ pub(super) fn build(surface: &Surface, normals: bool) -> Document<'_> {
         let children: Vec<usize> = (first..first + spheres.centers.len()).collect();
         nodes.push(json!({"name": "isolated_particles", "children": children}));
         roots.push(nodes.len() - 1);
-        for c in &spheres.centers {
-            nodes.push(json!({"mesh": mesh, "translation": c.to_array()}));
+        for (k, c) in spheres.centers.iter().enumerate() {
+            let mut node = json!({"mesh": mesh, "translation": c.to_array()});
+            if let Some(&s) = spheres.scales.get(k) {
+                node["scale"] = json!([s, s, s]);
+            }
+            nodes.push(node);
         }
         vertices += spheres.template.vertex_count();
     }

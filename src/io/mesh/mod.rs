@@ -3,7 +3,7 @@
 //!
 //! | format | extension | what is written | attributes |
 //! |---|---|---|---|
-//! | glTF 2.0 binary | `.glb` | fluid mesh node + one sphere mesh instanced by a node per isolated particle; POSITION (with min/max), NORMAL, u32 indices | `_NAME` float accessors (SCALAR/VEC2/VEC3/VEC4; `_NAME_0 … _NAME_k` scalars beyond 4 components); spheres with attributes become one merged mesh node `isolated_particles` |
+//! | glTF 2.0 binary | `.glb` | fluid mesh node + one sphere mesh instanced by a node per isolated particle (its `translation`, and its `scale` when the spheres have sizes of their own); POSITION (with min/max), NORMAL, u32 indices | `_NAME` float accessors (SCALAR/VEC2/VEC3/VEC4; `_NAME_0 … _NAME_k` scalars beyond 4 components); spheres with attributes become one merged mesh node `isolated_particles` |
 //! | glTF 2.0 | `.gltf` | the same, with the buffer embedded as a base64 data URI (one self-contained file, so the write stays atomic) | as `.glb` |
 //! | PLY | `.ply` | binary little-endian, float x y z (+ nx ny nz), uchar/uint face lists | float vertex properties `name` / `name_x name_y [name_z [name_w]]` / `name_0 … name_k` |
 //! | OBJ | `.obj` | `v`, `vn`, `f a//a` (1-based) | none: listed in [`MeshWriteStats::dropped_attributes`] |
@@ -15,8 +15,11 @@
 //! with a wrong value count or whose names collide in the format are refused before
 //! anything is written.
 //!
-//! Formats without instancing get [`Surface::merged`]. Every write is atomic: a failed
-//! write leaves no partial file and keeps an existing target.
+//! Formats without instancing get the spheres as [`Surface::merged`] has them (each
+//! instance scaled about its centre by its [`crate::mesh::SphereInstances::scales`]
+//! factor). Sphere scales that do not fit the centres are refused before anything is
+//! written. Every write is atomic: a failed write leaves no partial file and keeps an
+//! existing target.
 
 mod columns;
 mod gltf;
@@ -236,6 +239,13 @@ pub fn write_surface(
         MeshFormat::Obj => None,
     };
     columns::check_surface(path, surface, naming)?;
+    surface
+        .spheres
+        .check_scales()
+        .map_err(|message| Error::UnsupportedFormat {
+            path: path.to_path_buf(),
+            message,
+        })?;
     let mut dropped_attributes = Vec::new();
     let (bytes, vertices) = match format {
         MeshFormat::Glb | MeshFormat::Gltf => {

@@ -18,7 +18,8 @@ use std::io::{Result, Write};
 pub(super) enum Part<'a> {
     /// A mesh as it is.
     Mesh(&'a TriMesh),
-    /// Every instance of a sphere, as if merged (instance after instance).
+    /// Every instance of a sphere, as if merged (instance after instance, each scaled by
+    /// its scale).
     Spheres(&'a SphereInstances),
 }
 
@@ -48,7 +49,7 @@ impl Part<'_> {
             Part::Mesh(m) => m.positions[i],
             Part::Spheres(s) => {
                 let n = s.template.vertex_count();
-                s.template.positions[i % n] + s.centers[i / n]
+                s.vertex(i / n, i % n)
             }
         }
     }

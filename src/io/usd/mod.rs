@@ -7,7 +7,9 @@
 //! attributes (vertex interpolation; 1–4 components as `float`…`float4`, more as
 //! `float[]` with `elementSize`); the isolated-particle spheres as a `UsdGeomPointInstancer`
 //! (`/Surface/Spheres`) of the icosphere, with time-sampled positions, velocities and
-//! primvars per instance. The layer metadata sets `startTimeCode`/`endTimeCode` to the
+//! primvars per instance, and `scales` (each factor on all three axes) for frames whose
+//! spheres have sizes of their own (a frame without them has an empty array there:
+//! every instance at the prototype's size). The layer metadata sets `startTimeCode`/`endTimeCode` to the
 //! first and last frame, `timeCodesPerSecond` = `framesPerSecond` = [`UsdOptions::fps`],
 //! `upAxis` and `metersPerUnit`.
 //!

@@ -8,7 +8,8 @@
 //!                                  points, normals, velocities, primvars:NAME (series);
 //!                                  subdivisionScheme = "none"
 //!   /Surface/Spheres               PointInstancer (when a frame had isolated spheres):
-//!                                  positions, protoIndices, extent, velocities,
+//!                                  positions, protoIndices, extent, scales (when a
+//!                                  frame's spheres have sizes of their own), velocities,
 //!                                  primvars:NAME (series); prototypes → Sphere…
 //!     /Surface/Spheres/Prototypes  Scope
 //!       …/Sphere, Sphere_1, …      Mesh: the icosphere template(s), static
@@ -17,7 +18,7 @@
 use super::UsdOptions;
 use crate::attributes::{Attribute, VELOCITY_NAMES};
 use crate::error::{Error, Result};
-use crate::mesh::{Surface, TriMesh};
+use crate::mesh::{SphereInstances, Surface, TriMesh};
 use glam::Vec3;
 use std::path::Path;
 
@@ -111,6 +112,8 @@ pub(crate) enum Values<'a> {
     Repeat(i32, usize),
     /// Two corners (an extent).
     Corners([Vec3; 2]),
+    /// Uniform scales: each factor as a `float3` of three equal components.
+    Scales(&'a [f32]),
 }
 
 impl Values<'_> {
@@ -118,6 +121,7 @@ impl Values<'_> {
     pub(crate) fn len(&self, width: usize) -> usize {
         match *self {
             Values::Vec3(v) => v.len(),
+            Values::Scales(v) => v.len(),
             Values::Floats(v) => v.len() / width.max(1),
             Values::Triangles(t) => 3 * t.len(),
             Values::Repeat(_, n) => n,
@@ -131,6 +135,7 @@ impl Values<'_> {
             Values::Vec3(v) => Box::new(v.iter().flat_map(|p| p.to_array())),
             Values::Floats(v) => Box::new(v.iter().copied()),
             Values::Corners(c) => Box::new(c.into_iter().flat_map(|p| p.to_array())),
+            Values::Scales(v) => Box::new(v.iter().flat_map(|&s| [s; 3])),
             Values::Triangles(_) | Values::Repeat(..) => Box::new(std::iter::empty()),
         }
     }
@@ -140,7 +145,7 @@ impl Values<'_> {
         match *self {
             Values::Triangles(t) => Box::new(t.iter().flatten().map(|&i| i as i32)),
             Values::Repeat(v, n) => Box::new(std::iter::repeat_n(v, n)),
-            Values::Vec3(_) | Values::Floats(_) | Values::Corners(_) => {
+            Values::Vec3(_) | Values::Floats(_) | Values::Corners(_) | Values::Scales(_) => {
                 Box::new(std::iter::empty())
             }
         }
@@ -179,6 +184,23 @@ pub(crate) fn extent(points: &[Vec3], pad: [Vec3; 2]) -> [Vec3; 2] {
         |(lo, hi), p| (lo.min(*p), hi.max(*p)),
     );
     [lo + pad[0], hi + pad[1]]
+}
+
+/// The extent of the sphere instances: every centre moved by the corners of the
+/// template, scaled by the instance's scale.
+fn instances_extent(spheres: &SphereInstances) -> [Vec3; 2] {
+    let pad = extent(&spheres.template.positions, [Vec3::ZERO; 2]);
+    if spheres.scales.is_empty() {
+        return extent(&spheres.centers, pad);
+    }
+    let far = [Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)];
+    spheres
+        .centers
+        .iter()
+        .zip(&spheres.scales)
+        .fold(far, |[lo, hi], (c, &s)| {
+            [lo.min(*c + pad[0] * s), hi.max(*c + pad[1] * s)]
+        })
 }
 
 /// The series an attribute of `owner` goes to: `velocities` for a 3-component velocity
@@ -306,6 +328,12 @@ pub(crate) fn plan_frame<'a>(
         &mut samples,
     )?;
     let spheres = &surface.spheres;
+    spheres
+        .check_scales()
+        .map_err(|message| Error::UnsupportedFormat {
+            path: path.to_path_buf(),
+            message,
+        })?;
     let template = (!spheres.centers.is_empty()).then_some(&spheres.template);
     if template.is_some() {
         let n = spheres.centers.len();
@@ -313,15 +341,20 @@ pub(crate) fn plan_frame<'a>(
             fixed(Owner::Spheres, "positions", Element::Point),
             Values::Vec3(&spheres.centers),
         ));
-        let pad = extent(&spheres.template.positions, [Vec3::ZERO; 2]);
         samples.push((
             fixed(Owner::Spheres, "extent", Element::Float3),
-            Values::Corners(extent(&spheres.centers, pad)),
+            Values::Corners(instances_extent(spheres)),
         ));
         samples.push((
             fixed(Owner::Spheres, "protoIndices", Element::Int),
             Values::Repeat(prototype as i32, n),
         ));
+        if !spheres.scales.is_empty() {
+            samples.push((
+                fixed(Owner::Spheres, "scales", Element::Float3),
+                Values::Scales(&spheres.scales),
+            ));
+        }
         plan_attributes(path, Owner::Spheres, &spheres.attributes, n, &mut samples)?;
     }
     Ok(FramePlan { samples, template })
