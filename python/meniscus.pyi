@@ -208,8 +208,9 @@ def reconstruct_file(
     input_format: str | None = None,
     **options: Unpack[ReconstructOptions],
 ) -> list[dict[str, Any]]:
-    """Reconstructs a particle file, or a ``{}`` frame sequence, into ``output`` as
-    ``meniscus reconstruct INPUT -o OUTPUT`` does (the same library function): a mesh
+    """Reconstructs a particle file, or a frame sequence (a ``{}`` pattern or a ParaView
+    ``.pvd`` collection, whose datasets are frames 0, 1, 2, ... by timestep), into
+    ``output`` as ``meniscus reconstruct INPUT -o OUTPUT`` does (the same library function): a mesh
     file, a ``{}`` pattern of them, one ``.mseq`` archive, one ``.glb``/``.gltf`` or one USD
     stage (``.usdc``, ``.usda``, ``.usd``; with ``{}``, a stage per frame) for a sequence. An archive is the CLI's, byte for byte (the control mesh of each frame is
     stored, subdivided when read).

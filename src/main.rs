@@ -95,7 +95,9 @@ impl FarmArgs {
 
 #[derive(Args)]
 struct ReconstructArgs {
-    /// Particle file (.xyz, .vtk, .vtu, .vtp, .ply, .bgeo), or a pattern with `{}` for the frame number.
+    /// Particle file (.xyz, .vtk, .vtu, .vtp, .ply, .bgeo), or a sequence: a pattern with
+    /// `{}` for the frame number, or a ParaView collection (.pvd; frames 0, 1, 2, … by
+    /// timestep).
     input: String,
     /// Output mesh (.glb, .gltf, .ply, .obj, .vtk); a pattern with `{}` for sequences.
     #[arg(short, long)]

@@ -577,7 +577,8 @@ fn selection(attributes: Option<&Bound<'_, PyAny>>) -> PyResult<AttributeSelecti
     }
 }
 
-/// Reconstructs a particle file (or a `{}` frame sequence) into `output` as the CLI's
+/// Reconstructs a particle file (or a frame sequence: a `{}` pattern, a `.pvd`
+/// collection) into `output` as the CLI's
 /// `meniscus reconstruct INPUT -o OUTPUT` does (a mesh file, a `{}` pattern of them, a
 /// `.mseq` archive, one `.glb` or one USD stage for a sequence; `up_axis` and
 /// `meters_per_unit` are a stage's metadata), through the same library function

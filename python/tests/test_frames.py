@@ -123,3 +123,13 @@ def test_an_exception_in_progress_stops_the_run_and_is_raised(tmp_path):
         meniscus.reconstruct_file(PATTERN, str(tmp_path / "o.mseq"), RADIUS, progress=progress)
     assert seen == [1]
     assert meniscus.Archive(tmp_path / "o.mseq").frames == [1]
+
+
+def test_a_pvd_collection_is_a_sequence_like_its_pattern(tmp_path):
+    pvd = ROOT / "tests" / "data" / "pvd"
+    reports = meniscus.reconstruct_file(str(pvd / "run.pvd"), str(tmp_path / "pvd.mseq"), 0.025, radius_check=False, frames="0,2")
+    assert [(r["frame"], r["time"]) for r in reports] == [(0, 0.0), (2, 0.1)]
+    meniscus.reconstruct_file(str(pvd / "frame_{}.vtu"), str(tmp_path / "pattern.mseq"), 0.025, radius_check=False, frames="0,2")
+    assert (tmp_path / "pvd.mseq").read_bytes() == (tmp_path / "pattern.mseq").read_bytes()
+    with pytest.raises(OSError, match="no dataset for 1 of the 1 selected frames: 3"):
+        meniscus.reconstruct_file(str(pvd / "run.pvd"), str(tmp_path / "o.mseq"), 0.025, frames="3")

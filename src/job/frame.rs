@@ -137,6 +137,7 @@ pub(crate) fn run_frame(
     reconstruction.push_stage("write", write_seconds, reconstruction.fluid_triangles);
     Ok(FrameReport {
         frame: frame.number,
+        time: frame.time,
         input: frame.input.clone(),
         output: output.to_path_buf(),
         status: FrameStatus::Done,

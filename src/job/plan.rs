@@ -5,9 +5,10 @@ use crate::error::{Error, Result};
 use crate::sequence::{self, Frame, FrameChoice};
 use std::path::{Path, PathBuf};
 
-/// The frames of a job: a single file, or the frames of a `{}` pattern that `choice`
-/// takes ([`sequence::choose`]). The output must be a pattern exactly when the input is
-/// (or one `.mseq`, `.glb` or `.gltf` for the whole sequence).
+/// The frames of a job: a single file, or the frames of a `{}` pattern or a `.pvd`
+/// collection that `choice` takes ([`sequence::choose`]). The output must be a pattern
+/// exactly when the input is a sequence (or one `.mseq`, `.glb`, `.gltf` or USD stage for
+/// the whole sequence).
 pub fn plan_frames(
     input: &str,
     output: &str,
@@ -16,7 +17,7 @@ pub fn plan_frames(
     if sequence::is_pattern(output) {
         sink::check_pattern_output(output)?;
     }
-    match (sequence::is_pattern(input), sequence::is_pattern(output)) {
+    match (sequence::is_sequence(input), sequence::is_pattern(output)) {
         (true, true) => Ok(sequence::choose(input, choice)?
             .into_iter()
             .map(|f| {
@@ -34,7 +35,8 @@ pub fn plan_frames(
         (true, false) => Err(Error::InvalidOption {
             option: "output",
             message: format!(
-                "INPUT {input:?} is a sequence pattern, so OUTPUT {output:?} needs a {{}} too (or is one {} for the whole sequence)",
+                "INPUT {input:?} is a sequence {}, so OUTPUT {output:?} needs a {{}} too (or is one {} for the whole sequence)",
+                if sequence::is_pattern(input) { "pattern" } else { "collection" },
                 sink::sequence_extensions()
             ),
         }),
@@ -96,6 +98,7 @@ fn single_file(input: &str, output: &str, choice: &FrameChoice) -> Result<Vec<(F
             number: 0,
             label: String::new(),
             input: PathBuf::from(input),
+            time: None,
         },
         PathBuf::from(output),
     )])

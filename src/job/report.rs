@@ -23,6 +23,10 @@ pub enum FrameStatus {
 pub struct FrameReport {
     /// Frame number (0 for a single file).
     pub frame: i64,
+    /// The frame's simulation time, when its input says it (a `.pvd` collection's
+    /// `timestep`); absent from the JSON otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub time: Option<f64>,
     /// Input file.
     pub input: PathBuf,
     /// Output file.
@@ -57,6 +61,7 @@ impl FrameReport {
     ) -> Self {
         FrameReport {
             frame: frame.number,
+            time: frame.time,
             input: frame.input.clone(),
             output: output.to_path_buf(),
             status: match error {
@@ -95,6 +100,9 @@ impl FrameReport {
         });
         if let Some(error) = &self.error {
             line["error"] = error.as_str().into();
+        }
+        if let Some(time) = self.time {
+            line["time"] = time.into();
         }
         line
     }

@@ -31,6 +31,7 @@ mod xyz;
 
 pub use source::{MappedXyz, ParticleChunk, ParticleSlices, ParticleSource};
 pub use spool::SpooledParticles;
+pub(crate) use vtk_xml::pvd::{datasets as collection_datasets, DataSetEntry};
 
 use crate::error::{Error, Result};
 use glam::Vec3;

@@ -8,9 +8,11 @@
 //! `scan.rs` finds the structure (one pass over the markup, stopping at the appended
 //! data), `data.rs` decodes one array at a time from the file. A file of one piece
 //! streams (the points, then each selected array); several pieces are read whole and
-//! joined, their point data matched by name.
+//! joined, their point data matched by name. `pvd.rs` reads ParaView's collection files
+//! (`.pvd`), which list the files of a frame sequence.
 
 mod data;
+pub(crate) mod pvd;
 mod scan;
 
 use super::records::RecordSink;

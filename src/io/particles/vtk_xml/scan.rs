@@ -78,7 +78,7 @@ pub(super) struct Layout {
 }
 
 /// A tag of the markup.
-enum Tag {
+pub(super) enum Tag {
     Start {
         name: String,
         attributes: Vec<(String, String)>,
@@ -90,7 +90,7 @@ enum Tag {
 }
 
 /// A byte reader over the file that keeps the offset and line.
-struct Scanner {
+pub(super) struct Scanner {
     path: PathBuf,
     r: std::io::BufReader<std::fs::File>,
     pos: u64,
@@ -98,7 +98,35 @@ struct Scanner {
 }
 
 impl Scanner {
-    fn error(&self, message: impl Into<String>) -> Error {
+    /// A scanner at the start of `path`; an empty file is [`Error::EmptyInput`].
+    pub(super) fn open(path: &Path) -> Result<(Scanner, u64)> {
+        let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        let file_len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+        if file_len == 0 {
+            return Err(Error::EmptyInput {
+                path: path.to_path_buf(),
+            });
+        }
+        let scanner = Scanner {
+            path: path.to_path_buf(),
+            r: std::io::BufReader::with_capacity(1 << 16, file),
+            pos: 0,
+            line: 1,
+        };
+        Ok((scanner, file_len))
+    }
+
+    /// The current line.
+    pub(super) fn line(&self) -> usize {
+        self.line
+    }
+
+    /// True at the end of the file.
+    pub(super) fn at_end(&mut self) -> Result<bool> {
+        Ok(self.peek()?.is_none())
+    }
+
+    pub(super) fn error(&self, message: impl Into<String>) -> Error {
         Error::parse(
             &self.path,
             format!("line {} (byte offset {})", self.line, self.pos),
@@ -124,7 +152,7 @@ impl Scanner {
     }
 
     /// Skips text up to the next `<` (or the end); returns its length.
-    fn skip_text(&mut self) -> Result<u64> {
+    pub(super) fn skip_text(&mut self) -> Result<u64> {
         let mut len = 0u64;
         loop {
             let buf = self.r.fill_buf().map_err(|e| Error::io(&self.path, e))?;
@@ -161,7 +189,7 @@ impl Scanner {
     }
 
     /// The tag at `<`.
-    fn tag(&mut self) -> Result<Tag> {
+    pub(super) fn tag(&mut self) -> Result<Tag> {
         let (line, pos) = (self.line, self.pos);
         let head = self.until(b"<", "a tag")?;
         debug_assert_eq!(head, b"<");
@@ -200,7 +228,7 @@ impl Scanner {
 }
 
 /// The first 60 characters of `text`.
-fn shorten(text: &str) -> String {
+pub(super) fn shorten(text: &str) -> String {
     let mut s: String = text.chars().take(60).collect();
     if s.len() < text.len() {
         s.push('…');
@@ -260,7 +288,7 @@ fn unescape(value: &str) -> String {
         .replace("&amp;", "&")
 }
 
-fn attribute<'a>(attributes: &'a [(String, String)], key: &str) -> Option<&'a str> {
+pub(super) fn attribute<'a>(attributes: &'a [(String, String)], key: &str) -> Option<&'a str> {
     attributes
         .iter()
         .find(|(k, _)| k == key)
@@ -288,19 +316,7 @@ fn scalar_of(name: &str) -> Option<Scalar> {
 /// Errors name the file and the line: not a VTK XML file, a dataset type without
 /// particle points, an unknown byte order, header type or compressor, malformed markup.
 pub(super) fn scan(path: &Path) -> Result<Layout> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let file_len = file.metadata().map_err(|e| Error::io(path, e))?.len();
-    if file_len == 0 {
-        return Err(Error::EmptyInput {
-            path: path.to_path_buf(),
-        });
-    }
-    let mut s = Scanner {
-        path: path.to_path_buf(),
-        r: std::io::BufReader::with_capacity(1 << 16, file),
-        pos: 0,
-        line: 1,
-    };
+    let (mut s, file_len) = Scanner::open(path)?;
     let mut layout = Layout {
         path: path.to_path_buf(),
         file_len,

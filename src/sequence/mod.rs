@@ -1,4 +1,4 @@
-//! Frame sequences: `{}` patterns in input and output paths.
+//! Frame sequences: `{}` patterns in input and output paths, and ParaView collections.
 //!
 //! `sim/ParticleData_Fluid_{}.bgeo` names one file per frame; `{}` stands for the frame
 //! number. With a range (`--start`/`--end`, inclusive) the numbers are written plainly
@@ -6,14 +6,22 @@
 //! matches (with the number written in any way, such as `0007`) is taken, in increasing
 //! frame order. The output pattern receives the number exactly as the input file wrote it.
 //!
+//! A ParaView collection (`run.pvd`) lists a sequence's files with their times
+//! ([`collection_frames`]): its datasets are frames 0, 1, 2, … in the order of their
+//! `timestep`s, and the output pattern receives that number plainly.
+//!
 //! Render farms name frames as [`FrameSelection`]s (`1-100:2,7`) and split them among
 //! machines as [`Shard`]s (`--shard I/N`, round-robin); [`choose`] applies both.
+
+mod collection;
+
+pub use collection::collection_frames;
 
 use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};
 
 /// One frame of a sequence.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Frame {
     /// Frame number.
     pub number: i64,
@@ -21,6 +29,9 @@ pub struct Frame {
     pub label: String,
     /// Input file.
     pub input: PathBuf,
+    /// The simulation time of the frame, when its input says it (a `.pvd` collection's
+    /// `timestep`).
+    pub time: Option<f64>,
 }
 
 /// The placeholder in file patterns.
@@ -29,6 +40,19 @@ pub const PLACEHOLDER: &str = "{}";
 /// True when `path` is a pattern (contains `{}`).
 pub fn is_pattern(path: &str) -> bool {
     path.contains(PLACEHOLDER)
+}
+
+/// True when `path` is a ParaView collection (`.pvd`, any case) and not a pattern.
+pub fn is_collection(path: &str) -> bool {
+    !is_pattern(path)
+        && Path::new(path)
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("pvd"))
+}
+
+/// True when `path` names a sequence of frames: a pattern or a collection.
+pub fn is_sequence(path: &str) -> bool {
+    is_pattern(path) || is_collection(path)
 }
 
 /// Replaces every placeholder of `pattern` with `label`.
@@ -151,6 +175,7 @@ pub fn frames(pattern: &str, start: Option<i64>, end: Option<i64>) -> Result<Vec
                 number,
                 label,
                 input,
+                time: None,
             });
         }
         return match missing.as_slice() {
@@ -203,6 +228,7 @@ pub fn frames(pattern: &str, start: Option<i64>, end: Option<i64>) -> Result<Vec
             number,
             label: middle.to_string(),
             input: dir.join(name),
+            time: None,
         });
     }
     found.sort_by(|a, b| (a.number, &a.label).cmp(&(b.number, &b.label)));
@@ -409,59 +435,25 @@ impl FrameChoice {
     }
 }
 
-/// The frames of `pattern` that `choice` takes, in increasing frame order. With a
-/// [`FrameSelection`] the pattern's directory is scanned (any zero padding is matched)
-/// and every selected frame must have a file; a [`Shard`] then takes its part. A shard
-/// that gets no frame is an error.
-pub fn choose(pattern: &str, choice: &FrameChoice) -> Result<Vec<Frame>> {
-    let found = match &choice.frames {
-        Some(selection) => {
-            if choice.start.is_some() || choice.end.is_some() {
-                return Err(Error::InvalidOption {
-                    option: "frames",
-                    message: "takes the place of start/end; give one or the other".into(),
-                });
-            }
-            let scanned = match frames(pattern, None, None) {
-                Ok(f) => f,
-                Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
-                    Vec::new()
-                }
-                Err(e) => return Err(e),
-            };
-            let found: Vec<Frame> = scanned
-                .into_iter()
-                .filter(|f| selection.contains(f.number))
-                .collect();
-            let missing: Vec<i64> = selection
-                .numbers()
-                .iter()
-                .copied()
-                .filter(|n| found.binary_search_by_key(n, |f| f.number).is_err())
-                .collect();
-            if !missing.is_empty() {
-                const SHOWN: usize = 10;
-                let mut list: Vec<String> =
-                    missing.iter().take(SHOWN).map(|n| n.to_string()).collect();
-                if missing.len() > SHOWN {
-                    list.push("…".into());
-                }
-                return Err(Error::io(
-                    Path::new(pattern),
-                    std::io::Error::new(
-                        std::io::ErrorKind::NotFound,
-                        format!(
-                            "no file for {} of the {} selected frames: {}",
-                            missing.len(),
-                            selection.numbers().len(),
-                            list.join(", ")
-                        ),
-                    ),
-                ));
-            }
-            found
+/// The frames of `input` that `choice` takes, in increasing frame order. `input` is a
+/// `{}` pattern or a `.pvd` collection ([`collection_frames`]). With a
+/// [`FrameSelection`] a pattern's directory is scanned (any zero padding is matched) and
+/// every selected frame must have a file; a [`Shard`] then takes its part. A shard that
+/// gets no frame is an error.
+pub fn choose(input: &str, choice: &FrameChoice) -> Result<Vec<Frame>> {
+    if choice.frames.is_some() && (choice.start.is_some() || choice.end.is_some()) {
+        return Err(Error::InvalidOption {
+            option: "frames",
+            message: "takes the place of start/end; give one or the other".into(),
+        });
+    }
+    let found = if is_collection(input) {
+        collection::choose(Path::new(input), choice)?
+    } else {
+        match &choice.frames {
+            Some(selection) => select_from_pattern(input, selection)?,
+            None => frames(input, choice.start, choice.end)?,
         }
-        None => frames(pattern, choice.start, choice.end)?,
     };
     match choice.shard {
         Some(shard) => {
@@ -479,6 +471,65 @@ pub fn choose(pattern: &str, choice: &FrameChoice) -> Result<Vec<Frame>> {
         }
         None => Ok(found),
     }
+}
+
+/// The frames of `pattern` that `selection` names; each needs a file.
+fn select_from_pattern(pattern: &str, selection: &FrameSelection) -> Result<Vec<Frame>> {
+    let scanned = match frames(pattern, None, None) {
+        Ok(f) => f,
+        Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
+            Vec::new()
+        }
+        Err(e) => return Err(e),
+    };
+    let found: Vec<Frame> = scanned
+        .into_iter()
+        .filter(|f| selection.contains(f.number))
+        .collect();
+    let missing: Vec<i64> = selection
+        .numbers()
+        .iter()
+        .copied()
+        .filter(|n| found.binary_search_by_key(n, |f| f.number).is_err())
+        .collect();
+    if !missing.is_empty() {
+        return Err(unselectable(
+            Path::new(pattern),
+            &missing,
+            selection,
+            "no file for",
+            "",
+        ));
+    }
+    Ok(found)
+}
+
+/// The error for selected frames that `source` does not have: "`what` 3 of the 10
+/// selected frames: 4, 5, 9`after`" (the first ten listed).
+fn unselectable(
+    source: &Path,
+    missing: &[i64],
+    selection: &FrameSelection,
+    what: &str,
+    after: &str,
+) -> Error {
+    const SHOWN: usize = 10;
+    let mut list: Vec<String> = missing.iter().take(SHOWN).map(|n| n.to_string()).collect();
+    if missing.len() > SHOWN {
+        list.push("…".into());
+    }
+    Error::io(
+        source,
+        std::io::Error::new(
+            std::io::ErrorKind::NotFound,
+            format!(
+                "{what} {} of the {} selected frames: {}{after}",
+                missing.len(),
+                selection.numbers().len(),
+                list.join(", ")
+            ),
+        ),
+    )
 }
 
 #[cfg(test)]

@@ -1,0 +1,107 @@
+//! ParaView's collection files (`.pvd`): `<VTKFile type="Collection">` holding a
+//! `<Collection>` of `<DataSet timestep=".." group=".." part=".." file=".."/>` entries.
+//! This reads the entries as written (markup only, with the VTK XML scanner); what they
+//! mean as a frame sequence is [`crate::sequence`]'s.
+
+use super::scan::{attribute, shorten, Scanner, Tag};
+use crate::error::{Error, Result};
+use std::path::Path;
+
+/// Most `<DataSet>` entries read from one collection.
+const MAX_DATASETS: usize = 1 << 24;
+/// Deepest element nesting followed.
+const MAX_DEPTH: usize = 64;
+
+/// One `<DataSet>` of a collection, its attributes as written.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct DataSetEntry {
+    /// Line of the `<DataSet>` tag.
+    pub(crate) line: usize,
+    /// `file`: the dataset, relative to the collection's folder (or absolute).
+    pub(crate) file: String,
+    /// `timestep`, when given.
+    pub(crate) timestep: Option<String>,
+    /// `part` (ParaView's default `0` when absent).
+    pub(crate) part: String,
+    /// `group` (empty when absent).
+    pub(crate) group: String,
+}
+
+/// The `<DataSet>` entries of the collection `path`, in file order. Errors name the file
+/// and the line: not a VTK XML file, a `<VTKFile>` of another type than `Collection`, a
+/// `<DataSet>` without `file`, malformed markup. An empty collection is returned empty.
+pub(crate) fn datasets(path: &Path) -> Result<Vec<DataSetEntry>> {
+    let (mut s, _) = Scanner::open(path)?;
+    let at = |line: usize, message: String| Error::parse(path, format!("line {line}"), message);
+    let mut stack: Vec<String> = Vec::new();
+    let mut seen_file = false;
+    let mut entries = Vec::new();
+    loop {
+        s.skip_text()?;
+        if s.at_end()? {
+            break;
+        }
+        let line = s.line();
+        let (name, attributes, empty) = match s.tag()? {
+            Tag::Other => continue,
+            Tag::End(name) => {
+                if stack.pop().as_deref() != Some(name.as_str()) {
+                    return Err(s.error(format!("</{name}> closes no open <{name}>")));
+                }
+                continue;
+            }
+            Tag::Start {
+                name,
+                attributes,
+                empty,
+            } => (name, attributes, empty),
+        };
+        match (stack.last().map(String::as_str), name.as_str()) {
+            (None, "VTKFile") => {
+                seen_file = true;
+                match attribute(&attributes, "type") {
+                    Some("Collection") => {}
+                    Some(other) => {
+                        return Err(at(line, format!(
+                            "not a collection: VTKFile type {:?}, not \"Collection\" (a .pvd lists the frames' files)",
+                            shorten(other)
+                        )))
+                    }
+                    None => return Err(at(line, "<VTKFile> without a type".into())),
+                }
+            }
+            (None, other) => {
+                return Err(at(line, format!(
+                    "not a VTK collection: the first element is <{}>, not <VTKFile type=\"Collection\">",
+                    shorten(other)
+                )))
+            }
+            (Some("Collection"), "DataSet") => {
+                if entries.len() == MAX_DATASETS {
+                    return Err(s.error(format!("more than {MAX_DATASETS} DataSet entries")));
+                }
+                let file = attribute(&attributes, "file")
+                    .filter(|f| !f.trim().is_empty())
+                    .ok_or_else(|| at(line, "<DataSet> without a file".into()))?;
+                entries.push(DataSetEntry {
+                    line,
+                    file: file.trim().to_string(),
+                    timestep: attribute(&attributes, "timestep").map(|t| t.trim().to_string()),
+                    part: attribute(&attributes, "part").unwrap_or("0").trim().to_string(),
+                    group: attribute(&attributes, "group").unwrap_or("").trim().to_string(),
+                });
+            }
+            _ => {}
+        }
+        if !empty {
+            if stack.len() == MAX_DEPTH {
+                return Err(s.error(format!("elements nested deeper than {MAX_DEPTH}")));
+            }
+            stack.push(name);
+        }
+    }
+    if !seen_file {
+        return Err(s.error("not a VTK collection: no <VTKFile> element"));
+    }
+    Ok(entries)
+}
