@@ -21,7 +21,7 @@
 use crate::cancel::CancelToken;
 use crate::containment::{contain_centres, ContainmentInput};
 use crate::decimation::{decimate, DecimateStats};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::field::Sizes;
 use crate::io::particles::ParticleSource;
 use crate::mesh::{SphereInstances, Surface, TriMesh};
@@ -97,30 +97,7 @@ fn radius_ratios(
     let Some(radii) = radii else {
         return Ok(None);
     };
-    let fail = |particle: Option<usize>, message: String| Error::InvalidRadius {
-        path: "the particles given to reconstruct".into(),
-        attribute: radii.attribute.clone(),
-        particle,
-        message,
-    };
-    if radii.values.len() != particles {
-        let n = radii.values.len();
-        return Err(fail(
-            None,
-            format!("holds {n} values for {particles} particles"),
-        ));
-    }
-    if let Some(i) = radii
-        .values
-        .iter()
-        .position(|&v| !(v.is_finite() && v > 0.0))
-    {
-        let v = radii.values[i];
-        return Err(fail(
-            Some(i),
-            format!("radius {v:?}; a radius must be a finite number > 0"),
-        ));
-    }
+    radii.check("the particles given to reconstruct".as_ref(), particles)?;
     if radii.values.iter().all(|&v| v == reference) {
         return Ok(None);
     }

@@ -73,47 +73,55 @@ impl ParticleRadii {
     /// checking them: one component, `count` values, each finite and > 0; else an
     /// [`Error::InvalidRadius`] naming the file, the attribute and the first bad particle.
     pub fn new(path: &Path, attribute: Attribute, count: usize) -> Result<Self> {
-        let fail = |particle: Option<usize>, message: String| Error::InvalidRadius {
-            path: path.to_path_buf(),
-            attribute: attribute.name.clone(),
-            particle,
-            message,
-        };
         if attribute.components != 1 {
-            return Err(fail(
-                None,
-                format!(
+            return Err(Error::InvalidRadius {
+                path: path.to_path_buf(),
+                attribute: attribute.name,
+                particle: None,
+                message: format!(
                     "has {} components per particle; a radius is one number",
                     attribute.components
                 ),
-            ));
+            });
         }
-        if attribute.values.len() != count {
+        let radii = ParticleRadii {
+            attribute: attribute.name,
+            values: attribute.values,
+        };
+        radii.check(path, count)?;
+        Ok(radii)
+    }
+
+    /// Checks that there are `count` radii, each finite and > 0; else an
+    /// [`Error::InvalidRadius`] naming `path`, the attribute and the first bad particle.
+    pub fn check(&self, path: &Path, count: usize) -> Result<()> {
+        let fail = |particle: Option<usize>, message: String| Error::InvalidRadius {
+            path: path.to_path_buf(),
+            attribute: self.attribute.clone(),
+            particle,
+            message,
+        };
+        if self.values.len() != count {
+            let n = self.values.len();
             return Err(fail(
                 None,
-                format!(
-                    "holds {} values for {count} particles",
-                    attribute.values.len()
-                ),
+                format!("holds {n} values for {count} particles"),
             ));
         }
-        if let Some(i) = attribute
+        match self
             .values
             .iter()
             .position(|&v| !(v.is_finite() && v > 0.0))
         {
-            return Err(fail(
+            Some(i) => Err(fail(
                 Some(i),
                 format!(
                     "radius {:?}; a radius must be a finite number > 0",
-                    attribute.values[i]
+                    self.values[i]
                 ),
-            ));
+            )),
+            None => Ok(()),
         }
-        Ok(ParticleRadii {
-            attribute: attribute.name,
-            values: attribute.values,
-        })
     }
 
     /// The median radius, world units: the lower middle value (a radius of the input,
