@@ -282,10 +282,7 @@ pub(crate) fn kernel_reach(options: &FieldOptions, sizes: Option<Sizes<'_>>) -> 
         Kernel::Isotropic => options.influence_radius,
         Kernel::Anisotropic => options.influence_radius.max(options.anisotropy.reach()),
     };
-    match sizes {
-        None => reach,
-        Some(_) => reach * largest_ratio(sizes),
-    }
+    reach * largest_ratio(sizes)
 }
 
 /// Computes the field of `positions` (world units, any order) on the whole sparse
