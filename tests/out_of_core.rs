@@ -14,15 +14,20 @@ use support::{dataset, dir_with_temp, in_pool, interrupt_once_spilled, meniscus,
 
 #[test]
 fn decimation_in_tiles_keeps_the_surface_closed_on_target_and_thread_independent() {
-    for (rel, r, tile) in [
-        ("dambreak_small/ParticleData_Fluid_25.xyz", 0.012, 64),
-        ("dambreak_small/ParticleData_Fluid_25.xyz", 0.012, 128),
-        ("double_dambreak/ParticleData_Fluid_9.xyz", 0.025, 64),
+    // The last case cuts each tile's piece into regions (as large tiles are).
+    for (rel, r, tile, regions) in [
+        ("dambreak_small/ParticleData_Fluid_25.xyz", 0.012, 64, None),
+        ("dambreak_small/ParticleData_Fluid_25.xyz", 0.012, 128, None),
+        ("double_dambreak/ParticleData_Fluid_9.xyz", 0.025, 64, None),
+        ("dambreak_small/ParticleData_Fluid_25.xyz", 0.012, 128, Some(4096)),
     ] {
         let positions = xyz(rel);
         let whole = ReconstructOptions::new(r);
         let mut tiled = whole.clone();
         tiled.tiles.tile_size_cells = Some(tile);
+        if let Some(regions) = regions {
+            tiled.decimate.as_mut().unwrap().region_triangles = regions;
+        }
         let (reference, _) =
             reconstruct_source(&positions, &whole, &|_| {}, &CancelToken::new()).unwrap();
         let (one, stats) = in_pool(1, || {
@@ -35,6 +40,9 @@ fn decimation_in_tiles_keeps_the_surface_closed_on_target_and_thread_independent
         assert!(stats.tiles.tiles >= 3, "{rel}: {:?}", stats.tiles);
         assert!(stats.tiles.spill_bytes >= 16 * positions.len() as u64);
         let d = stats.decimation.as_ref().expect("decimated in tiles");
+        if regions.is_some() {
+            assert!(d.regions > 2 * stats.tiles.tiles, "{rel}: {d:?}");
+        }
         let fraction = whole.decimate.as_ref().unwrap().target_reduction.unwrap();
         let target =
             ((1.0 - fraction as f64) * stats.marching_cubes_triangles as f64).ceil() as usize;

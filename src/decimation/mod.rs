@@ -53,7 +53,8 @@
 //! the price, measured on the 1M-particle scene when regions came in, was a flat-region
 //! bumpiness of 0.0076 r instead of 0.0075 r (regions of 2^17 triangles: faster still, but
 //! 0.0078 r). The regions depend only on the mesh and the option, never on the
-//! thread count.
+//! thread count. A tile's piece of a tiled run is cut the same way, its border locked
+//! (`decimate_keeping`): the vertices locked by the caller stay locked in the band.
 //!
 //! **Order:** edges are ranked by the collapse's RMS distance to the original planes,
 //! `Q(p) / area` (the quadric cost normalised by the area it stands for), not by the raw
@@ -90,8 +91,8 @@ mod tri_list;
 use crate::mesh::TriMesh;
 use collapse::{Attempt, Candidate, Mark, Outcome, View, WalkTally};
 use glam::{DVec3, Vec3};
-pub(crate) use pieces::decimate_band;
 pub(crate) use pieces::place_survivors;
+pub(crate) use pieces::{decimate_band, Remap};
 use rayon::prelude::*;
 use state::State;
 
@@ -173,6 +174,11 @@ impl DecimateOptions {
         }
     }
 
+    /// Whether a mesh of `triangles` is decimated region by region.
+    fn splits(&self, triangles: usize) -> bool {
+        self.region_triangles > 0 && triangles > 2 * self.region_triangles
+    }
+
     /// Triangles to keep out of `triangles`: the fraction's share, rounded up, or 0 when
     /// only the error bound stops the decimation.
     pub fn target_triangles(&self, triangles: usize) -> usize {
@@ -237,10 +243,27 @@ pub(crate) const CHUNK_TRIANGLES: usize = 16 * 1024;
 /// Decimates `mesh` in place.
 pub fn decimate(mesh: &mut TriMesh, options: &DecimateOptions) -> DecimateStats {
     let target = options.target_triangles(mesh.triangle_count());
-    if options.region_triangles > 0 && mesh.triangle_count() > 2 * options.region_triangles {
-        pieces::decimate_by_regions(mesh, options, target)
+    if options.splits(mesh.triangle_count()) {
+        pieces::decimate_by_regions(mesh, options, target, &[], Remap::Drop).0
     } else {
         decimate_locked(mesh, target, options.max_error, &[]).0
+    }
+}
+
+/// [`decimate`] with the `locked` vertices (indexed like the mesh's) never moving nor
+/// removed, region by region when the mesh is large; returns the stats and the new index
+/// of every input vertex (`u32::MAX` when it was removed). A tile's piece goes through
+/// it ([`crate::tiles`]), its border locked.
+pub(crate) fn decimate_keeping(
+    mesh: &mut TriMesh,
+    options: &DecimateOptions,
+    locked: &[bool],
+) -> (DecimateStats, Vec<u32>) {
+    let target = options.target_triangles(mesh.triangle_count());
+    if options.splits(mesh.triangle_count()) {
+        pieces::decimate_by_regions(mesh, options, target, locked, Remap::Keep)
+    } else {
+        decimate_locked(mesh, target, options.max_error, locked)
     }
 }
 
@@ -555,6 +578,60 @@ mod tests {
             *p *= 1.0 + noise * (rng.unit_f64() as f32 * 2.0 - 1.0);
         }
         mesh
+    }
+
+    #[test]
+    fn keeping_locked_vertices_region_by_region_reports_where_every_vertex_went() {
+        let input = noisy_sphere(6, 0.01);
+        // A cap and a ring of vertices locked (a tile's border), across several regions.
+        let locked: Vec<bool> = input
+            .positions
+            .iter()
+            .map(|p| p.z > 0.8 || p.x.abs() < 0.02)
+            .collect();
+        let options = DecimateOptions::default().with_region_triangles(4096);
+        let mut mesh = input.clone();
+        let (stats, remap) = decimate_keeping(&mut mesh, &options, &locked);
+        assert!(stats.regions >= 8, "{stats:?}");
+        assert!(
+            mesh.triangle_count() <= input.triangle_count() / 4,
+            "{stats:?}"
+        );
+        assert!(crate::mesh::validate(&mesh).is_closed_manifold());
+        // Every output vertex is the image of exactly one input vertex.
+        let mut seen = vec![false; mesh.vertex_count()];
+        for &new in remap.iter().filter(|&&n| n != u32::MAX) {
+            assert!(
+                !std::mem::replace(&mut seen[new as usize], true),
+                "{new} twice"
+            );
+        }
+        assert!(seen.iter().all(|&s| s), "an output vertex nobody maps to");
+        // The locked ones survive at their exact input positions.
+        for (v, _) in locked.iter().enumerate().filter(|(_, &l)| l) {
+            let new = remap[v];
+            assert_ne!(new, u32::MAX, "locked vertex {v} removed");
+            assert_eq!(
+                mesh.positions[new as usize], input.positions[v],
+                "vertex {v}"
+            );
+        }
+        // Unlocked vertices did move or go: the decimation did its work around them.
+        let unlocked_kept = (0..input.vertex_count())
+            .filter(|&v| !locked[v] && remap[v] != u32::MAX)
+            .count();
+        assert!(unlocked_kept < (input.vertex_count() - locked.iter().filter(|&&l| l).count()) / 3);
+        // The same with one thread.
+        let mut one = input.clone();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let (_, remap_one) = pool.install(|| decimate_keeping(&mut one, &options, &locked));
+        assert!(
+            one == mesh && remap_one == remap,
+            "thread count changed the output"
+        );
     }
 
     #[test]

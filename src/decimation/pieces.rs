@@ -50,13 +50,27 @@ pub(crate) fn place_survivors(
     output_of
 }
 
-/// Decimates region by region, seams locked, then the band around the seams until the
-/// whole mesh has `target` triangles.
+/// Whether a piecewise decimation reports where every input vertex went.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Remap {
+    /// The new index of every input vertex (`u32::MAX` when it was removed).
+    Keep,
+    /// Nothing (an empty list): the caller needs no vertex identities.
+    Drop,
+}
+
+/// Decimates region by region, seams and the `locked` vertices (indexed like the mesh's;
+/// may be empty) locked, then the band around the seams until the whole mesh has
+/// `target` triangles; the `locked` vertices never move and survive at their exact input
+/// positions. Returns the stats and, with [`Remap::Keep`], the new index of every input
+/// vertex (`u32::MAX` when it was removed; else an empty list).
 pub(super) fn decimate_by_regions(
     mesh: &mut TriMesh,
     options: &DecimateOptions,
     target: usize,
-) -> DecimateStats {
+    locked: &[bool],
+    remap: Remap,
+) -> (DecimateStats, Vec<u32>) {
     let split = Regions::split(mesh, (options.region_triangles / 2).max(1));
     let mut stats = DecimateStats {
         triangles_before: mesh.triangle_count(),
@@ -76,14 +90,39 @@ pub(super) fn decimate_by_regions(
         .into_par_iter()
         .map(|r| split.triangles_of(r))
         .filter(|tris| !tris.is_empty())
-        .map(|tris| decimate_region(mesh, tris, &local_of, &split.on_seam, options))
+        .map(|tris| decimate_region(mesh, tris, &local_of, &split.on_seam, locked, options))
         .collect();
     drop(local_of);
-    let at_seam = split.assemble(mesh, decimated, &mut stats);
-    let last = decimate_band(mesh, &at_seam, target, options.max_error);
+    let assembled = split.assemble(mesh, decimated, locked, remap, &mut stats);
+    let (last, band_remap) = decimate_band(
+        mesh,
+        &assembled.at_seam,
+        &assembled.locked,
+        target,
+        options.max_error,
+        remap,
+    );
     stats.add_work(&last);
     stats.triangles_after = last.triangles_after;
-    stats
+    let mut first = assembled.remap;
+    for new in &mut first {
+        if *new != u32::MAX {
+            *new = band_remap[*new as usize];
+        }
+    }
+    (stats, first)
+}
+
+/// What [`Regions::assemble`] gives: the flags of the joined mesh's vertices and where
+/// the input vertices went.
+struct Assembled {
+    /// The vertices on a seam between regions.
+    at_seam: Vec<bool>,
+    /// The vertices locked by the caller (empty when none were).
+    locked: Vec<bool>,
+    /// The joined mesh's index of every input vertex (`u32::MAX`: removed); empty with
+    /// [`Remap::Drop`].
+    remap: Vec<u32>,
 }
 
 /// A mesh cut into regions: runs of vertices in Morton order of position (compact pieces
@@ -162,14 +201,15 @@ impl Regions {
     }
 
     /// Replaces `mesh` by the decimated regions, in region order, then the seam triangles
-    /// (their vertices at their exact input positions); returns which output vertices lie
-    /// on a seam.
+    /// (the vertices on a seam or `locked` at their exact input positions).
     fn assemble(
         self,
         mesh: &mut TriMesh,
         decimated: Vec<(Piece, DecimateStats, Vec<u32>)>,
+        locked: &[bool],
+        remap: Remap,
         stats: &mut DecimateStats,
-    ) -> Vec<bool> {
+    ) -> Assembled {
         let Regions {
             grouped,
             start,
@@ -179,28 +219,40 @@ impl Regions {
         } = self;
         // The region lists are done with: freed before the output grows.
         drop((grouped, start));
+        let is_locked = |g: usize| locked.get(g).is_some_and(|&l| l);
+        let mut first = match remap {
+            Remap::Keep => vec![u32::MAX; mesh.vertex_count()],
+            Remap::Drop => Vec::new(),
+        };
         let mut positions: Vec<Vec3> = Vec::new();
         let mut triangles: Vec<[u32; 3]> = Vec::new();
-        // Output index of each seam vertex, once placed.
-        let mut seam_index = vec![u32::MAX; mesh.vertex_count()];
-        let mut place_seam = |g: usize, positions: &mut Vec<Vec3>| -> u32 {
-            if seam_index[g] == u32::MAX {
-                seam_index[g] = positions.len() as u32;
+        // Output index of each seam or locked vertex, once placed.
+        let mut fixed_index = vec![u32::MAX; mesh.vertex_count()];
+        let mut place_fixed = |g: usize, positions: &mut Vec<Vec3>| -> u32 {
+            if fixed_index[g] == u32::MAX {
+                fixed_index[g] = positions.len() as u32;
                 positions.push(mesh.positions[g]);
             }
-            seam_index[g]
+            fixed_index[g]
         };
-        for (piece, region_stats, remap) in decimated {
+        for (piece, region_stats, region_remap) in decimated {
             stats.add_work(&region_stats);
             let output_of = place_survivors(
                 &piece.mesh,
-                &remap,
+                &region_remap,
                 |old, positions| {
                     let g = piece.global_of[old] as usize;
-                    on_seam[g].then(|| place_seam(g, positions))
+                    (on_seam[g] || is_locked(g)).then(|| place_fixed(g, positions))
                 },
                 &mut positions,
             );
+            if remap == Remap::Keep {
+                for (old, &new) in region_remap.iter().enumerate() {
+                    if new != u32::MAX {
+                        first[piece.global_of[old] as usize] = output_of[new as usize];
+                    }
+                }
+            }
             triangles.extend(
                 piece
                     .mesh
@@ -210,7 +262,7 @@ impl Regions {
             );
         }
         for &t in &seam_tris {
-            let tri = mesh.triangles[t as usize].map(|v| place_seam(v as usize, &mut positions));
+            let tri = mesh.triangles[t as usize].map(|v| place_fixed(v as usize, &mut positions));
             triangles.push(tri);
         }
         *mesh = TriMesh {
@@ -220,21 +272,41 @@ impl Regions {
             attributes: Vec::new(),
         };
         let mut at_seam = vec![false; mesh.vertex_count()];
-        for &i in seam_index.iter().filter(|&&i| i != u32::MAX) {
-            at_seam[i as usize] = true;
+        let mut locked_here = if locked.is_empty() {
+            Vec::new()
+        } else {
+            vec![false; mesh.vertex_count()]
+        };
+        for (g, &i) in fixed_index
+            .iter()
+            .enumerate()
+            .filter(|(_, &i)| i != u32::MAX)
+        {
+            at_seam[i as usize] |= on_seam[g];
+            if is_locked(g) {
+                locked_here[i as usize] = true;
+            }
+            if remap == Remap::Keep {
+                first[g] = i;
+            }
         }
-        at_seam
+        Assembled {
+            at_seam,
+            locked: locked_here,
+            remap: first,
+        }
     }
 }
 
 /// Takes one region's triangles `tris` out of `mesh` (numbering its vertices in
 /// `local_of`, which no other region shares) and decimates it to the options' fraction,
-/// its seam vertices locked.
+/// its seam vertices and the `extra_locked` ones (indexed like the mesh's) locked.
 fn decimate_region(
     mesh: &TriMesh,
     tris: &[u32],
     local_of: &[AtomicU32],
     on_seam: &[bool],
+    extra_locked: &[bool],
     options: &DecimateOptions,
 ) -> (Piece, DecimateStats, Vec<u32>) {
     let mut global_of: Vec<u32> = Vec::new();
@@ -270,7 +342,7 @@ fn decimate_region(
     let locked: Vec<bool> = piece
         .global_of
         .iter()
-        .map(|&g| on_seam[g as usize])
+        .map(|&g| on_seam[g as usize] || extra_locked.get(g as usize).is_some_and(|&l| l))
         .collect();
     let region_target = options.target_triangles(piece.mesh.triangle_count());
     let (stats, remap) = decimate_locked_walk(
@@ -356,16 +428,20 @@ fn morton_regions(positions: &[Vec3], region_vertices: usize) -> Vec<u32> {
 /// Decimates only the band of triangles around the `flagged` vertices (the triangles
 /// within [`BAND_RINGS`] + 1 rings of one) until the whole mesh has
 /// `target` triangles or the error bound stops it; the rest of the mesh is untouched and
-/// the band's border does not move. Memory follows the band, not the mesh: this is the
-/// pass across tile seams after each tile was decimated with its seam vertices locked
-/// ([`crate::tiles`]). Unused vertices are removed; the order of the untouched triangles
-/// and vertices is kept, the band's triangles come last.
+/// the band's border and the `locked` vertices (indexed like the mesh's; may be empty) do
+/// not move. Memory follows the band, not the mesh: this is the pass across tile seams
+/// after each tile was decimated with its seam vertices locked ([`crate::tiles`]), and
+/// across region seams. Unused vertices are removed; the order of the untouched triangles
+/// and vertices is kept, the band's triangles come last. Returns the stats and, with
+/// [`Remap::Keep`], the new index of every vertex (`u32::MAX`: removed).
 pub(crate) fn decimate_band(
     mesh: &mut TriMesh,
     flagged: &[bool],
+    locked: &[bool],
     target: usize,
     max_error: Option<f32>,
-) -> DecimateStats {
+    remap: Remap,
+) -> (DecimateStats, Vec<u32>) {
     let nv = mesh.vertex_count();
     let before = mesh.triangle_count();
     // The flagged vertices grown by `BAND_RINGS` rings.
@@ -392,7 +468,11 @@ pub(crate) fn decimate_band(
         ..Default::default()
     };
     if band.is_empty() || before <= target {
-        return stats;
+        let identity = match remap {
+            Remap::Keep => (0..nv as u32).collect(),
+            Remap::Drop => Vec::new(),
+        };
+        return (stats, identity);
     }
     // The band's border: vertices the rest also uses.
     let mut in_rest = vec![false; nv];
@@ -406,20 +486,34 @@ pub(crate) fn decimate_band(
         mesh: band_mesh,
         global_of,
     };
-    let locked: Vec<bool> = piece
+    let fixed: Vec<bool> = piece
         .global_of
         .iter()
-        .map(|&g| in_rest[g as usize])
+        .map(|&g| in_rest[g as usize] || locked.get(g as usize).is_some_and(|&l| l))
         .collect();
     let band_target = piece.mesh.triangle_count().saturating_sub(before - target);
-    let (band_stats, remap) = decimate_locked(&mut piece.mesh, band_target, max_error, &locked);
+    let (band_stats, band_remap) = decimate_locked(&mut piece.mesh, band_target, max_error, &fixed);
     let mut positions = std::mem::take(&mut mesh.positions);
     let output_of = place_survivors(
         &piece.mesh,
-        &remap,
-        |old, _| locked[old].then(|| piece.global_of[old]),
+        &band_remap,
+        |old, _| fixed[old].then(|| piece.global_of[old]),
         &mut positions,
     );
+    // Where each vertex went before the unused ones are removed: the band's moved
+    // vertices to their new index or nowhere, the others stay.
+    let mut moved_to = Vec::new();
+    if remap == Remap::Keep {
+        moved_to = (0..nv as u32).collect();
+        for (old, &new) in band_remap.iter().enumerate() {
+            if !fixed[old] {
+                moved_to[piece.global_of[old] as usize] = match new {
+                    u32::MAX => u32::MAX,
+                    new => output_of[new as usize],
+                };
+            }
+        }
+    }
     let mut triangles = rest;
     triangles.extend(
         piece
@@ -434,12 +528,18 @@ pub(crate) fn decimate_band(
         normals: Vec::new(),
         attributes: Vec::new(),
     };
-    mesh.remove_unused_vertices();
-    DecimateStats {
+    let kept = mesh.remove_unused_vertices_mapped();
+    for to in &mut moved_to {
+        if *to != u32::MAX {
+            *to = kept[*to as usize];
+        }
+    }
+    let stats = DecimateStats {
         triangles_before: before,
         triangles_after: mesh.triangle_count(),
         ..band_stats
-    }
+    };
+    (stats, moved_to)
 }
 
 #[cfg(test)]

@@ -165,6 +165,12 @@ impl TriMesh {
     /// Removes the vertices no triangle uses, keeping the order of the others (and their
     /// normals, when the mesh has them).
     pub fn remove_unused_vertices(&mut self) {
+        self.remove_unused_vertices_mapped();
+    }
+
+    /// [`TriMesh::remove_unused_vertices`], returning the new index of every old vertex
+    /// (`u32::MAX` for a removed one).
+    pub(crate) fn remove_unused_vertices_mapped(&mut self) -> Vec<u32> {
         let mut new_index = vec![u32::MAX; self.positions.len()];
         for t in &self.triangles {
             for &v in t {
@@ -199,6 +205,7 @@ impl TriMesh {
                 *v = new_index[*v as usize];
             }
         }
+        new_index
     }
 
     /// `triangles` (of this mesh) as a mesh of their own, vertices numbered in order of
