@@ -19,7 +19,12 @@ fn decimation_in_tiles_keeps_the_surface_closed_on_target_and_thread_independent
         ("dambreak_small/ParticleData_Fluid_25.xyz", 0.012, 64, None),
         ("dambreak_small/ParticleData_Fluid_25.xyz", 0.012, 128, None),
         ("double_dambreak/ParticleData_Fluid_9.xyz", 0.025, 64, None),
-        ("dambreak_small/ParticleData_Fluid_25.xyz", 0.012, 128, Some(4096)),
+        (
+            "dambreak_small/ParticleData_Fluid_25.xyz",
+            0.012,
+            128,
+            Some(4096),
+        ),
     ] {
         let positions = xyz(rel);
         let whole = ReconstructOptions::new(r);
