@@ -3,20 +3,21 @@
 //! normals, triangle quality) before it is made. See the module docs of
 //! [`super`] for the rules.
 
+use super::placement::placement_of;
 use super::quadric::Quadric;
 use super::tri_list::TriList;
 use super::State;
 use glam::{DVec3, Vec3};
 
-/// An edge collapse candidate of one pass, with the placement computed when it was
-/// costed: still valid when it is taken, since a collapse is taken only while neither end
-/// has moved in the pass.
+/// An edge collapse candidate of one pass, with the cost computed when it was costed:
+/// still valid when it is taken, since a collapse is taken only while neither end has
+/// moved in the pass. Where the merged vertex goes is computed again when the collapse
+/// is tried (the same function of the same state, so the same point): 24 bytes instead
+/// of 48 for every candidate of every pass, against one placement per attempt.
 #[derive(Clone, Copy)]
 pub(super) struct Candidate {
     /// Squared RMS distance of the collapse, `Q(p) / area` (unit-box units).
     pub(super) cost: f64,
-    /// Where the merged vertex goes.
-    pub(super) target: DVec3,
     pub(super) u: u32,
     pub(super) v: u32,
     /// The triangle whose side `u → v` the candidate came from (the next pass finds the
@@ -42,7 +43,6 @@ impl Candidate {
     pub(super) fn edge(triangle: u32, u: u32, v: u32) -> Candidate {
         Candidate {
             cost: 0.0,
-            target: DVec3::ZERO,
             u,
             v,
             triangle,
@@ -228,8 +228,7 @@ impl View {
         if !self.alive(u) || !self.alive(v) || self.touched(u) == pass || self.touched(v) == pass {
             return Outcome::Passed;
         }
-        // Neither end has moved since the candidate was costed: its placement holds.
-        let (target_point, error) = (c.target, c.cost.sqrt());
+        let error = c.cost.sqrt();
         if max_cost_error.is_some_and(|m| error > m) {
             return Outcome::Passed;
         }
@@ -237,6 +236,14 @@ impl View {
             tally.refused_topology += 1;
             return Outcome::Refused;
         }
+        // Neither end has moved since the candidate was costed: the placement is the one
+        // its cost was measured at.
+        let (target_point, _) = placement_of(
+            self.pos(u),
+            self.pos(v),
+            &*self.quadric.add(u as usize),
+            &*self.quadric.add(v as usize),
+        );
         if !self.geometry_ok(u, v, target_point) {
             tally.refused_geometry += 1;
             return Outcome::Refused;

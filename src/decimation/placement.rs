@@ -18,8 +18,18 @@ use glam::DVec3;
 /// (not divided by the area). The scalar reference: the lanes compute the same.
 #[cfg_attr(all(target_arch = "x86_64", not(test)), allow(dead_code))]
 pub(super) fn placement(pos: &[DVec3], quadric: &[Quadric], u: u32, v: u32) -> (DVec3, f64) {
-    let (pu, pv) = (pos[u as usize], pos[v as usize]);
-    let q = quadric[u as usize] + quadric[v as usize];
+    placement_of(
+        pos[u as usize],
+        pos[v as usize],
+        &quadric[u as usize],
+        &quadric[v as usize],
+    )
+}
+
+/// [`placement`] of the edge with ends at `pu`, `pv` and quadrics `qu`, `qv`: what a
+/// collapse recomputes when it is made (the candidates keep their cost only).
+pub(super) fn placement_of(pu: DVec3, pv: DVec3, qu: &Quadric, qv: &Quadric) -> (DVec3, f64) {
+    let q = *qu + *qv;
     let mid = (pu + pv) * 0.5;
     let target = match q.optimum() {
         Some(p) if (p - mid).length() <= (pv - pu).length() => p,
@@ -32,21 +42,36 @@ pub(super) fn placement(pos: &[DVec3], quadric: &[Quadric], u: u32, v: u32) -> (
 /// distance, `Q(p) / area` (0 for a quadric without area).
 #[cfg_attr(all(target_arch = "x86_64", not(test)), allow(dead_code))]
 pub(super) fn candidate(pos: &[DVec3], quadric: &[Quadric], u: u32, v: u32) -> Candidate {
-    let (target, cost) = placement(pos, quadric, u, v);
+    let (_, cost) = placement(pos, quadric, u, v);
     let weight = quadric[u as usize].weight + quadric[v as usize].weight;
     Candidate {
         cost: if weight > 0.0 { cost / weight } else { 0.0 },
-        target,
         ..Candidate::edge(0, u, v)
     }
 }
 
-/// Fills in the target and cost of every candidate (its `u`, `v` set), exactly as
-/// [`candidate`] would one by one.
+/// The cost of every candidate (its `u`, `v` set), exactly as [`candidate`] would one by
+/// one, and each placement's target, exactly as [`placement`] would.
 #[cfg(test)]
-pub(super) fn place_candidates(pos: &[DVec3], quadric: &[Quadric], candidates: &mut [Candidate]) {
-    let all: Vec<u32> = (0..candidates.len() as u32).collect();
-    place_candidates_at(pos, quadric, candidates, &all);
+pub(super) fn place_candidates(
+    pos: &[DVec3],
+    quadric: &[Quadric],
+    candidates: &mut [Candidate],
+) -> Vec<DVec3> {
+    let mut targets = vec![DVec3::NAN; candidates.len()];
+    #[cfg(target_arch = "x86_64")]
+    {
+        let all: Vec<u32> = (0..candidates.len() as u32).collect();
+        lanes::place_at(pos, quadric, candidates, &all, |i, target| {
+            targets[i] = target
+        });
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    for (c, t) in candidates.iter_mut().zip(&mut targets) {
+        c.cost = candidate(pos, quadric, c.u, c.v).cost;
+        *t = placement(pos, quadric, c.u, c.v).0;
+    }
+    targets
 }
 
 /// [`place_candidates`] on the candidates at the indices `at` only.
@@ -57,12 +82,11 @@ pub(super) fn place_candidates_at(
     at: &[u32],
 ) {
     #[cfg(target_arch = "x86_64")]
-    lanes::place_candidates_at(pos, quadric, candidates, at);
+    lanes::place_at(pos, quadric, candidates, at, |_, _| {});
     #[cfg(not(target_arch = "x86_64"))]
     for &i in at {
         let c = &mut candidates[i as usize];
-        let placed = candidate(pos, quadric, c.u, c.v);
-        (c.cost, c.target) = (placed.cost, placed.target);
+        c.cost = candidate(pos, quadric, c.u, c.v).cost;
     }
 }
 
@@ -286,13 +310,16 @@ mod lanes {
         }
     }
 
-    /// Costs the candidates at the indices `at`, group by group; a short last group
-    /// repeats its first candidate in the spare lanes.
-    pub(super) fn place_candidates_at(
+    /// Costs the candidates at the indices `at`, group by group (a short last group
+    /// repeats its first candidate in the spare lanes), handing each placement's target
+    /// to `target` (candidate index, point).
+    #[inline(always)]
+    pub(super) fn place_at(
         pos: &[DVec3],
         quadric: &[Quadric],
         candidates: &mut [Candidate],
         at: &[u32],
+        mut target_of: impl FnMut(usize, DVec3),
     ) {
         for group in at.chunks(LANES) {
             let at = [group[0], group[group.len() - 1]].map(|i| i as usize);
@@ -333,9 +360,8 @@ mod lanes {
                 target.z.lanes(),
             );
             for (i, &c) in at.iter().enumerate() {
-                let c = &mut candidates[c];
-                c.cost = cost[i];
-                c.target = DVec3::new(x[i], y[i], z[i]);
+                candidates[c].cost = cost[i];
+                target_of(c, DVec3::new(x[i], y[i], z[i]));
             }
         }
     }
@@ -448,14 +474,14 @@ mod tests {
                     let v = (i * 11 + 5 + i / 3) % n;
                     Candidate {
                         cost: f64::NAN,
-                        target: DVec3::NAN,
                         ..Candidate::edge(0, u, if u == v { (v + 1) % n } else { v })
                     }
                 })
                 .collect();
-            place_candidates(&pos, &quadric, &mut candidates);
-            for c in &candidates {
+            let targets = place_candidates(&pos, &quadric, &mut candidates);
+            for (c, target) in candidates.iter().zip(targets) {
                 let expected = candidate(&pos, &quadric, c.u, c.v);
+                let (expected_target, _) = placement(&pos, &quadric, c.u, c.v);
                 assert_eq!(
                     c.cost.to_bits(),
                     expected.cost.to_bits(),
@@ -463,7 +489,7 @@ mod tests {
                     c.u,
                     c.v
                 );
-                for (got, want) in c.target.to_array().iter().zip(expected.target.to_array()) {
+                for (got, want) in target.to_array().iter().zip(expected_target.to_array()) {
                     assert_eq!(got.to_bits(), want.to_bits(), "target of {}-{}", c.u, c.v);
                 }
             }
