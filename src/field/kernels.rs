@@ -325,38 +325,31 @@ pub(crate) fn kernels_sorted(
                     }
                 }
             }
+            let around = Around {
+                cells,
+                low: c.map(|k| k - reach),
+                width,
+                edge,
+            };
             (start..end)
                 .filter(|&i| wanted[i])
-                .map(|i| {
-                    let ratio = sizes.map_or(1.0, |s| s.ratios[i] as f64);
-                    match sizes {
-                        None => kernel_of::<false>(
-                            positions[i],
-                            1.0,
-                            (candidates, &[]),
-                            &Around {
-                                cells,
-                                low: c.map(|k| k - reach),
-                                width,
-                                edge,
-                            },
-                            (near, volumes, gaps),
-                            field,
-                        ),
-                        Some(_) => kernel_of::<true>(
-                            positions[i],
-                            ratio,
-                            (candidates, candidate_ratios),
-                            &Around {
-                                cells,
-                                low: c.map(|k| k - reach),
-                                width,
-                                edge,
-                            },
-                            (near, volumes, gaps),
-                            field,
-                        ),
-                    }
+                .map(|i| match sizes {
+                    None => kernel_of::<false>(
+                        positions[i],
+                        1.0,
+                        (candidates, &[]),
+                        &around,
+                        (near, volumes, gaps),
+                        field,
+                    ),
+                    Some(s) => kernel_of::<true>(
+                        positions[i],
+                        s.ratios[i] as f64,
+                        (candidates, candidate_ratios),
+                        &around,
+                        (near, volumes, gaps),
+                        field,
+                    ),
                 })
                 .collect::<Vec<_>>()
         })
