@@ -3,7 +3,7 @@
 //! This reads the entries as written (markup only, with the VTK XML scanner); what they
 //! mean as a frame sequence is [`crate::sequence`]'s.
 
-use super::scan::{attribute, shorten, Scanner, Tag};
+use super::scan::{attribute, shorten, Scanner};
 use crate::error::{Error, Result};
 use std::path::Path;
 
@@ -36,26 +36,7 @@ pub(crate) fn datasets(path: &Path) -> Result<Vec<DataSetEntry>> {
     let mut stack: Vec<String> = Vec::new();
     let mut seen_file = false;
     let mut entries = Vec::new();
-    loop {
-        s.skip_text()?;
-        if s.at_end()? {
-            break;
-        }
-        let line = s.line();
-        let (name, attributes, empty) = match s.tag()? {
-            Tag::Other => continue,
-            Tag::End(name) => {
-                if stack.pop().as_deref() != Some(name.as_str()) {
-                    return Err(s.error(format!("</{name}> closes no open <{name}>")));
-                }
-                continue;
-            }
-            Tag::Start {
-                name,
-                attributes,
-                empty,
-            } => (name, attributes, empty),
-        };
+    while let Some((line, name, attributes, empty)) = s.next_start(&mut stack)? {
         match (stack.last().map(String::as_str), name.as_str()) {
             (None, "VTKFile") => {
                 seen_file = true;

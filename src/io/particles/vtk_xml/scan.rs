@@ -89,6 +89,9 @@ pub(super) enum Tag {
     Other,
 }
 
+/// A start tag as [`Scanner::next_start`] gives it: line, name, attributes, empty.
+pub(super) type StartTag = (usize, String, Vec<(String, String)>, bool);
+
 /// A byte reader over the file that keeps the offset and line.
 pub(super) struct Scanner {
     path: PathBuf,
@@ -116,14 +119,35 @@ impl Scanner {
         Ok((scanner, file_len))
     }
 
-    /// The current line.
-    pub(super) fn line(&self) -> usize {
-        self.line
-    }
-
     /// True at the end of the file.
     pub(super) fn at_end(&mut self) -> Result<bool> {
         Ok(self.peek()?.is_none())
+    }
+
+    /// The next start tag (its line, name, attributes and whether it is empty), past text,
+    /// comments and end tags, each of which must close the innermost element of `open`;
+    /// `None` at the end of the file.
+    pub(super) fn next_start(&mut self, open: &mut Vec<String>) -> Result<Option<StartTag>> {
+        loop {
+            self.skip_text()?;
+            if self.at_end()? {
+                return Ok(None);
+            }
+            let line = self.line;
+            match self.tag()? {
+                Tag::Other => {}
+                Tag::End(name) => {
+                    if open.pop().as_deref() != Some(name.as_str()) {
+                        return Err(self.error(format!("</{name}> closes no open <{name}>")));
+                    }
+                }
+                Tag::Start {
+                    name,
+                    attributes,
+                    empty,
+                } => return Ok(Some((line, name, attributes, empty))),
+            }
+        }
     }
 
     pub(super) fn error(&self, message: impl Into<String>) -> Error {
@@ -329,26 +353,7 @@ pub(super) fn scan(path: &Path) -> Result<Layout> {
     let mut stack: Vec<String> = Vec::new();
     let mut seen_file = false;
     let mut arrays = 0usize;
-    loop {
-        s.skip_text()?;
-        if s.peek()?.is_none() {
-            break;
-        }
-        let line = s.line;
-        let (name, attributes, empty) = match s.tag()? {
-            Tag::Other => continue,
-            Tag::End(name) => {
-                if stack.pop().as_deref() != Some(name.as_str()) {
-                    return Err(s.error(format!("</{name}> closes no open <{name}>")));
-                }
-                continue;
-            }
-            Tag::Start {
-                name,
-                attributes,
-                empty,
-            } => (name, attributes, empty),
-        };
+    while let Some((line, name, attributes, empty)) = s.next_start(&mut stack)? {
         let parent = stack.last().map(String::as_str);
         match (parent, name.as_str()) {
             (None, "VTKFile") => {
