@@ -63,13 +63,15 @@ pub(crate) enum Remap {
 /// may be empty) locked, then the band around the seams until the whole mesh has
 /// `target` triangles; the `locked` vertices never move and survive at their exact input
 /// positions. Returns the stats and, with [`Remap::Keep`], the new index of every input
-/// vertex (`u32::MAX` when it was removed; else an empty list).
+/// vertex (`u32::MAX` when it was removed; else an empty list). At most `in_flight`
+/// regions are decimated at once (`usize::MAX`: all).
 pub(super) fn decimate_by_regions(
     mesh: &mut TriMesh,
     options: &DecimateOptions,
     target: usize,
     locked: &[bool],
     remap: Remap,
+    in_flight: usize,
 ) -> (DecimateStats, Vec<u32>) {
     let split = Regions::split(mesh, (options.region_triangles / 2).max(1));
     let mut stats = DecimateStats {
@@ -84,13 +86,20 @@ pub(super) fn decimate_by_regions(
         .map(|_| AtomicU32::new(u32::MAX))
         .collect();
     // Regions are decimated in parallel, one per task (each costs its candidates in
-    // parallel too, but walks its collapses sequentially: `Walk::Sequential`), and placed
-    // in region order, so the output does not depend on the thread count.
+    // parallel too, but walks its collapses sequentially: `Walk::Sequential`), at most
+    // `in_flight` at once (their state is the memory that grows with the thread count),
+    // and placed in region order, so the output does not depend on the thread count.
+    let in_flight = in_flight.max(1);
     let decimated: Vec<(Piece, DecimateStats, Vec<u32>)> = (0..split.count)
-        .into_par_iter()
-        .map(|r| split.triangles_of(r))
-        .filter(|tris| !tris.is_empty())
-        .map(|tris| decimate_region(mesh, tris, &local_of, &split.on_seam, locked, options))
+        .step_by(in_flight)
+        .flat_map(|first| {
+            (first..first.saturating_add(in_flight).min(split.count))
+                .into_par_iter()
+                .map(|r| split.triangles_of(r))
+                .filter(|tris| !tris.is_empty())
+                .map(|tris| decimate_region(mesh, tris, &local_of, &split.on_seam, locked, options))
+                .collect::<Vec<_>>()
+        })
         .collect();
     drop(local_of);
     let assembled = split.assemble(mesh, decimated, locked, remap, &mut stats);

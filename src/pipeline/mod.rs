@@ -290,7 +290,11 @@ fn march_tiles<S: ParticleSource>(
     let decimating = options.decimate.as_ref().filter(|_| plan.is_tiled());
     let (fluid, tiles_run, decimated) = match decimating {
         Some(decimate_options) => {
-            let mut sink = TileDecimation::new(decimate_options, options.field.particle_radius);
+            let mut sink = TileDecimation::new(
+                decimate_options,
+                options.field.particle_radius,
+                plan.spare_bytes,
+            );
             let tiles_run = run_into(&mut sink, &mut tile_stats)?;
             run.stats.marching_cubes.triangles = sink.marching_triangles();
             tile_stats.stitch_seconds = sink.stitch_seconds;

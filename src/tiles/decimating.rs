@@ -17,6 +17,7 @@
 use super::TileSink;
 use crate::decimation::{
     decimate_band, decimate_keeping, place_survivors, DecimateOptions, DecimateStats, Remap,
+    REGION_BYTES_PER_TRIANGLE,
 };
 use crate::error::Result;
 use crate::grid::BlockRange;
@@ -38,6 +39,8 @@ pub(crate) const TILE_ERROR_CAP: f32 = 0.1;
 pub(crate) struct TileDecimation {
     /// The options, with the error bound capped ([`TILE_ERROR_CAP`]).
     options: DecimateOptions,
+    /// Regions decimated at once in a piece.
+    in_flight: usize,
     joined: JoinedPieces,
     stats: DecimateStats,
     /// Marching-cubes triangles of all pieces.
@@ -53,12 +56,23 @@ impl TileDecimation {
     /// units). Each tile must reach the fraction on its own; the error cap keeps a tile of
     /// mostly curved surface from forcing large collapses to get there (the seam pass,
     /// capped too, makes up the rest where it can).
-    pub fn new(options: &DecimateOptions, particle_radius: f32) -> Self {
+    ///
+    /// A large piece is decimated region by region, two regions at once (what the memory
+    /// model's tile figures were measured with) and one more for each
+    /// [`REGION_BYTES_PER_TRIANGLE`] × region triangles of `spare_bytes` (what the budget
+    /// leaves above the plan's estimate; `None`: no budget, no limit). Without the cap each
+    /// thread decimates a region of its own: 16 threads took the 4M splash to 1.2 GiB under
+    /// a 1 GiB budget.
+    pub fn new(options: &DecimateOptions, particle_radius: f32, spare_bytes: Option<u64>) -> Self {
+        let region_bytes = (options.region_triangles as u64 * REGION_BYTES_PER_TRIANGLE).max(1);
         TileDecimation {
             options: DecimateOptions {
                 max_error: options.max_error.or(Some(TILE_ERROR_CAP * particle_radius)),
                 ..options.clone()
             },
+            in_flight: spare_bytes.map_or(usize::MAX, |spare| {
+                2 + usize::try_from(spare / region_bytes).unwrap_or(usize::MAX)
+            }),
             joined: JoinedPieces::default(),
             stats: DecimateStats::default(),
             marching_triangles: 0,
@@ -112,7 +126,7 @@ impl TileSink for TileDecimation {
         self.marching_triangles += piece.mesh.triangle_count();
         self.stitch_seconds += clock.elapsed().as_secs_f64();
         let clock = Instant::now();
-        let tile_stats = decimate_piece(piece, &self.options, &mut self.joined);
+        let tile_stats = decimate_piece(piece, &self.options, self.in_flight, &mut self.joined);
         self.stats.add_work(&tile_stats);
         self.stats.regions += tile_stats.regions.max(1);
         self.decimation_seconds += clock.elapsed().as_secs_f64();
@@ -136,13 +150,14 @@ struct JoinedPieces {
 fn decimate_piece(
     piece: crate::marching_cubes::RangeMesh,
     options: &DecimateOptions,
+    in_flight: usize,
     joined: &mut JoinedPieces,
 ) -> DecimateStats {
     let mut mesh = piece.mesh;
     let locked: Vec<bool> = piece.seam_keys.iter().map(Option::is_some).collect();
     // Border vertices keep their exact input position (decimation rescales internally).
     let original = mesh.positions.clone();
-    let (stats, remap) = decimate_keeping(&mut mesh, options, &locked);
+    let (stats, remap) = decimate_keeping(&mut mesh, options, &locked, in_flight);
     let (seam_index, was_seam) = (&mut joined.seam_index, &mut joined.was_seam);
     let output_of = place_survivors(
         &mesh,

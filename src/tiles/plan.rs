@@ -27,6 +27,9 @@ pub(crate) struct TilePlan {
     pub tile_blocks: Option<i32>,
     /// Estimated peak memory of the run, bytes.
     pub estimated_peak_bytes: u64,
+    /// What the memory budget leaves above the estimate, bytes (`None`: no budget); the
+    /// tiles' decimation spends it on more regions at once.
+    pub(crate) spare_bytes: Option<u64>,
     /// Whether the run keeps the big buffers it frees ([`super::TileStats::kept_freed_memory`]).
     pub kept_freed_memory: bool,
     /// Blocks between a block and the farthest block a particle of it reaches.
@@ -134,6 +137,9 @@ pub(crate) fn plan_tiles<S: ParticleSource + ?Sized>(
         payload_width,
         tile_blocks,
         estimated_peak_bytes,
+        spare_bytes: tile_options
+            .memory_budget_bytes
+            .map(|budget| budget.saturating_sub(estimated_peak_bytes)),
         kept_freed_memory,
         reach,
         inv_h,
