@@ -22,12 +22,15 @@ pub(crate) const FIELD_BYTES_PER_POPULATED_BLOCK: u64 = 3400;
 /// Block surfaces and the stitched mesh of an untiled run, bytes per marching-cubes
 /// triangle (23 measured on the 4M scene, 26 on its splash).
 pub(crate) const SURFACE_BYTES_PER_TRIANGLE: f64 = 25.0;
-/// Peak memory of one tile, bytes per particle it loads (own and ghost): particles,
-/// neighbour grid, field blocks, block surfaces and the tile's decimation state, in a
-/// scene with [`PARTICLES_PER_SURFACE_BLOCK`]; scaled up where a scene has more surface
-/// per particle (its splash: 1.4 × as much surface, ≈ 750 B per particle measured in its
-/// densest 64-block tile).
-pub(crate) const TILE_BYTES_PER_PARTICLE: u64 = 600;
+/// Peak memory of one tile beyond its kernels, bytes per particle it loads (own and
+/// ghost): particles, neighbour grid, field blocks, block surfaces and the tile's
+/// decimation state, in a scene with [`PARTICLES_PER_SURFACE_BLOCK`]; scaled up where a
+/// scene has more surface per particle (its splash: 1.4 × as much surface). Across tiles
+/// of 256 to 1024 cells the measured tile peaks grow by 238 B per particle of the densest
+/// tile in the 4M scene and by 273 B in its splash, kernels included, over what the
+/// earlier tiles produced (2 threads, `--stats`); with the kernels' bytes this puts
+/// the tiles 1.5 × above those slopes.
+pub(crate) const TILE_BYTES_PER_PARTICLE: u64 = 150;
 /// Particles per surface block of the scene [`TILE_BYTES_PER_PARTICLE`] was measured on
 /// (50.2 in the 4M scene, 35.6 in its splash).
 pub(crate) const PARTICLES_PER_SURFACE_BLOCK: f64 = 50.0;
@@ -311,15 +314,19 @@ fn given_tile_size(model: &Model, cells: u32, budget: Option<u64>) -> Result<(Op
     }
 }
 
-/// One tile if the run fits `budget` untiled, else the largest power-of-two tile that
-/// does.
+/// Tile edges a budget chooses from, in blocks, largest first: powers of two and the
+/// halfway steps between them (fewer tiles do less work again on their borders).
+const TILE_BLOCKS: [i32; 14] = [128, 96, 64, 48, 32, 24, 16, 12, 8, 6, 4, 3, 2, 1];
+
+/// One tile if the run fits `budget` untiled, else the largest tile of [`TILE_BLOCKS`]
+/// that does.
 fn largest_tile_under(model: &Model, budget: u64) -> Result<(Option<i32>, u64)> {
     let untiled = model.untiled();
     if untiled <= budget {
         return Ok((None, untiled));
     }
     let mut smallest = 0;
-    for t in [64, 32, 16, 8, 4, 2, 1] {
+    for t in TILE_BLOCKS {
         let estimate = model.tiled(t);
         smallest = estimate;
         if estimate <= budget {

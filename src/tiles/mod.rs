@@ -40,7 +40,7 @@
 //!   locked (the locked-seam contract is written down there).
 //!
 //! **Memory budget.** [`TileOptions::memory_budget_bytes`] picks the tile size (the largest
-//! power-of-two number of blocks whose densest tile fits next to the expected output) or
+//! of a few steps, powers of two and halfway between, whose densest tile fits next to the expected output) or
 //! refuses, before any work, a run whose smallest tile cannot fit. The estimate counts the
 //! particles, the blocks they populate and the triangles the populated blocks on the
 //! fluid's surface will carry, calibrated on a real frame and a splash of it (`budget`). An untiled run whose
