@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # A short cargo-fuzz run (FUZZ_SECONDS, default 30, per target) of the targets whose
 # readers changed: src/archive → archive targets, src/io/particles → particle targets,
-# src/io/mesh (or the rest of src/io) → mesh targets. Changes are taken against
-# FUZZ_BASE (default: origin/main, else main, else the previous commit); with
-# FUZZ_ALL=1 every target runs. Stable toolchain with RUSTC_BOOTSTRAP=1, as
-# fuzz/README.md explains; cargo-fuzz is installed when missing.
+# src/io/mesh (or the rest of src/io) → mesh targets, src/sequence or the VTK XML
+# scanner under src/io/particles/vtk_xml (which reads the .pvd markup) → sequence_pvd.
+# Changes are taken against FUZZ_BASE (default: origin/main, else main, else the
+# previous commit); with FUZZ_ALL=1 every target runs. Stable toolchain with
+# RUSTC_BOOTSTRAP=1, as fuzz/README.md explains; cargo-fuzz is installed when missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seconds=${FUZZ_SECONDS:-30}
@@ -16,7 +17,7 @@ if [ -z "$base" ]; then
 fi
 # Since the branch left the base (its merge base), committed or not.
 since=$(git merge-base "$base" HEAD)
-changed=$( { git diff --name-only "$since" -- src/io src/archive; git status --porcelain -- src/io src/archive | cut -c4-; } | sort -u)
+changed=$( { git diff --name-only "$since" -- src/io src/archive src/sequence; git status --porcelain -- src/io src/archive src/sequence | cut -c4-; } | sort -u)
 targets=()
 if [ "${FUZZ_ALL:-0}" = 1 ] || grep -q '^src/archive/' <<<"$changed"; then
   targets+=(archive archive_payload)
@@ -27,8 +28,11 @@ fi
 if [ "${FUZZ_ALL:-0}" = 1 ] || grep -Eq '^src/io/(mesh|[^/]*\.rs)' <<<"$changed"; then
   targets+=(mesh_ply mesh_obj mesh_gltf mesh_vtk)
 fi
+if [ "${FUZZ_ALL:-0}" = 1 ] || grep -Eq '^src/(sequence/|io/particles/vtk_xml/)' <<<"$changed"; then
+  targets+=(sequence_pvd)
+fi
 if [ ${#targets[@]} -eq 0 ]; then
-  echo "no change to src/io or src/archive since $base (${since:0:8}): no fuzzing"
+  echo "no change to src/io, src/archive or src/sequence since $base (${since:0:8}): no fuzzing"
   exit 0
 fi
 command -v cargo-fuzz >/dev/null || cargo install cargo-fuzz --locked

@@ -9,7 +9,7 @@ cd "$(dirname "$0")"
 BIN=${1:-${CARGO_TARGET_DIR:-../target}/release/meniscus}
 OUT=seeds
 rm -rf "$OUT"
-mkdir -p "$OUT"/{particles_xyz,particles_ply,particles_bgeo,particles_vtk,particles_vtk_xml,mesh_ply,mesh_obj,mesh_gltf,mesh_vtk,archive,archive_payload}
+mkdir -p "$OUT"/{particles_xyz,particles_ply,particles_bgeo,particles_vtk,particles_vtk_xml,mesh_ply,mesh_obj,mesh_gltf,mesh_vtk,archive,archive_payload,sequence_pvd}
 
 python3 - "$OUT" <<'EOF'
 import gzip, struct, sys
@@ -67,6 +67,15 @@ EOF
 # data mode, compressor and header type, and two pieces with ascii data.
 cp ../tests/data/vtk_xml/dd9_*.vt[up] "$OUT/particles_vtk_xml/"
 printf '<?xml version="1.0"?>\n<VTKFile type="PolyData" version="0.1">\n<PolyData><Piece NumberOfPoints="2"><PointData><DataArray type="Float32" Name="m" format="ascii">0 1</DataArray></PointData><Points><DataArray type="Float64" NumberOfComponents="3" format="ascii">0 0 0 1 0 0</DataArray></Points></Piece><Piece NumberOfPoints="1"><PointData><DataArray type="Float32" Name="m" format="ascii">2</DataArray></PointData><Points><DataArray type="Float64" NumberOfComponents="3" format="ascii">2 0 0</DataArray></Points></Piece></PolyData></VTKFile>\n' >"$OUT/particles_vtk_xml/pieces.vtp"
+
+# .pvd collections naming frame_0.vtu … frame_3.vtu (the files the sequence_pvd target
+# puts beside its input): VTK's fixture (out of time order), entries without timesteps,
+# one file listed twice, parts and groups, a comment and end tags written out.
+cp ../tests/data/pvd/run.pvd "$OUT/sequence_pvd/"
+pvd() { printf '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n%b  </Collection>\n</VTKFile>\n' "$2" >"$OUT/sequence_pvd/$1"; }
+pvd untimed.pvd '    <DataSet file="frame_2.vtu"/>\n    <DataSet file="frame_0.vtu"/>\n'
+pvd twice.pvd '    <DataSet timestep="1e-3" part="1" file="frame_1.vtu"/>\n    <DataSet timestep="0.001" part="1" file="frame_1.vtu"/>\n    <DataSet timestep="-2" part="1" file="frame_3.vtu"/>\n'
+pvd parts.pvd '    <!-- two parts of one time -->\n    <DataSet timestep="0" group="g" part="0" file="frame_0.vtu"></DataSet>\n    <DataSet timestep="0" group="g" part="1" file="frame_1.vtu"></DataSet>\n'
 
 # Meshes and archives from the release binary: the fluid blocks plus an isolated-particle
 # sphere, with the velocity as attribute where the format holds one.
