@@ -71,7 +71,9 @@ impl TileDecimation {
                 ..options.clone()
             },
             in_flight: spare_bytes.map_or(usize::MAX, |spare| {
-                2 + usize::try_from(spare / region_bytes).unwrap_or(usize::MAX)
+                usize::try_from(spare / region_bytes)
+                    .unwrap_or(usize::MAX)
+                    .saturating_add(2)
             }),
             joined: JoinedPieces::default(),
             stats: DecimateStats::default(),
