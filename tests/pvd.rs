@@ -269,6 +269,31 @@ fn broken_collections_are_errors_naming_the_file_and_the_entry() {
     std::fs::write(&grid, "<?xml version=\"1.0\"?>\n<html></html>\n").unwrap();
     let m = collection_frames(&grid).unwrap_err().to_string();
     assert!(m.contains("the first element is <html>"), "{m}");
+    // Cut off after a whole entry (a collection still being written): an error, not the
+    // entries so far taken for the whole sequence.
+    let whole = collection(dir.path(), &entry("0", "0", "frame_0.vtu"));
+    let text = std::fs::read_to_string(&whole).unwrap();
+    let cut = &text[..text.find("  </Collection>").unwrap()];
+    std::fs::write(&whole, cut).unwrap();
+    let m = collection_frames(&whole).unwrap_err().to_string();
+    assert!(
+        m.contains("the file ends inside <Collection> (2 element(s) left open)"),
+        "{m}"
+    );
+    assert!(m.contains("cut off"), "{m}");
+    std::fs::write(&whole, &text[..text.find("</VTKFile>").unwrap()]).unwrap();
+    let m = collection_frames(&whole).unwrap_err().to_string();
+    assert!(m.contains("the file ends inside <VTKFile>"), "{m}");
+    // A second root after the first: refused, whatever it is.
+    for late in [
+        "<VTKFile type=\"Collection\"><Collection/></VTKFile>",
+        "<html/>",
+    ] {
+        std::fs::write(&whole, format!("{text}{late}\n")).unwrap();
+        let m = collection_frames(&whole).unwrap_err().to_string();
+        assert!(m.contains("line 7: <"), "{m}");
+        assert!(m.contains("> after the end of the <VTKFile>"), "{m}");
+    }
 }
 
 #[test]

@@ -29,7 +29,10 @@ pub(crate) struct DataSetEntry {
 
 /// The `<DataSet>` entries of the collection `path`, in file order. Errors name the file
 /// and the line: not a VTK XML file, a `<VTKFile>` of another type than `Collection`, a
-/// `<DataSet>` without `file`, malformed markup. An empty collection is returned empty.
+/// `<DataSet>` without `file`, malformed markup, a file that ends before its elements
+/// are closed (cut off, or still being written: its entries so far are not taken for
+/// the whole sequence), an element after the `<VTKFile>` closed. An empty collection is
+/// returned empty.
 pub(crate) fn datasets(path: &Path) -> Result<Vec<DataSetEntry>> {
     let (mut s, _) = Scanner::open(path)?;
     let at = |line: usize, message: String| Error::parse(path, format!("line {line}"), message);
@@ -38,6 +41,12 @@ pub(crate) fn datasets(path: &Path) -> Result<Vec<DataSetEntry>> {
     let mut entries = Vec::new();
     while let Some((line, name, attributes, empty)) = s.next_start(&mut stack)? {
         match (stack.last().map(String::as_str), name.as_str()) {
+            (None, other) if seen_file => {
+                return Err(at(line, format!(
+                    "<{}> after the end of the <VTKFile>: a collection is one <VTKFile> element",
+                    shorten(other)
+                )))
+            }
             (None, "VTKFile") => {
                 seen_file = true;
                 match attribute(&attributes, "type") {
@@ -83,6 +92,13 @@ pub(crate) fn datasets(path: &Path) -> Result<Vec<DataSetEntry>> {
     }
     if !seen_file {
         return Err(s.error("not a VTK collection: no <VTKFile> element"));
+    }
+    if let Some(open) = stack.last() {
+        return Err(s.error(format!(
+            "the file ends inside <{}> ({} element(s) left open): the collection is cut off, or still being written",
+            shorten(open),
+            stack.len()
+        )));
     }
     Ok(entries)
 }
