@@ -79,6 +79,8 @@ pub(crate) fn contain_centres<C: Centres + ?Sized>(
             break;
         }
         let (moved, largest) = rounds.push_out(control, &mut shallow);
+        let pushed = rounds.pushed.iter().map(|&(v, _)| v);
+        rounds.moved_since_slabs.extend(pushed);
         stats.moved_vertices += moved;
         // A push of more than r may reach centres nobody watched: measure again every
         // centre near the surface the pushes moved (every centre when that region is too
@@ -90,7 +92,8 @@ pub(crate) fn contain_centres<C: Centres + ?Sized>(
             // (what a centre's measuring may read) is taken again, so that the surface
             // built around the centres measured next holds all they read.
             let clock = Instant::now();
-            rounds.slabs = Slabs::new(control, &rounds.tris, input.slab_triangles, r);
+            let moved = std::mem::take(&mut rounds.moved_since_slabs);
+            rounds.slabs.update(control, &rounds.tris, &moved);
             stats.surface_seconds += clock.elapsed().as_secs_f64();
             match rounds.centres_near_pushes(control, input, cancel)? {
                 Some(near) => rounds.near_pushes = near,
@@ -136,6 +139,8 @@ struct Rounds {
     near_pushes: Vec<Watched>,
     /// The pushes of the last round: control vertex and how far it moved.
     pushed: Vec<(u32, DVec3)>,
+    /// The control vertices pushed since the slabs' reaches were last taken.
+    moved_since_slabs: Vec<u32>,
     /// Particles measured in the last round that was not full, ascending.
     measured: Vec<u32>,
     /// Whether the control mesh's normals are those of its current positions (the
@@ -171,6 +176,7 @@ impl Rounds {
             full_round: true,
             near_pushes: Vec::new(),
             pushed: Vec::new(),
+            moved_since_slabs: Vec::new(),
             measured: Vec::new(),
             fresh_normals: true,
         }
@@ -338,15 +344,11 @@ impl Rounds {
         let cell_of = |p: Vec3| super::slabs::cell_of(p, cell);
         let pushed: HashMap<u32, Vec3> =
             self.pushed.iter().map(|&(v, d)| (v, d.as_vec3())).collect();
-        let mut corners: Vec<u32> = control
-            .triangles
-            .iter()
-            .filter(|t| t.iter().any(|&v| self.reached[v as usize]))
-            .flatten()
-            .copied()
-            .collect();
-        corners.sort_unstable();
-        corners.dedup();
+        // The corners of the triangles with a reached vertex (the reached vertices are
+        // the corners of the triangles around the pushed ones).
+        let pushed_vertices: Vec<u32> = self.pushed.iter().map(|&(v, _)| v).collect();
+        let reached = super::slabs::ring(control, &self.tris, &pushed_vertices);
+        let corners = super::slabs::ring(control, &self.tris, &reached);
         let mut cells: HashSet<glam::IVec3> = HashSet::new();
         for &u in &corners {
             let (mut lo, mut hi) = (Vec3::MAX, Vec3::MIN);

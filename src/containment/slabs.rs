@@ -95,6 +95,30 @@ impl Slabs {
         }
     }
 
+    /// The slabs after the control vertices `moved` moved (any order, repeats allowed):
+    /// the reaches of the vertices within two rings of them (the only ones a move
+    /// changes) taken again, bit for bit what [`Self::new`] would give, and the members
+    /// with them. The bounds stay: a centre is measured the same in any slab layout.
+    pub(super) fn update(&mut self, control: &TriMesh, tris: &VertexTriangles, moved: &[u32]) {
+        let mut moved = moved.to_vec();
+        moved.sort_unstable();
+        moved.dedup();
+        let changed = ring(control, tris, &ring(control, tris, &moved));
+        let r = self.particle_radius;
+        let fresh: Vec<f32> = changed
+            .par_iter()
+            .map(|&v| {
+                8.0 * r + 2.0 * fan_max(control, tris, v, &|w| longest_edge(control, tris, w))
+            })
+            .collect();
+        for (&v, reach) in changed.iter().zip(fresh) {
+            self.reach[v as usize] = reach;
+        }
+        if !self.bounds.is_empty() {
+            (self.starts, self.members) = members(control, self.axis, &self.bounds, &self.reach);
+        }
+    }
+
     /// The axis and the extent along it of slab `k` (from `lo`, to under `hi`).
     pub(super) fn range(&self, k: usize) -> (usize, f32, f32) {
         let lo = if k == 0 {
@@ -182,27 +206,50 @@ impl Slabs {
     }
 }
 
+/// The largest `f` over the corners of `v`'s fan (`v` and its neighbours).
+fn fan_max(
+    control: &TriMesh,
+    tris: &VertexTriangles,
+    v: u32,
+    f: &(dyn Fn(u32) -> f32 + Sync),
+) -> f32 {
+    tris.of(v)
+        .iter()
+        .flat_map(|&t| control.triangles[t as usize])
+        .map(f)
+        .fold(0.0, f32::max)
+}
+
+/// The longest edge at control vertex `v` (0 without triangles).
+fn longest_edge(control: &TriMesh, tris: &VertexTriangles, v: u32) -> f32 {
+    let x = |w: u32| control.positions[w as usize];
+    fan_max(control, tris, v, &|w| (x(w) - x(v)).length())
+}
+
 /// The reach of every control vertex: `8r` plus twice the longest edge at it or at a
 /// neighbour (see [`Slabs::new`]).
 fn reaches(control: &TriMesh, tris: &VertexTriangles, r: f32) -> Vec<f32> {
-    // The largest `f` over the corners of `v`'s fan (`v` and its neighbours).
-    let fan_max = |v: u32, f: &(dyn Fn(u32) -> f32 + Sync)| {
-        tris.of(v)
-            .iter()
-            .flat_map(|&t| control.triangles[t as usize])
-            .map(f)
-            .fold(0.0, f32::max)
-    };
     let n = control.positions.len() as u32;
-    let x = |v: u32| control.positions[v as usize];
     let longest: Vec<f32> = (0..n)
         .into_par_iter()
-        .map(|v| fan_max(v, &|w| (x(w) - x(v)).length()))
+        .map(|v| longest_edge(control, tris, v))
         .collect();
     (0..n)
         .into_par_iter()
-        .map(|v| 8.0 * r + 2.0 * fan_max(v, &|w| longest[w as usize]))
+        .map(|v| 8.0 * r + 2.0 * fan_max(control, tris, v, &|w| longest[w as usize]))
         .collect()
+}
+
+/// The corners of the triangles around `vertices` (their closed one-rings), ascending.
+pub(super) fn ring(control: &TriMesh, tris: &VertexTriangles, vertices: &[u32]) -> Vec<u32> {
+    let mut out: Vec<u32> = vertices
+        .iter()
+        .flat_map(|&v| tris.of(v))
+        .flat_map(|&t| control.triangles[t as usize])
+        .collect();
+    out.sort_unstable();
+    out.dedup();
+    out
 }
 
 /// Boundaries along `axis` that cut the control triangles (by first corner) into `count`
@@ -314,5 +361,46 @@ impl Near {
             Some(Some(cells)) => cells.contains(&cell_of(p, self.cell)),
             _ => true,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// After some vertices move (some by more than the edges), `update` gives the reaches
+    /// `new` would, bit for bit, and the members of those reaches with its bounds.
+    #[test]
+    fn updated_slabs_hold_the_reaches_taken_afresh() {
+        let mut control = crate::isolated::icosphere(4, 1.0);
+        let r = 0.02;
+        let tris = VertexTriangles::new(&control);
+        let mut slabs = Slabs::new(&control, &tris, 700, r);
+        assert!(slabs.count() > 3, "{} slabs", slabs.count());
+        let mut rng = crate::test_rng::TestRng::new(3);
+        let mut moved = Vec::new();
+        for k in 0..40u32 {
+            let v = (k * 61) % control.positions.len() as u32;
+            let d = Vec3::new(rng.unit_f32(), rng.unit_f32(), rng.unit_f32()) - 0.5;
+            control.positions[v as usize] += d * if k % 4 == 0 { 0.5 } else { 0.02 };
+            moved.push(v);
+        }
+        moved.push(moved[0]);
+        let before = slabs.reach.clone();
+        slabs.update(&control, &tris, &moved);
+        let fresh = reaches(&control, &tris, r as f32);
+        assert!(fresh != before, "the moves change some reaches");
+        assert!(
+            fresh
+                .iter()
+                .zip(&slabs.reach)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "reaches as taken afresh"
+        );
+        let (starts, members) = members(&control, slabs.axis, &slabs.bounds, &fresh);
+        assert_eq!(
+            (starts, members),
+            (slabs.starts.clone(), slabs.members.clone())
+        );
     }
 }
