@@ -28,6 +28,8 @@
 //! same order as the whole scene, so the kernels do not depend on the tiling or the
 //! thread count.
 
+use super::eigen::symmetric_eigen;
+use super::gather::{Around, Gathered, Reaches, Source};
 use crate::field::FieldOptions;
 use crate::grid::{home_half_block, BlockKey, HALF_BLOCK_EDGE};
 use glam::{DMat3, DVec3, Vec3};
@@ -373,92 +375,6 @@ fn kernels_reaching(
         .collect()
 }
 
-/// The half-blocks a gather of [`kernels_sorted`] reaches, per axis on either side of a
-/// particle's own: `full` holds every neighbour of any particle, `common` every neighbour
-/// of a particle at least the hair inside its half-block's faces.
-#[derive(Clone, Copy)]
-struct Reaches {
-    /// `⌈R (1 + ε) / e⌉`.
-    full: i32,
-    /// `⌈R (1 − ε) / e⌉`, at most `full`.
-    common: i32,
-    /// `R (1 + ε) / e`: how far, in half-block edges, a neighbour may lie.
-    span: f64,
-}
-
-impl Reaches {
-    /// The relative hair `ε` on `R`: far above the rounding of the f32 distance test of
-    /// [`kernel_of`] and of the half-block keys (1e-7 relative or less).
-    const HAIR: f64 = 1e-6;
-
-    /// The reaches for neighbourhoods of `need` half-block edges.
-    fn new(need: f64) -> Self {
-        let span = need * (1.0 + Self::HAIR);
-        let full = span.ceil() as i32;
-        let common = ((need * (1.0 - Self::HAIR)).ceil() as i32).clamp(1, full);
-        Reaches { full, common, span }
-    }
-
-    /// Whether every neighbour of the particle at `p`, of half-block `c` (edge `edge`),
-    /// lies within `common` half-blocks of `c`: per axis, its offset `f` in the
-    /// half-block (in edges) leaves `span` on both sides inside them,
-    /// `span − common ≤ f < common + 1 − span`, with a hair of margin.
-    fn within_common(&self, p: Vec3, c: BlockKey, edge: f64) -> bool {
-        let low = self.span - self.common as f64 + Self::HAIR;
-        let high = self.common as f64 + 1.0 - self.span - Self::HAIR;
-        (0..3).all(|k| {
-            let f = p[k] as f64 / edge - c[k] as f64;
-            low <= f && f < high
-        })
-    }
-}
-
-/// Where [`kernels_sorted`] gathers from.
-struct Source<'a> {
-    positions: &'a [Vec3],
-    /// Radii, multiples of r, aligned with `positions` (several sizes only).
-    ratios: Option<&'a [f32]>,
-    /// The populated half-blocks: key and range of particles.
-    runs: &'a [([i32; 3], u32, u32)],
-    /// Per (y, z) row of half-blocks, its range of `runs`.
-    rows: &'a hashbrown::HashMap<[i32; 2], (u32, u32)>,
-}
-
-impl Source<'_> {
-    /// Gathers into `out` the particles of the half-blocks within `reach` of `c` (per
-    /// axis), in (z, y, x, index) order.
-    fn gather(&self, c: BlockKey, reach: i32, out: &mut Gathered) {
-        out.candidates.clear();
-        out.ratios.clear();
-        out.cells.clear();
-        let width = 2 * reach as usize + 1;
-        for dz in -reach..=reach {
-            for dy in -reach..=reach {
-                let Some(&(a, b)) = self.rows.get(&[c[1] + dy, c[2] + dz]) else {
-                    continue;
-                };
-                let row = &self.runs[a as usize..b as usize];
-                let first = row.partition_point(|r| r.0[0] < c[0] - reach);
-                let last = row.partition_point(|r| r.0[0] <= c[0] + reach);
-                for &(key, a, b) in &row[first..last] {
-                    let base = out.candidates.len() as u32;
-                    out.candidates
-                        .extend_from_slice(&self.positions[a as usize..b as usize]);
-                    if let Some(ratios) = self.ratios {
-                        out.ratios
-                            .extend_from_slice(&ratios[a as usize..b as usize]);
-                    }
-                    let offset = |k: usize| (key[k] - c[k] + reach) as usize + k * width;
-                    out.cells
-                        .push(([offset(0), offset(1), offset(2)], base, base + (b - a)));
-                }
-            }
-        }
-        out.low = c.map(|k| k - reach);
-        out.width = width;
-    }
-}
-
 /// Lanes of the neighbour sums of [`kernel_of`].
 const LANES: usize = 8;
 
@@ -475,47 +391,6 @@ struct Scratch {
     volumes: Vec<f32>,
     /// Squared distances from the current particle to the slabs of half-blocks.
     gaps: Vec<f64>,
-}
-
-/// The particles of the half-blocks around one, gathered by [`Source::gather`].
-#[derive(Default)]
-struct Gathered {
-    /// Particles of the half-blocks around the current one, in canonical order.
-    candidates: Vec<Vec3>,
-    /// Their radii, multiples of r (particles of several sizes only).
-    ratios: Vec<f32>,
-    /// The half-blocks of `candidates`: [`Around::cells`].
-    cells: Vec<([usize; 3], u32, u32)>,
-    /// Key of the first half-block along each axis.
-    low: BlockKey,
-    /// Half-blocks per axis.
-    width: usize,
-}
-
-impl Gathered {
-    /// The gathered half-blocks, of edge `edge` (world units).
-    fn around(&self, edge: f64) -> Around<'_> {
-        Around {
-            cells: &self.cells,
-            low: self.low,
-            width: self.width,
-            edge,
-        }
-    }
-}
-
-/// The half-blocks around the one of the current particles, `width` = 2·reach + 1 per
-/// axis, from key `low` up.
-struct Around<'a> {
-    /// Per populated half-block, its offset from `low` along axis k plus `k·width`
-    /// (where its slab's distance is in the gap table), and its range of candidates.
-    cells: &'a [([usize; 3], u32, u32)],
-    /// Key of the first half-block along each axis.
-    low: BlockKey,
-    /// Half-blocks per axis.
-    width: usize,
-    /// Edge of a half-block, world units.
-    edge: f64,
 }
 
 /// The kernel of the particle at `p`, of radius `ratio`·r, from `candidates` (its
@@ -649,70 +524,6 @@ fn kernel_of<const SIZED: bool>(
         axes: s.map(|v| (v * scale) as f32),
         directions: vectors.map(|v| v.as_vec3()),
         neighbours,
-    }
-}
-
-/// Eigenvalues (descending) and unit eigenvectors of a symmetric 3×3 matrix, by cyclic
-/// Jacobi rotations (deterministic: a fixed sweep order, stopping when the off-diagonal
-/// part is negligible). The vectors form a right-handed orthonormal frame.
-pub(crate) fn symmetric_eigen(m: DMat3) -> ([f64; 3], [DVec3; 3]) {
-    let mut a = [
-        [m.x_axis.x, m.y_axis.x, m.z_axis.x],
-        [m.x_axis.y, m.y_axis.y, m.z_axis.y],
-        [m.x_axis.z, m.y_axis.z, m.z_axis.z],
-    ];
-    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0f64]];
-    let scale = a.iter().flatten().map(|x| x.abs()).fold(0.0, f64::max);
-    if scale > 0.0 && scale.is_finite() {
-        for _sweep in 0..32 {
-            let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
-            if off <= 1e-15 * scale {
-                break;
-            }
-            rotate::<0, 1>(&mut a, &mut v);
-            rotate::<0, 2>(&mut a, &mut v);
-            rotate::<1, 2>(&mut a, &mut v);
-        }
-    }
-    let mut idx = [0usize, 1, 2];
-    idx.sort_by(|&i, &j| a[j][j].total_cmp(&a[i][i]));
-    let values = idx.map(|i| a[i][i]);
-    let mut vectors = idx.map(|i| DVec3::new(v[0][i], v[1][i], v[2][i]).normalize());
-    if vectors[0].cross(vectors[1]).dot(vectors[2]) < 0.0 {
-        vectors[2] = -vectors[2];
-    }
-    (values, vectors)
-}
-
-/// One Jacobi rotation of [`symmetric_eigen`] in the (`P`, `Q`) plane: `A ← Jᵀ A J`,
-/// `V ← V J`, the one that zeroes `A[P][Q]` (none when it is already 0). The plane is a
-/// constant so that each rotation compiles to straight-line code (the same operations in
-/// the same order as with the plane a loop variable: 9 % fewer instructions in
-/// `symmetric_eigen` on frame 25, callgrind, the same bits).
-#[inline(always)]
-fn rotate<const P: usize, const Q: usize>(a: &mut [[f64; 3]; 3], v: &mut [[f64; 3]; 3]) {
-    if a[P][Q].abs() <= 1e-300 {
-        return;
-    }
-    let theta = (a[Q][Q] - a[P][P]) / (2.0 * a[P][Q]);
-    let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-    let t = if theta == 0.0 { 1.0 } else { t };
-    let c = 1.0 / (t * t + 1.0).sqrt();
-    let s = t * c;
-    for row in a.iter_mut() {
-        let (akp, akq) = (row[P], row[Q]);
-        row[P] = c * akp - s * akq;
-        row[Q] = s * akp + c * akq;
-    }
-    let (row_p, row_q) = (a[P], a[Q]);
-    for k in 0..3 {
-        a[P][k] = c * row_p[k] - s * row_q[k];
-        a[Q][k] = s * row_p[k] + c * row_q[k];
-    }
-    for row in v.iter_mut() {
-        let (vp, vq) = (row[P], row[Q]);
-        row[P] = c * vp - s * vq;
-        row[Q] = s * vp + c * vq;
     }
 }
 
@@ -979,25 +790,6 @@ mod tests {
                 }
                 // Too few neighbours (or none apart from coincident copies): spheres.
                 _ => assert!(kernels.iter().all(|k| k.axes == [h_a; 3]), "{name}"),
-            }
-        }
-    }
-
-    #[test]
-    fn eigen_decomposition_reconstructs_the_matrix() {
-        let mut rng = crate::test_rng::TestRng::new(3);
-        for _ in 0..200 {
-            let mut e = || rng.unit_f32() as f64 * 2.0 - 1.0;
-            let b = DMat3::from_cols_array(&[e(), e(), e(), e(), e(), e(), e(), e(), e()]);
-            let m = b * b.transpose();
-            let (values, vectors) = symmetric_eigen(m);
-            assert!(values[0] >= values[1] && values[1] >= values[2]);
-            let mut back = DMat3::ZERO;
-            for (l, v) in values.iter().zip(&vectors) {
-                back += DMat3::from_cols(*v * v.x, *v * v.y, *v * v.z) * *l;
-            }
-            for (x, y) in back.to_cols_array().iter().zip(m.to_cols_array()) {
-                assert!((x - y).abs() < 1e-12 * (1.0 + y.abs()), "{back} vs {m}");
             }
         }
     }
