@@ -302,14 +302,7 @@ pub fn compute_field(
         options.cell_size_world(),
         options.particle_radius,
     )?;
-    let inv_h = 1.0 / options.cell_size_world();
-    let halves: Vec<BlockKey> = positions
-        .par_iter()
-        .map(|p| home_half_block(*p, inv_h))
-        .collect();
-    let order = crate::grid::sort_by_key_zyx(&halves);
-    let sorted: Vec<Vec3> = order.par_iter().map(|&i| positions[i as usize]).collect();
-    let sorted_halves: Vec<BlockKey> = order.iter().map(|&i| halves[i as usize]).collect();
+    let (_, sorted, sorted_halves) = canonical_order(positions, options);
     let in_field = vec![true; sorted.len()];
     let particles = TileParticles {
         positions: sorted,
@@ -319,6 +312,24 @@ pub fn compute_field(
     };
     let tile = compute_tile(particles, options, None, None);
     Ok((tile.field, tile.stats))
+}
+
+/// `positions` in the canonical order (home half-block in (z, y, x) order, then input
+/// index; see the module docs): the input index of each, the positions and their home
+/// half-blocks.
+pub(crate) fn canonical_order(
+    positions: &[Vec3],
+    options: &FieldOptions,
+) -> (Vec<u32>, Vec<Vec3>, Vec<BlockKey>) {
+    let inv_h = 1.0 / options.cell_size_world();
+    let halves: Vec<BlockKey> = positions
+        .par_iter()
+        .map(|p| home_half_block(*p, inv_h))
+        .collect();
+    let order = crate::grid::sort_by_key_zyx(&halves);
+    let sorted: Vec<Vec3> = order.par_iter().map(|&i| positions[i as usize]).collect();
+    let sorted_halves: Vec<BlockKey> = order.iter().map(|&i| halves[i as usize]).collect();
+    (order, sorted, sorted_halves)
 }
 
 /// The particles one tile's field is computed from, in the canonical order (home
