@@ -5,6 +5,10 @@ this VM's speed drifts within the hour).
 
     python3 benches/peers.py [--rounds 3] [--cases frame25,splash168k,splash4m,splash4m-1GiB,calm4m]
 
+Two more cases, run only when named, give the floor of the default pipeline's time:
+`frame25-raw` and `splash4m-raw` time meniscus's raw anisotropic surface (no decimation,
+smoothing, containment or subdivision) against the same splashsurf runs.
+
 Each round runs every case's meniscus command and its splashsurf command back to back
 (meniscus first on odd rounds, splashsurf first on even ones), each under
 `/usr/bin/time -v` for the wall time and the peak RSS. Per case it prints the ratio
@@ -34,6 +38,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 FRAME = os.path.join(ROOT, "datasets", "dambreak_small", "ParticleData_Fluid_25.xyz")
 RADIUS = "0.012"
 SPLASHSURF_RAW = ["-l", "2.0", "-t", "0.6", "-c", "1.0"]
+# meniscus without post-processing.
+RAW = ["--decimate", "off", "--smooth", "0", "--subdivide", "0", "--keep-inside", "off"]
 SPLASHSURF_SMOOTHED = ["-l", "2.0", "-t", "0.6", "-c", "0.5", "--mesh-smoothing-weights=on",
                        "--mesh-smoothing-iters=25", "--normals=on"]
 
@@ -44,7 +50,13 @@ CASES = {
     "splash4m": ((96, True), [], SPLASHSURF_RAW),
     "splash4m-1GiB": ((96, True), ["--memory-budget", "1GiB"], SPLASHSURF_RAW),
     "calm4m": ((96, False), [], SPLASHSURF_RAW),
+    # The floor: meniscus's raw anisotropic surface (kernels, field, marching cubes, no
+    # post-processing) against the same peer runs. The default pipeline cannot be faster.
+    "frame25-raw": (None, RAW, SPLASHSURF_SMOOTHED),
+    "splash4m-raw": ((96, True), RAW, SPLASHSURF_RAW),
 }
+# Cases run without --cases (the floor cases are asked for by name).
+DEFAULT_CASES = ["frame25", "splash168k", "splash4m", "splash4m-1GiB", "calm4m"]
 
 
 def splashsurf_binary():
@@ -88,7 +100,7 @@ def timed(command, work):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rounds", type=int, default=3)
-    ap.add_argument("--cases", default=",".join(CASES))
+    ap.add_argument("--cases", default=",".join(DEFAULT_CASES))
     ap.add_argument("--binary", default=os.path.join(ROOT, "target", "release", "meniscus"))
     args = ap.parse_args()
     cases = args.cases.split(",")
