@@ -28,8 +28,7 @@ pub(crate) fn symmetric_eigen(m: DMat3) -> ([f64; 3], [DVec3; 3]) {
     let (a11, a12, a22) = (a.y_axis.y, a.z_axis.y, a.z_axis.z);
     let q = (a00 + a11 + a22) / 3.0;
     let (b00, b11, b22) = (a00 - q, a11 - q, a22 - q);
-    let p = ((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12))
-        / 6.0)
+    let p = ((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0)
         .sqrt();
     // B = (A − qI) / p has the eigenvalues 2 cos(θ + 2πk/3) with cos 3θ = det(B) / 2; the
     // largest (k = 0) lies farthest from the others when det(B) ≥ 0, else the smallest.
@@ -163,14 +162,28 @@ mod tests {
     fn check(m: DMat3, tol: f64) {
         let (values, vectors) = symmetric_eigen(m);
         let (reference, _) = jacobi_eigen(m);
-        let scale = m.to_cols_array().iter().map(|x| x.abs()).fold(0.0, f64::max);
-        assert!(values[0] >= values[1] && values[1] >= values[2], "{values:?}");
+        let scale = m
+            .to_cols_array()
+            .iter()
+            .map(|x| x.abs())
+            .fold(0.0, f64::max);
+        assert!(
+            values[0] >= values[1] && values[1] >= values[2],
+            "{values:?}"
+        );
         for (v, r) in values.iter().zip(&reference) {
-            assert!((v - r).abs() <= tol * scale, "{values:?} against {reference:?} for {m}");
+            assert!(
+                (v - r).abs() <= tol * scale,
+                "{values:?} against {reference:?} for {m}"
+            );
         }
         let frame = DMat3::from_cols(vectors[0], vectors[1], vectors[2]);
         let gram = frame.transpose() * frame;
-        for (x, y) in gram.to_cols_array().iter().zip(DMat3::IDENTITY.to_cols_array()) {
+        for (x, y) in gram
+            .to_cols_array()
+            .iter()
+            .zip(DMat3::IDENTITY.to_cols_array())
+        {
             assert!((x - y).abs() < 1e-12, "not orthonormal: {gram} for {m}");
         }
         assert!(frame.determinant() > 0.0, "left-handed for {m}");
