@@ -21,7 +21,9 @@ pub struct StageTiming {
     pub seconds: f64,
     /// Triangles of the fluid surface after the stage (0 before marching cubes).
     pub triangles: usize,
-    /// Peak resident memory of the process at the end of the stage (Linux), bytes.
+    /// Peak resident memory of the process at the end of the stage (Linux), bytes. The
+    /// stages the tile engine runs together, tile by tile (neighbours to marching cubes),
+    /// all report it at the end of the last of them.
     pub peak_rss_bytes: Option<u64>,
 }
 
