@@ -56,7 +56,7 @@ CASES = {
     "splash4m-raw": ((96, True), RAW, SPLASHSURF_RAW),
 }
 # Cases run without --cases (the floor cases are asked for by name).
-DEFAULT_CASES = ["frame25", "splash168k", "splash4m", "splash4m-1GiB", "calm4m"]
+DEFAULT_CASES = [case for case in CASES if not case.endswith("-raw")]
 
 
 def splashsurf_binary():
