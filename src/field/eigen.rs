@@ -12,11 +12,7 @@ use glam::{DMat3, DVec3};
 /// the cubic's roots lose half their digits). The vectors form a right-handed
 /// orthonormal frame; no iteration, so the cost is the same for every matrix.
 pub(crate) fn symmetric_eigen(m: DMat3) -> ([f64; 3], [DVec3; 3]) {
-    let scale = m
-        .to_cols_array()
-        .iter()
-        .map(|x| x.abs())
-        .fold(0.0, f64::max);
+    let scale = largest_entry(&m);
     let diagonal = m.x_axis.y == 0.0 && m.x_axis.z == 0.0 && m.y_axis.z == 0.0;
     if diagonal || !(scale > 0.0 && scale.is_finite()) {
         let d = [m.x_axis.x, m.y_axis.y, m.z_axis.z];
@@ -75,6 +71,14 @@ pub(crate) fn symmetric_eigen(m: DMat3) -> ([f64; 3], [DVec3; 3]) {
     )
 }
 
+/// The largest magnitude of an entry of `m`.
+fn largest_entry(m: &DMat3) -> f64 {
+    m.to_cols_array()
+        .iter()
+        .map(|x| x.abs())
+        .fold(0.0, f64::max)
+}
+
 /// Values in descending order with their vectors, the frame made right-handed.
 fn sorted(values: [f64; 3], vectors: [DVec3; 3]) -> ([f64; 3], [DVec3; 3]) {
     let mut idx = [0usize, 1, 2];
@@ -115,7 +119,7 @@ fn isolated_vector(a: &DMat3, lambda: f64) -> DVec3 {
 fn jacobi_eigen(m: DMat3) -> ([f64; 3], [DVec3; 3]) {
     let mut a = m.transpose().to_cols_array_2d();
     let mut v = DMat3::IDENTITY.to_cols_array_2d();
-    let scale = a.iter().flatten().map(|x| x.abs()).fold(0.0, f64::max);
+    let scale = largest_entry(&m);
     for _sweep in 0..64 {
         let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
         if off <= 1e-15 * scale {
@@ -162,11 +166,7 @@ mod tests {
     fn check(m: DMat3, tol: f64) {
         let (values, vectors) = symmetric_eigen(m);
         let (reference, _) = jacobi_eigen(m);
-        let scale = m
-            .to_cols_array()
-            .iter()
-            .map(|x| x.abs())
-            .fold(0.0, f64::max);
+        let scale = largest_entry(&m);
         assert!(
             values[0] >= values[1] && values[1] >= values[2],
             "{values:?}"
