@@ -37,3 +37,8 @@ for output in "$out/shot.usdc" "$out/f_{}.ply"; do
     --isolated-spheres off -o "$output" --quiet
 done
 "$venv/bin/python" tests/blender/import_usd.py "$out/shot.usdc" "$out/f_{}.ply"
+# The same sequence with its isolated particles (the default): the droplets arrive as a
+# point cloud with `velocity` and `radius`, and motion blur changes their pixels.
+cargo run --release --quiet -- reconstruct "$pattern" --particle-radius 0.025 \
+  -o "$out/droplets.usdc" --quiet
+"$venv/bin/python" tests/blender/import_droplets.py "$out/droplets.usdc" 0.025

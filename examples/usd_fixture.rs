@@ -3,8 +3,11 @@
 //!
 //! * `sequence.usdc` and `sequence.usda`: frames 1, 2 and 5 (a gap), a fluid whose
 //!   topology changes every frame, attributes of 1 to 4 components (velocity, density,
-//!   `tex-coord`, colour), isolated spheres in frames 1 and 5 only, with a velocity and a
-//!   density per instance, those of frame 1 of three sizes (scales 1, 2, 0.5);
+//!   `tex-coord`, colour), isolated particles in frames 1 and 5 only (a point cloud, the
+//!   default), with a velocity and a density per point, those of frame 1 of three sizes
+//!   (scales 1, 2, 0.5);
+//! * `instanced.usdc` and `instanced.usda`: the same frames with the isolated particles
+//!   as a point instancer of the icosphere;
 //! * `no_spheres.usdc`: two frames without spheres, up axis Z, 100 frames per second,
 //!   centimetres;
 //! * `wide.usdc`: one frame with a 6-component attribute (`elementSize` 6) and no normals;
@@ -14,7 +17,7 @@
 //! `cargo run --release --example usd_fixture -- OUT_DIR`
 
 use glam::Vec3;
-use meniscus::io::usd::{UpAxis, UsdOptions, UsdStageWriter};
+use meniscus::io::usd::{UpAxis, UsdDroplets, UsdOptions, UsdStageWriter};
 use meniscus::isolated::icosphere;
 use meniscus::mesh::{Attribute, SphereInstances, Surface, TriMesh};
 use serde_json::{json, Value};
@@ -119,6 +122,7 @@ fn write(path: &Path, options: &UsdOptions, frames: &[(i64, Surface)]) -> Value 
     );
     json!({
         "file": path.file_name().unwrap().to_string_lossy(),
+        "droplets": options.droplets.name(),
         "fps": options.fps,
         "up_axis": options.up_axis.token(),
         "meters_per_unit": options.meters_per_unit,
@@ -155,6 +159,13 @@ fn main() {
     let mut stages = Vec::new();
     for name in ["sequence.usdc", "sequence.usda"] {
         stages.push(write(&dir.join(name), &UsdOptions::default(), &sequence));
+    }
+    let instanced = UsdOptions {
+        droplets: UsdDroplets::Instancer,
+        ..UsdOptions::default()
+    };
+    for name in ["instanced.usdc", "instanced.usda"] {
+        stages.push(write(&dir.join(name), &instanced, &sequence));
     }
     let plain: Vec<(i64, Surface)> = [10, 11]
         .into_iter()

@@ -137,7 +137,7 @@ class Mesh:
     def write(self, path: _Path, *, normals: bool = True, frame: int = 0) -> int:
         """Writes the surface to ``path`` (.ply, .obj, .glb, .gltf, .vtk, or a USD stage .usdc,
         .usda, .usd, by extension), as the CLI does (glTF keeps the spheres instanced, USD
-        has them as a point instancer); a stage holds it at time code ``frame``. Returns the
+        has them as a point cloud with widths and velocities); a stage holds it at time code ``frame``. Returns the
         bytes written."""
 
 def reconstruct(
@@ -205,6 +205,7 @@ def reconstruct_file(
     fps: float = 24.0,
     up_axis: str = "Y",
     meters_per_unit: float = 1.0,
+    usd_droplets: str = "points",
     input_format: str | None = None,
     **options: Unpack[ReconstructOptions],
 ) -> list[dict[str, Any]]:
@@ -243,6 +244,10 @@ def reconstruct_file(
             per second.
         up_axis: a USD stage's up axis, ``"Y"`` (the simulators') or ``"Z"``.
         meters_per_unit: a USD stage's ``metersPerUnit``.
+        usd_droplets: the isolated particles of a USD stage: ``"points"`` (a
+            ``UsdGeomPoints`` prim with widths 2 r_i and velocities, which renderers
+            draw as spheres and Blender blurs) or ``"instancer"`` (a point instancer of
+            the sphere mesh).
         input_format: ``"xyz"``, ``"vtk"``, ``"ply"`` or ``"bgeo"``, instead of the extension.
         **options: the reconstruction settings (``ReconstructOptions``).
 

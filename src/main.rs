@@ -14,7 +14,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use meniscus::attributes::AttributeSelection;
 use meniscus::io::mesh::MeshWriteOptions;
 use meniscus::io::particles::ParticleFormat;
-use meniscus::io::usd::UpAxis;
+use meniscus::io::usd::{UpAxis, UsdDroplets};
 use meniscus::job::{
     check_outputs, peak_rss_bytes, plan_frames, run_frames, FrameReport, FrameStatus, JobOptions,
 };
@@ -60,6 +60,11 @@ struct StageArgs {
     /// Meters in one world unit of a USD stage output (its `metersPerUnit`).
     #[arg(allow_negative_numbers = true, long, default_value_t = 1.0)]
     meters_per_unit: f64,
+    /// Isolated particles of a USD stage: `points` (a point cloud with widths and
+    /// velocities, which renderers draw as spheres and blur) or `instancer` (a point
+    /// instancer of the sphere mesh).
+    #[arg(long, value_name = "points|instancer", default_value_t = UsdDroplets::Points)]
+    usd_droplets: UsdDroplets,
 }
 
 /// Frame selection of a sequence: a range, or a list and a share as render farms give
@@ -562,6 +567,7 @@ fn job_options(
         fps: args.stage.fps,
         up_axis: args.stage.up_axis,
         meters_per_unit: args.stage.meters_per_unit,
+        usd_droplets: args.stage.usd_droplets,
         attributes,
         radius_attribute: args.radius_attribute.clone().unwrap_or_default(),
         cancel: cancel.clone(),

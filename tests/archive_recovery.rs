@@ -468,6 +468,7 @@ fn run_into_archive(
         fps: 24.0,
         up_axis: Default::default(),
         meters_per_unit: 1.0,
+        usd_droplets: Default::default(),
         attributes: Default::default(),
         radius_attribute: Default::default(),
         keep_going: false,

@@ -3,7 +3,7 @@
 //! Pixar's reader by `tests/usd/check_stages.py` (see `tests/usd/run.sh`).
 
 use glam::Vec3;
-use meniscus::io::usd::{UsdFormat, UsdOptions, UsdStageWriter};
+use meniscus::io::usd::{UsdDroplets, UsdFormat, UsdOptions, UsdStageWriter};
 use meniscus::isolated::icosphere;
 use meniscus::mesh::{Attribute, SphereInstances, Surface};
 use meniscus::Error;
@@ -68,8 +68,19 @@ fn both_formats_are_written_by_finish_only() {
         assert!(bytes.starts_with(head), "{name}");
         assert_eq!(stats.bytes, bytes.len() as u64, "{name}");
         assert_eq!(stats.frames, 2);
-        let sphere = 80 * 2;
-        assert_eq!(stats.triangles, 80 + 320 + 2 * sphere, "{name}");
+        // The droplets are points by default: no sphere triangles.
+        assert_eq!(stats.triangles, 80 + 320, "{name}");
+        assert_eq!(stats.droplets, 2 * 2, "{name}");
+        let instanced = UsdOptions {
+            droplets: UsdDroplets::Instancer,
+            ..UsdOptions::default()
+        };
+        let mut stage = UsdStageWriter::create(&path, &instanced).unwrap();
+        stage.append_frame(3, &surface(1)).unwrap();
+        let stats = stage.finish().unwrap();
+        // Two spheres of 80 triangles.
+        assert_eq!(stats.triangles, 80 + 2 * 80, "{name}");
+        assert_eq!(stats.droplets, 2, "{name}");
     }
     assert_eq!(
         files(dir.path()),
@@ -210,4 +221,36 @@ fn options_and_paths_are_checked_at_create() {
         UsdFormat::from_path(Path::new("a.USD")).unwrap(),
         UsdFormat::Usdc
     );
+}
+
+#[test]
+fn droplets_are_points_with_widths_or_an_instancer_by_option() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut s = surface(1);
+    s.spheres.scales = vec![1.0, 2.0];
+    let write = |name: &str, droplets| {
+        let path = dir.path().join(name);
+        let options = UsdOptions {
+            droplets,
+            ..UsdOptions::default()
+        };
+        let mut stage = UsdStageWriter::create(&path, &options).unwrap();
+        stage.append_frame(1, &s).unwrap();
+        stage.finish().unwrap();
+        std::fs::read_to_string(path).unwrap()
+    };
+    let points = write("points.usda", UsdDroplets::default());
+    assert!(points.contains("def Points \"Droplets\""), "{points}");
+    assert!(!points.contains("PointInstancer"));
+    // widths = 2 r_i: the template's radius is 0.05, the scales 1 and 2.
+    let widths = &points[points.find("float[] widths.timeSamples").unwrap()..];
+    assert!(widths.contains("1: [0.1, 0.2]"), "{widths}");
+    let droplets = &points[points.find("def Points").unwrap()..];
+    assert!(droplets.contains("vector3f[] velocities.timeSamples"));
+    assert!(droplets.contains("interpolation = \"vertex\""));
+    let instanced = write("instanced.usda", UsdDroplets::Instancer);
+    assert!(instanced.contains("def PointInstancer \"Spheres\""));
+    assert!(!instanced.contains("def Points"));
+    assert_eq!("instancer".parse(), Ok(UsdDroplets::Instancer));
+    assert!("spheres".parse::<UsdDroplets>().is_err());
 }

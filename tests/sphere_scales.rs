@@ -184,7 +184,11 @@ fn a_usd_instancer_gets_scales_and_a_scaled_extent_only_for_frames_with_them() {
     let s = scaled();
     let mut plain = scaled();
     plain.spheres.scales.clear();
-    let mut stage = UsdStageWriter::create(&path, &UsdOptions::default()).unwrap();
+    let options = UsdOptions {
+        droplets: meniscus::io::usd::UsdDroplets::Instancer,
+        ..UsdOptions::default()
+    };
+    let mut stage = UsdStageWriter::create(&path, &options).unwrap();
     stage.append_frame(1, &s).unwrap();
     stage.append_frame(2, &plain).unwrap();
     stage.finish().unwrap();
@@ -294,7 +298,21 @@ fn an_archive_stores_the_scales_and_every_sphere_within_the_bound() {
         )
         .unwrap();
     let text = std::fs::read_to_string(&stage).unwrap();
-    assert!(usda_property(&text, "float3[] scales.timeSamples").contains("(2.0, 2.0, 2.0)"));
+    // The droplets' widths are their diameters, 2 r_i (the template's radius within the
+    // archive's bound, scaled).
+    let widths = usda_property(&text, "float[] widths.timeSamples");
+    let widths = &widths[widths.find("2: [").unwrap() + 4..];
+    let widths: Vec<f32> = widths[..widths.find(']').unwrap()]
+        .split(", ")
+        .map(|w| w.parse().unwrap())
+        .collect();
+    assert_eq!(widths.len(), SCALES.len());
+    for (w, k) in widths.iter().zip(SCALES) {
+        assert!(
+            (w - 2.0 * RADIUS * k).abs() <= 2.0 * bound as f32 * k,
+            "{widths:?}"
+        );
+    }
 }
 
 #[test]

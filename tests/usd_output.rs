@@ -125,7 +125,7 @@ fn braces_in_the_output_write_a_stage_per_frame_which_skip_existing_skips() {
 }
 
 #[test]
-fn tiled_runs_write_the_same_stage_and_spheres_are_an_instancer_or_nothing() {
+fn tiled_runs_write_the_same_stage_and_droplets_are_points_an_instancer_or_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let pattern = write_particle_sequence(dir.path());
     let stage = |name: &str, args: &[&str]| {
@@ -150,10 +150,15 @@ fn tiled_runs_write_the_same_stage_and_spheres_are_an_instancer_or_nothing() {
     let tiled = stage("tiled.usdc", &[&raw[..], &["--tile-size", "16"]].concat());
     assert!(whole == tiled, "a tiled run writes the same stage");
     let with = String::from_utf8(stage("with.usda", &[])).unwrap();
-    assert!(with.contains("def PointInstancer \"Spheres\""));
-    assert!(!sample_times(&with, "point3f[] positions").is_empty());
+    assert!(with.contains("def Points \"Droplets\""));
+    assert!(!with.contains("PointInstancer"));
+    assert!(!sample_times(&with, "float[] widths").is_empty());
+    let instanced = stage("inst.usda", &["--usd-droplets", "instancer"]);
+    let instanced = String::from_utf8(instanced).unwrap();
+    assert!(instanced.contains("def PointInstancer \"Spheres\""));
+    assert!(!sample_times(&instanced, "point3f[] positions").is_empty());
     let without = String::from_utf8(stage("without.usda", &["--isolated-spheres", "off"])).unwrap();
-    assert!(!without.contains("PointInstancer"));
+    assert!(!without.contains("PointInstancer") && !without.contains("def Points"));
     assert_eq!(sample_times(&without, "point3f[] points"), [1, 2, 4]);
 }
 

@@ -413,7 +413,7 @@ impl Mesh {
 
     /// Writes the surface to `path` (.ply, .obj, .glb, .gltf, .vtk, or a USD stage
     /// .usdc, .usda, .usd, by extension), as the CLI writes it (glTF keeps the spheres
-    /// instanced, USD has them as a point instancer). A stage holds the surface at time
+    /// instanced, USD has them as a point cloud with widths and velocities). A stage holds the surface at time
     /// code `frame` (other formats have no time). Returns the bytes written.
     #[pyo3(signature = (path, *, normals = true, frame = 0))]
     fn write(&self, py: Python<'_>, path: PathBuf, normals: bool, frame: i64) -> PyResult<u64> {
@@ -593,7 +593,7 @@ fn selection(attributes: Option<&Bound<'_, PyAny>>) -> PyResult<AttributeSelecti
     frames = None, shard = None, start = None, end = None, keep_going = false,
     progress = None, skip_existing = false, normals = true, error_bound = None,
     attribute_error_bound = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND, fps = 24.0,
-    up_axis = "Y", meters_per_unit = 1.0, input_format = None, **options))]
+    up_axis = "Y", meters_per_unit = 1.0, usd_droplets = "points", input_format = None, **options))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct_file<'py>(
     py: Python<'py>,
@@ -617,6 +617,7 @@ fn reconstruct_file<'py>(
     fps: f64,
     up_axis: &str,
     meters_per_unit: f64,
+    usd_droplets: &str,
     input_format: Option<String>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
@@ -629,6 +630,9 @@ fn reconstruct_file<'py>(
     let up_axis: UpAxis = up_axis
         .parse()
         .map_err(|e| PyValueError::new_err(format!("invalid up_axis: {e}")))?;
+    let usd_droplets: meniscus::io::usd::UsdDroplets = usd_droplets
+        .parse()
+        .map_err(|e| PyValueError::new_err(format!("invalid usd_droplets: {e}")))?;
     reconstruct_options(
         py,
         "reconstruct_file",
@@ -680,6 +684,7 @@ fn reconstruct_file<'py>(
             fps,
             up_axis,
             meters_per_unit,
+            usd_droplets,
             attributes,
             radius_attribute: which.clone(),
             cancel: cancel.clone(),

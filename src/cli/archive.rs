@@ -257,6 +257,7 @@ fn extract(
             fps: stage.fps,
             up_axis: stage.up_axis,
             meters_per_unit: stage.meters_per_unit,
+            droplets: stage.usd_droplets,
             ..UsdOptions::default()
         };
         let written = r.extract_stage(numbers.as_deref(), output, &options, cancel)?;

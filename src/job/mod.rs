@@ -24,7 +24,7 @@ use crate::cancel::CancelToken;
 use crate::error::{Error, Result};
 use crate::io::mesh::MeshWriteOptions;
 use crate::io::particles::ParticleFormat;
-use crate::io::usd::UpAxis;
+use crate::io::usd::{UpAxis, UsdDroplets};
 use crate::pipeline::ReconstructOptions;
 use crate::radius::RadiusAttribute;
 use crate::sequence::Frame;
@@ -56,6 +56,9 @@ pub struct JobOptions {
     pub up_axis: UpAxis,
     /// Meters in one world unit of a USD stage output (`metersPerUnit`).
     pub meters_per_unit: f64,
+    /// How a USD stage output holds the isolated particles: points (the default) or a
+    /// point instancer.
+    pub usd_droplets: UsdDroplets,
     /// The point attributes carried to the surface.
     pub attributes: AttributeSelection,
     /// The point attribute holding each particle's radius (default Houdini's `pscale`

@@ -9,8 +9,10 @@ The stage opens without an error and Pixar's compliance check reports none
 its time range is the first and last frame; every time-sampled property of the fluid mesh
 has a sample at exactly FRAME...; at every frame each face is a triangle, the indices are
 in range, `velocities` has the points' length, and points and velocities equal the PLY's
-first vertices (the PLY lists the fluid's vertices, then the spheres'), bit for bit; the
-triangles of the fluid plus every sphere instance are the PLY's. Exits non-zero on the
+first vertices (the PLY lists the fluid's vertices, then the spheres'), bit for bit; with
+an instancer, the triangles of the fluid plus every sphere instance are the PLY's; with
+droplets as points (the default), each point is the centre of one of the PLY's spheres,
+its width the sphere's diameter and its velocity the sphere's (`check_droplets`). Exits non-zero on the
 first failure.
 """
 
@@ -43,6 +45,36 @@ def read_ply(path):
     return faces, columns
 
 
+def check_droplets(points, frame, faces, columns, first):
+    """The droplets (a Points prim) against the PLY's spheres, which follow the fluid's
+    `first` vertices: as many spheres as points, each of the same number of vertices and
+    `faces` / points triangles, centred (the mean of its vertices) on its point, as wide
+    as its point's width (twice its farthest vertex), with the point's velocity."""
+    centers = points.GetPointsAttr().Get(frame) or []
+    widths = points.GetWidthsAttr().Get(frame) or []
+    velocities = points.GetVelocitiesAttr().Get(frame) or []
+    d = len(centers)
+    expect(len(widths) == d and len(velocities) == d, f"frame {frame}: {d} droplets, {len(widths)} widths, {len(velocities)} velocities")
+    rest = len(columns["x"]) - first
+    if d == 0:
+        expect(rest == 0 and faces == 0, f"frame {frame}: sphere vertices without droplets")
+        return
+    expect(rest % d == 0 and faces % d == 0, f"frame {frame}: {rest} sphere vertices, {faces} faces for {d} droplets")
+    per = rest // d
+    for k in range(d):
+        block = range(first + k * per, first + (k + 1) * per)
+        mean = [sum(columns[a][i] for i in block) / per for a in "xyz"]
+        reach = max(sum((columns[a][i] - mean[j]) ** 2 for j, a in enumerate("xyz")) ** 0.5 for i in block)
+        tolerance = 1e-4 * max(widths[k], 1e-6) + 1e-6 * max(abs(c) for c in centers[k])
+        expect(all(abs(mean[j] - centers[k][j]) <= tolerance for j in range(3)),
+               f"frame {frame} droplet {k}: at {centers[k]}, its sphere centred at {mean}")
+        expect(abs(2 * reach - widths[k]) <= 1e-4 * widths[k] + 2 * tolerance,
+               f"frame {frame} droplet {k}: width {widths[k]}, its sphere {2 * reach} wide")
+        for j, a in enumerate("xyz"):
+            expect(velocities[k][j] == columns[f"velocity_{a}"][block[0]],
+                   f"frame {frame} droplet {k}: velocity {a} is the PLY sphere's")
+
+
 def check_frame(stage, frame, ply):
     faces, columns = read_ply(ply)
     fluid = UsdGeom.Mesh(stage.GetPrimAtPath("/Surface/Fluid"))
@@ -61,6 +93,11 @@ def check_frame(stage, frame, ply):
                f"frame {frame}: velocity {axis} equals the PLY's")
     triangles = len(counts)
     spheres = stage.GetPrimAtPath("/Surface/Spheres")
+    droplets = stage.GetPrimAtPath("/Surface/Droplets")
+    if droplets.IsValid():
+        expect(not spheres.IsValid(), "both droplets and spheres")
+        check_droplets(UsdGeom.Points(droplets), frame, faces - triangles, columns, n)
+        return len(counts)
     if spheres.IsValid():
         instancer = UsdGeom.PointInstancer(spheres)
         instances = len(instancer.GetPositionsAttr().Get(frame) or [])

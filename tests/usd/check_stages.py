@@ -13,10 +13,11 @@ every face is a triangle, the indices are in range and equal the mesh's, points 
 normals equal the mesh's, `velocities` has the points' length and equals the velocity
 attribute, each other attribute is a `primvars:NAME` of its components (1-4 as
 float..float4, more as float[] with elementSize) with vertex interpolation and the same
-values, the extent is the points' bounding box; the spheres are a PointInstancer of the
-icosphere with the centres as positions, their velocity and density, their scales and
-each instance's size where a frame has them (`check_scales`), and it is absent
-from a stage without spheres. Floats must be equal to the bit (f32). Exits non-zero on the
+values, the extent is the points' bounding box; the isolated particles are a Points prim
+(`check_points`: centres, widths 2 r_i, extent, velocity and density) by default, or with
+the instancer option a PointInstancer of the icosphere with the centres as positions,
+their velocity and density, their scales and each instance's size where a frame has them
+(`check_scales`); either is absent from a stage without isolated particles. Floats must be equal to the bit (f32). Exits non-zero on the
 first failure.
 """
 
@@ -197,8 +198,56 @@ def check_scales(instancer, s, t, pad, template):
     same_floats(instancer.GetExtentAttr().Get(t), [*lo, *hi], f"frame {t} sphere extent")
 
 
-def check_spheres(stage, spec):
+def check_points(stage, spec):
+    """The isolated particles as a `UsdGeomPoints` prim, `/Surface/Droplets`: the centres
+    as points, widths 2 r_i (the template's radius, the mean distance of its vertices, times the scale, doubled), the extent
+    holding every point at its width, the velocity as `velocities`, the other attributes
+    as primvars; no instancer."""
     numbers = [f["frame"] for f in spec["frames"]]
+    expect(not stage.GetPrimAtPath("/Surface/Spheres"), "an instancer in a stage of points")
+    prim = stage.GetPrimAtPath("/Surface/Droplets")
+    if not any(f["spheres"]["centers"] for f in spec["frames"]):
+        expect(not prim, "droplets in a stage without isolated particles")
+        return
+    points = UsdGeom.Points(prim)
+    expect(points, "/Surface/Droplets is a Points prim")
+    expect(points.GetWidthsInterpolation() == UsdGeom.Tokens.vertex, "widths interpolation")
+    for attribute in prim.GetAttributes():
+        if attribute.HasAuthoredValue():
+            check_samples(attribute, numbers)
+    for f in spec["frames"]:
+        t, s = float(f["frame"]), f["spheres"]
+        n = len(s["centers"])
+        same_floats(points.GetPointsAttr().Get(t), flat(s["centers"]), f"frame {t} droplet points")
+        widths = list(points.GetWidthsAttr().Get(t))
+        expect(len(widths) == n, f"frame {t}: {len(widths)} widths for {n} droplets")
+        if not n:
+            expect(len(points.GetVelocitiesAttr().Get(t)) == 0, f"frame {t}: velocities without droplets")
+            continue
+        pts = s["template"]["points"]
+        radius = f32(sum(sum(f32(c) * f32(c) for c in p) ** 0.5 for p in pts) / len(pts))
+        scales = s["scales"] or [1.0] * n
+        for k, (w, scale) in enumerate(zip(widths, scales)):
+            want = 2 * radius * scale
+            expect(abs(w - want) <= 1e-6 * want, f"frame {t} droplet {k}: width {w}, expected {want}")
+        lo = [min(c[i] - w / 2 for c, w in zip(s["centers"], widths)) for i in range(3)]
+        hi = [max(c[i] + w / 2 for c, w in zip(s["centers"], widths)) for i in range(3)]
+        extent = flat(points.GetExtentAttr().Get(t))
+        for got, want in zip(extent, [*lo, *hi]):
+            expect(abs(got - want) <= 1e-6 * max(1.0, abs(want)), f"frame {t}: droplet extent {extent}, expected {lo} {hi}")
+        # What a renderer computes for the prim must hold every droplet too.
+        bound = UsdGeom.Points.ComputeExtent(points.GetPointsAttr().Get(t), points.GetWidthsAttr().Get(t))
+        expect(bound is not None and all(abs(a - b) <= 1e-6 * max(1.0, abs(b)) for a, b in zip(flat(bound), extent)),
+               f"frame {t}: extent {extent}, Pixar computes {bound}")
+        check_primvars(prim, s["attributes"], t, n, "droplets")
+
+
+def check_spheres(stage, spec):
+    if spec.get("droplets", "points") == "points":
+        check_points(stage, spec)
+        return
+    numbers = [f["frame"] for f in spec["frames"]]
+    expect(not stage.GetPrimAtPath("/Surface/Droplets"), "droplets in a stage of instances")
     prim = stage.GetPrimAtPath("/Surface/Spheres")
     if not any(f["spheres"]["centers"] for f in spec["frames"]):
         expect(not prim, "a sphere instancer in a stage without spheres")

@@ -22,6 +22,9 @@ for spheres in 2 off; do
       --attributes all --isolated-spheres "$spheres" -o "$output" --quiet
   done
 done
+# The droplets as a point instancer (the default is a point cloud).
+cargo run --release --quiet -- reconstruct "$pattern" --particle-radius 0.025 \
+  --attributes all --isolated-spheres 2 --usd-droplets instancer -o "$out/run-inst.usdc" --quiet
 for version in ${MENISCUS_USD_CORE:-25.11 26.11}; do
   venv="target/usd-venv-$version"
   if ! "$venv/bin/python" -c "import pxr.Usd" >/dev/null 2>&1; then
@@ -35,4 +38,5 @@ for version in ${MENISCUS_USD_CORE:-25.11 26.11}; do
       "$venv/bin/python" tests/usd/check_run.py "$stage" "$out/run-$spheres-{}.ply" 1 2 4
     done
   done
+  "$venv/bin/python" tests/usd/check_run.py "$out/run-inst.usdc" "$out/run-2-{}.ply" 1 2 4
 done

@@ -5,11 +5,17 @@
 //! `faceVertexIndices`, `normals`, `extent`, `velocities` (the velocity attribute, `v`,
 //! `vel` or `velocity`, as it is: units per second) and `primvars:NAME` for the other
 //! attributes (vertex interpolation; 1–4 components as `float`…`float4`, more as
-//! `float[]` with `elementSize`); the isolated-particle spheres as a `UsdGeomPointInstancer`
-//! (`/Surface/Spheres`) of the icosphere, with time-sampled positions, velocities and
-//! primvars per instance, and `scales` (each factor on all three axes) for frames whose
-//! spheres have sizes of their own (a frame without them has an empty array there:
-//! every instance at the prototype's size). The layer metadata sets `startTimeCode`/`endTimeCode` to the
+//! `float[]` with `elementSize`). The isolated particles (droplets) are, by default
+//! ([`UsdDroplets::Points`]), a `UsdGeomPoints` prim (`/Surface/Droplets`) with
+//! time-sampled `points`, `widths` (2 r_i: the particle's diameter), `extent`,
+//! `velocities` and `primvars:NAME` per point: renderers draw them as spheres, and
+//! importers keep the velocities (Blender makes a point cloud with `radius` and `velocity`
+//! attributes, which Cycles blurs). [`UsdDroplets::Instancer`] writes them instead as a
+//! `UsdGeomPointInstancer` (`/Surface/Spheres`) of the icosphere, with time-sampled
+//! positions, velocities and primvars per instance, and `scales` (each factor on all
+//! three axes) for frames whose spheres have sizes of their own (a frame without them
+//! has an empty array there: every instance at the prototype's size); Blender 5.0's
+//! importer drops an instancer's velocities, so its droplets get no motion blur. The layer metadata sets `startTimeCode`/`endTimeCode` to the
 //! first and last frame, `timeCodesPerSecond` = `framesPerSecond` = [`UsdOptions::fps`],
 //! `upAxis` and `metersPerUnit`.
 //!
@@ -79,6 +85,50 @@ impl std::fmt::Display for UpAxis {
     }
 }
 
+/// How a stage holds the isolated particles (the surface's sphere instances).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum UsdDroplets {
+    /// A `UsdGeomPoints` prim, `/Surface/Droplets`: a point per particle with its width
+    /// (2 r_i), velocity and attributes. The default: every renderer draws points as
+    /// spheres, and importers keep the velocities for motion blur.
+    #[default]
+    Points,
+    /// A `UsdGeomPointInstancer`, `/Surface/Spheres`, of the icosphere mesh (the
+    /// surface's sphere template).
+    Instancer,
+}
+
+impl UsdDroplets {
+    /// The option's word: `points` or `instancer`.
+    pub fn name(self) -> &'static str {
+        match self {
+            UsdDroplets::Points => "points",
+            UsdDroplets::Instancer => "instancer",
+        }
+    }
+}
+
+impl std::str::FromStr for UsdDroplets {
+    type Err = String;
+
+    /// `points` or `instancer`, either case.
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "points" => Ok(UsdDroplets::Points),
+            "instancer" => Ok(UsdDroplets::Instancer),
+            _ => Err(format!(
+                "the isolated particles of a USD stage are points or instancer, got {s:?}"
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for UsdDroplets {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// Stage file formats.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum UsdFormat {
@@ -120,6 +170,9 @@ pub struct UsdOptions {
     pub normals: bool,
     /// Format override; `None` chooses by extension. Default `None`.
     pub format: Option<UsdFormat>,
+    /// The isolated particles as points or as an instancer. Default
+    /// [`UsdDroplets::Points`].
+    pub droplets: UsdDroplets,
 }
 
 impl Default for UsdOptions {
@@ -130,6 +183,7 @@ impl Default for UsdOptions {
             meters_per_unit: 1.0,
             normals: true,
             format: None,
+            droplets: UsdDroplets::Points,
         }
     }
 }
@@ -172,10 +226,12 @@ pub struct UsdStageStats {
     pub bytes: u64,
     /// Frames in the stage.
     pub frames: usize,
-    /// Triangles over all frames (fluid plus every sphere instance).
+    /// Triangles over all frames (fluid plus every sphere instance of an instancer).
     pub triangles: usize,
-    /// Vertices over all frames (fluid plus every sphere instance).
+    /// Vertices over all frames (fluid plus every sphere instance of an instancer).
     pub vertices: usize,
+    /// Isolated particles over all frames (points or instances).
+    pub droplets: usize,
 }
 
 /// The format-specific part of the writer (`Send`, so a writer can move to the thread
@@ -361,11 +417,16 @@ impl UsdStageWriter {
         self.times.push(time);
         self.frames.insert(frame);
         let spheres = &surface.spheres;
+        let instances = match self.options.droplets {
+            UsdDroplets::Points => 0,
+            UsdDroplets::Instancer => spheres.centers.len(),
+        };
         self.stats.frames += 1;
-        self.stats.triangles += surface.fluid.triangle_count()
-            + spheres.template.triangle_count() * spheres.centers.len();
+        self.stats.droplets += spheres.centers.len();
+        self.stats.triangles +=
+            surface.fluid.triangle_count() + spheres.template.triangle_count() * instances;
         self.stats.vertices +=
-            surface.fluid.vertex_count() + spheres.template.vertex_count() * spheres.centers.len();
+            surface.fluid.vertex_count() + spheres.template.vertex_count() * instances;
         Ok(())
     }
 

@@ -7,15 +7,19 @@
 //!   /Surface/Fluid                 Mesh: extent, faceVertexCounts, faceVertexIndices,
 //!                                  points, normals, velocities, primvars:NAME (series);
 //!                                  subdivisionScheme = "none"
-//!   /Surface/Spheres               PointInstancer (when a frame had isolated spheres):
-//!                                  positions, protoIndices, extent, scales (when a
+//!   /Surface/Droplets              Points (the default for isolated particles, when a
+//!                                  frame had any): points, widths (2 r_i), extent,
+//!                                  velocities, primvars:NAME (series)
+//!   /Surface/Spheres               PointInstancer (instead of Droplets, by
+//!                                  UsdDroplets::Instancer, when a frame had isolated
+//!                                  spheres): positions, protoIndices, extent, scales (when a
 //!                                  frame's spheres have sizes of their own), velocities,
 //!                                  primvars:NAME (series); prototypes → Sphere…
 //!     /Surface/Spheres/Prototypes  Scope
 //!       …/Sphere, Sphere_1, …      Mesh: the icosphere template(s), static
 //! ```
 
-use super::UsdOptions;
+use super::{UsdDroplets, UsdOptions};
 use crate::attributes::{Attribute, VELOCITY_NAMES};
 use crate::error::{Error, Result};
 use crate::mesh::{SphereInstances, Surface, TriMesh};
@@ -32,6 +36,8 @@ pub(crate) enum Owner {
     Fluid,
     /// The sphere instancer, `/Surface/Spheres`.
     Spheres,
+    /// The isolated particles as a point cloud, `/Surface/Droplets`.
+    Droplets,
 }
 
 /// Element type of an array.
@@ -114,6 +120,16 @@ pub(crate) enum Values<'a> {
     Corners([Vec3; 2]),
     /// Uniform scales: each factor as a `float3` of three equal components.
     Scales(&'a [f32]),
+    /// Point widths: `diameter` times each scale, or `diameter` `count` times when there
+    /// are no scales.
+    Widths {
+        /// The scales (empty: all 1).
+        scales: &'a [f32],
+        /// The template's diameter.
+        diameter: f32,
+        /// Points.
+        count: usize,
+    },
 }
 
 impl Values<'_> {
@@ -122,6 +138,7 @@ impl Values<'_> {
         match *self {
             Values::Vec3(v) => v.len(),
             Values::Scales(v) => v.len(),
+            Values::Widths { count, .. } => count,
             Values::Floats(v) => v.len() / width.max(1),
             Values::Triangles(t) => 3 * t.len(),
             Values::Repeat(_, n) => n,
@@ -136,6 +153,11 @@ impl Values<'_> {
             Values::Floats(v) => Box::new(v.iter().copied()),
             Values::Corners(c) => Box::new(c.into_iter().flat_map(|p| p.to_array())),
             Values::Scales(v) => Box::new(v.iter().flat_map(|&s| [s; 3])),
+            Values::Widths {
+                scales,
+                diameter,
+                count,
+            } => widths(scales, diameter, count),
             Values::Triangles(_) | Values::Repeat(..) => Box::new(std::iter::empty()),
         }
     }
@@ -145,11 +167,52 @@ impl Values<'_> {
         match *self {
             Values::Triangles(t) => Box::new(t.iter().flatten().map(|&i| i as i32)),
             Values::Repeat(v, n) => Box::new(std::iter::repeat_n(v, n)),
-            Values::Vec3(_) | Values::Floats(_) | Values::Corners(_) | Values::Scales(_) => {
-                Box::new(std::iter::empty())
-            }
+            Values::Vec3(_)
+            | Values::Floats(_)
+            | Values::Corners(_)
+            | Values::Scales(_)
+            | Values::Widths { .. } => Box::new(std::iter::empty()),
         }
     }
+}
+
+/// The widths of `count` points: `diameter` times each of `scales`, or `diameter` for
+/// every point without scales.
+pub(crate) fn widths(
+    scales: &[f32],
+    diameter: f32,
+    count: usize,
+) -> Box<dyn Iterator<Item = f32> + '_> {
+    if scales.is_empty() {
+        Box::new(std::iter::repeat_n(diameter, count))
+    } else {
+        Box::new(scales.iter().map(move |&s| s * diameter))
+    }
+}
+
+/// The radius of a sphere template: the mean distance of its vertices from the origin
+/// (the icosphere's vertices lie on the sphere; the mean, unlike the farthest, does not
+/// grow with the noise of a template read back from an archive).
+pub(crate) fn template_radius(template: &TriMesh) -> f32 {
+    let n = template.positions.len().max(1) as f64;
+    let sum: f64 = template.positions.iter().map(|p| p.length() as f64).sum();
+    (sum / n) as f32
+}
+
+/// The extent of the droplets: every point padded by its radius.
+fn droplets_extent(spheres: &SphereInstances, radius: f32) -> [Vec3; 2] {
+    let far = [Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)];
+    if spheres.centers.is_empty() {
+        return [Vec3::ZERO; 2];
+    }
+    spheres
+        .centers
+        .iter()
+        .zip(widths(&spheres.scales, 2.0 * radius, spheres.centers.len()))
+        .fold(far, |[lo, hi], (c, w)| {
+            let pad = Vec3::splat(0.5 * w);
+            [lo.min(*c - pad), hi.max(*c + pad)]
+        })
 }
 
 /// The arrays one frame adds, each to a series (an existing one or one to create).
@@ -334,6 +397,35 @@ pub(crate) fn plan_frame<'a>(
             path: path.to_path_buf(),
             message,
         })?;
+    if options.droplets == UsdDroplets::Points {
+        if !spheres.centers.is_empty() {
+            let n = spheres.centers.len();
+            let radius = template_radius(&spheres.template);
+            samples.push((
+                fixed(Owner::Droplets, "points", Element::Point),
+                Values::Vec3(&spheres.centers),
+            ));
+            samples.push((
+                fixed(Owner::Droplets, "extent", Element::Float3),
+                Values::Corners(droplets_extent(spheres, radius)),
+            ));
+            let mut widths = fixed(Owner::Droplets, "widths", Element::Floats(1));
+            widths.interpolation = Some("vertex");
+            samples.push((
+                widths,
+                Values::Widths {
+                    scales: &spheres.scales,
+                    diameter: 2.0 * radius,
+                    count: n,
+                },
+            ));
+            plan_attributes(path, Owner::Droplets, &spheres.attributes, n, &mut samples)?;
+        }
+        return Ok(FramePlan {
+            samples,
+            template: None,
+        });
+    }
     let template = (!spheres.centers.is_empty()).then_some(&spheres.template);
     if template.is_some() {
         let n = spheres.centers.len();
@@ -498,7 +590,7 @@ fn prototype_name(k: usize) -> String {
 }
 
 /// The prim tree of a stage with `series` and the sphere `templates` (no instancer
-/// without templates).
+/// without templates, no point cloud without its series).
 pub(crate) fn prim_tree<'a>(series: &[Series], templates: &'a [TriMesh]) -> Prim<'a> {
     let mut fluid_properties = series_properties(series, Owner::Fluid);
     fluid_properties.push(Property {
@@ -512,6 +604,15 @@ pub(crate) fn prim_tree<'a>(series: &[Series], templates: &'a [TriMesh]) -> Prim
         properties: fluid_properties,
         children: Vec::new(),
     }];
+    let droplets = series_properties(series, Owner::Droplets);
+    if !droplets.is_empty() {
+        children.push(Prim {
+            name: "Droplets".into(),
+            type_name: "Points",
+            properties: droplets,
+            children: Vec::new(),
+        });
+    }
     if !templates.is_empty() {
         let prototypes: Vec<Prim> = templates
             .iter()

@@ -167,6 +167,11 @@ fn array(
         Values::Floats(v) => file.float_array(ty, len, v.iter().copied()),
         Values::Corners(c) => file.float_array(ty, len, vectors(&c).into_iter()),
         Values::Scales(v) => file.float_array(ty, len, v.iter().flat_map(|&s| [s; 3])),
+        Values::Widths {
+            scales,
+            diameter,
+            count,
+        } => file.float_array(ty, len, super::stage::widths(scales, diameter, count)),
         Values::Triangles(t) => file.int_array(len, t.iter().flatten().map(|&i| i as i32)),
         Values::Repeat(v, n) => file.int_array(len, std::iter::repeat_n(v, n)),
     }

@@ -50,6 +50,7 @@ pub(crate) fn stage_options(job: &JobOptions) -> UsdOptions {
         meters_per_unit: job.meters_per_unit,
         normals: job.write.normals,
         format: None,
+        droplets: job.usd_droplets,
     }
 }
 
