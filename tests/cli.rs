@@ -274,6 +274,10 @@ fn a_sequence_into_one_gltf_plays_frame_by_frame() {
         );
         assert_eq!(channel.sampler().input().count(), 3);
     }
+    // Frames 1, 6 and 13 at 10 fps: keyed from 0.1 to 1.3 s, Blender's frames 1 to 13.
+    let input = animation.channels().next().unwrap().sampler().input();
+    let bound = |v: Option<gltf::json::Value>| v.unwrap()[0].as_f64().unwrap() as f32;
+    assert_eq!((bound(input.min()), bound(input.max())), (0.1, 1.3));
     // Only the first frame is visible before the animation starts.
     let scales: Vec<[f32; 3]> = gltf.nodes().map(|n| n.transform().decomposed().2).collect();
     assert_eq!(scales, [[1.0; 3], [0.0; 3], [0.0; 3]]);

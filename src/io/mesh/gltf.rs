@@ -562,8 +562,9 @@ pub(super) fn build(surface: &Surface, normals: bool) -> Document<'_> {
 
 /// A sequence: one node per frame (fluid and spheres merged into one mesh), named
 /// `frame_N` after its frame number N, shown in turn by a step-interpolated scale
-/// animation (scale 1 during its frame, 0 otherwise): frame N from time (N − first)/`fps`
-/// seconds, so a gap in the numbering stays a gap. `frames` are in increasing order of
+/// animation (scale 1 during its frame, 0 otherwise): frame N from time N/`fps` seconds
+/// (Blender's frame N; (N − first)/`fps` when the first frame is negative), so a gap in
+/// the numbering stays a gap and the first frame shows from time 0. `frames` are in increasing order of
 /// their numbers.
 pub(super) fn build_sequence<'a>(
     frames: &[&'a (i64, TriMesh)],
@@ -586,17 +587,20 @@ pub(super) fn build_sequence<'a>(
         }
         nodes.push(node);
     }
-    // Shared key times, then one scale track per node.
-    let first = frames.first().map_or(0, |(number, _)| *number);
+    // Shared key times, then one scale track per node. Frame N at N/fps seconds, where
+    // Blender's importer keys it at its frame N (it takes t·fps as the frame); glTF times
+    // cannot be negative, so a sequence starting below 0 starts at 0.
+    let origin = frames.first().map_or(0, |(number, _)| (*number).min(0));
     let key_times: Vec<f32> = frames
         .iter()
-        .map(|(number, _)| ((number - first) as f64 / fps) as f32)
+        .map(|(number, _)| ((number - origin) as f64 / fps) as f32)
         .collect();
     let times = key_times.iter().flat_map(|t| t.to_le_bytes()).collect();
     let view = b.push_view(Payload::Bytes(times), None);
     let input = b.push_accessor(json!({
         "bufferView": view, "componentType": FLOAT, "count": n, "type": "SCALAR",
-        "min": [0.0], "max": [key_times.last().copied().unwrap_or(0.0)]
+        "min": [key_times.first().copied().unwrap_or(0.0)],
+        "max": [key_times.last().copied().unwrap_or(0.0)]
     }));
     let mut samplers = Vec::with_capacity(n);
     let mut channels = Vec::with_capacity(n);

@@ -164,8 +164,9 @@ pub struct MeshWriteStats {
 /// Writes a whole sequence, `(frame number, mesh)` in any order of the numbers, as one
 /// glTF (`.glb` or `.gltf`), atomically: one node per frame named `frame_N` (fluid and
 /// spheres merged), shown in turn by a step-interpolated scale animation at `fps` frames
-/// per second, frame N from time (N − first)/`fps` (a gap in the numbering stays a gap),
-/// which Blender and three.js play back. A number given twice fails with
+/// per second, frame N from time N/`fps` (Blender's importer keys it at its frame N; a
+/// gap in the numbering stays a gap; a sequence starting below 0 is shifted to start at
+/// time 0), which Blender and three.js play back. A number given twice fails with
 /// [`Error::FramesExist`]. Every frame is held in memory; for long sequences prefer a USD
 /// stage ([`crate::io::usd`]) or a `.mseq` archive.
 pub fn write_sequence_gltf(

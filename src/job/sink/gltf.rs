@@ -1,7 +1,7 @@
 //! The frames of a `{}` sequence in one animated `.glb`/`.gltf`: collected (fluid and
 //! spheres merged) and written whole, atomically, by [`write_sequence_gltf`] when the run
 //! finishes with at least one frame done; a node per frame named after its number, shown
-//! from (number − first)/fps seconds.
+//! from number/fps seconds (Blender's frame of that number).
 
 use super::{Appended, FrameSink, Output, OutputProfile};
 use crate::error::Result;
