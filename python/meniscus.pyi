@@ -124,6 +124,19 @@ class Mesh:
     def sphere_centers(self) -> npt.NDArray[np.float32]:
         """Centres of the isolated-particle spheres, (S, 3) float32 (their vertices are in
         ``vertices`` after the fluid's)."""
+    def fluid(self) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint32], npt.NDArray[np.float32], dict[str, npt.NDArray[np.float32]]]:
+        """The fluid surface alone, without the spheres and without merging (what a player
+        swaps in each frame): ``(vertices (V, 3), triangles (T, 3), normals (V, 3) or (0, 3),
+        attributes name -> (V,) or (V, k))``."""
+    @property
+    def sphere_attributes(self) -> dict[str, npt.NDArray[np.float32]]:
+        """Per-sphere attributes (each isolated particle's value): name -> (S,) or (S, k)
+        float32."""
+    @property
+    def sphere_radius(self) -> float:
+        """Radius of the sphere template (the particle radius r; the mean distance of its
+        vertices from its centre), 0 without spheres: sphere k has radius
+        ``sphere_radius * sphere_scales[k]``."""
     @property
     def sphere_scales(self) -> npt.NDArray[np.float32]:
         """Each sphere's scale, (S,) float32: its radius over the particle radius (1 when the

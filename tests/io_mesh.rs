@@ -418,7 +418,7 @@ fn a_sequence_carries_the_attributes_of_every_frame() {
 #[test]
 fn a_sequence_names_its_nodes_and_times_its_frames_by_their_numbers() {
     let dir = tempfile::tempdir().unwrap();
-    // Out of order, with gaps: frame N is shown from (N - 3) / 24 s.
+    // Out of order, with gaps: frame N is shown from N / 24 s (Blender's frame N).
     let frames: Vec<(i64, TriMesh)> = [7, 3, 4]
         .into_iter()
         .map(|n| (n, attributed().merged()))
@@ -435,7 +435,26 @@ fn a_sequence_names_its_nodes_and_times_its_frames_by_their_numbers() {
         .read_inputs()
         .unwrap()
         .collect();
-    assert_eq!(times, [0.0, 1.0 / 24.0, 4.0 / 24.0]);
+    assert_eq!(times, [3.0 / 24.0, 4.0 / 24.0, 7.0 / 24.0]);
+    // A sequence starting below 0 is shifted to start at time 0 (glTF times are >= 0).
+    let negative: Vec<(i64, TriMesh)> = [-2, 0]
+        .into_iter()
+        .map(|n| (n, attributed().merged()))
+        .collect();
+    write_sequence_gltf(&path, &negative, 24.0, &MeshWriteOptions::default()).unwrap();
+    let (doc, buffers, _) = gltf::import(&path).unwrap();
+    let times: Vec<f32> = doc
+        .animations()
+        .next()
+        .unwrap()
+        .channels()
+        .next()
+        .unwrap()
+        .reader(|b| Some(&buffers[b.index()]))
+        .read_inputs()
+        .unwrap()
+        .collect();
+    assert_eq!(times, [0.0, 2.0 / 24.0]);
     // One file holds one frame per number.
     let twice = [(3, frames[0].1.clone()), (3, frames[1].1.clone())];
     let err = write_sequence_gltf(&path, &twice, 24.0, &MeshWriteOptions::default()).unwrap_err();

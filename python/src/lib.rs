@@ -33,7 +33,7 @@ use pyo3::exceptions::{
     PyFileExistsError, PyKeyboardInterrupt, PyOSError, PyRuntimeError, PyValueError,
 };
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyTuple};
 use radius::{radius_attribute, resolve_radius};
 use std::path::PathBuf;
 use std::sync::{mpsc, Mutex};
@@ -377,6 +377,53 @@ impl Mesh {
                 py.import_bound("json")?.call_method1("loads", (text,))
             }
         }
+    }
+
+    /// The fluid surface alone, without the spheres (what a player swaps in each frame,
+    /// with no merging): `(vertices (V, 3) float32, triangles (T, 3) uint32, normals
+    /// (V, 3) or (0, 3) float32, attributes: name → (V,) or (V, k) float32)`.
+    fn fluid<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        let fluid = &self.surface.fluid;
+        let flat: Vec<u32> = fluid.triangles.iter().flatten().copied().collect();
+        let triangles = Array2::from_shape_vec((fluid.triangles.len(), 3), flat)
+            .expect("3 per row")
+            .into_pyarray_bound(py);
+        let attributes = PyDict::new_bound(py);
+        for a in &fluid.attributes {
+            attributes.set_item(&a.name, attribute_array(py, a))?;
+        }
+        Ok(PyTuple::new_bound(
+            py,
+            [
+                vec3s(py, &fluid.positions).into_any(),
+                triangles.into_any(),
+                vec3s(py, &fluid.normals).into_any(),
+                attributes.into_any(),
+            ],
+        ))
+    }
+
+    /// Per-sphere attributes (the value of each isolated particle): name → (S,) or (S, k)
+    /// float32.
+    #[getter]
+    fn sphere_attributes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new_bound(py);
+        for a in &self.surface.spheres.attributes {
+            d.set_item(&a.name, attribute_array(py, a))?;
+        }
+        Ok(d)
+    }
+
+    /// Radius of the sphere template (the particle radius r), world units: the mean
+    /// distance of its vertices from its centre; 0 without spheres. Sphere k has radius
+    /// `sphere_radius * sphere_scales[k]`.
+    #[getter]
+    fn sphere_radius(&self) -> f32 {
+        let t = &self.surface.spheres.template.positions;
+        if t.is_empty() {
+            return 0.0;
+        }
+        (t.iter().map(|p| p.length() as f64).sum::<f64>() / t.len() as f64) as f32
     }
 
     /// Centres of the isolated-particle spheres, (S, 3) float32.

@@ -1,0 +1,221 @@
+"""The panel (View3D ▸ Sidebar ▸ meniscus), its settings and operators: pick a particle
+sequence, see its estimated radius, choose a preset, bake to a ``.mseq`` (or a USD
+stage) with a progress bar and a cancel button, and play an archive back."""
+
+import os
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, PointerProperty, StringProperty
+
+from . import core, scene
+
+# The bake under way (one at a time), read by the modal operator and the panel.
+_job = {"job": None}
+
+
+def _on_source(self, context):
+    """A new source: its radius is estimated again."""
+    self.estimated_radius = 0.0
+    self.source_info = ""
+    try:
+        seq = core.resolve_sequence(bpy.path.abspath(self.source))
+        self.source_info = f"{len(seq.frames)} frame(s), {seq.frames[0]}–{seq.frames[-1]}"
+        self.estimated_radius = core.estimate_radius(seq)
+    except Exception as e:
+        self.source_info = str(e)
+
+
+class MeniscusSettings(bpy.types.PropertyGroup):
+    source: StringProperty(
+        name="Particles", subtype="FILE_PATH", update=_on_source,
+        description="A particle sequence: a file of it, a {} pattern, a folder of numbered frames or a .pvd")
+    source_info: StringProperty(name="Sequence")
+    estimated_radius: FloatProperty(name="Estimated radius", precision=5)
+    radius: FloatProperty(
+        name="Radius", default=0.0, min=0.0, precision=5,
+        description="Particle radius r, world units; 0 takes the estimate. A radius far from the estimate is refused")
+    force_radius: BoolProperty(
+        name="Force radius", default=False,
+        description="Run with the given radius even where the library refuses it (radius_check=False)")
+    preset: EnumProperty(
+        name="Preset", default="DEFAULT",
+        items=[("PREVIEW", "Preview", "Fast: a coarser grid, no subdivision or decimation"),
+               ("DEFAULT", "Default", "The library's defaults"),
+               ("PAPER", "Paper", "Akinci et al. 2013's pipeline")])
+    output: StringProperty(
+        name="Cache", subtype="FILE_PATH", default="//meniscus.mseq",
+        description="The cache: a .mseq archive (played back here) or a USD stage (.usdc, imported after the bake)")
+    progress: FloatProperty(name="Progress", subtype="PERCENTAGE", min=0.0, max=100.0, default=0.0)
+    status: StringProperty(name="Status")
+    archive: StringProperty(name="Archive", subtype="FILE_PATH", description="A .mseq archive to play back")
+
+
+def _bake_job(settings):
+    seq = core.resolve_sequence(bpy.path.abspath(settings.source))
+    output = bpy.path.abspath(settings.output)
+    return core.BakeJob(seq, output, radius=settings.radius, preset=settings.preset,
+                        radius_check=not settings.force_radius,
+                        usd=output.lower().endswith((".usdc", ".usda", ".usd")))
+
+
+def _after_bake(context, settings, job):
+    if job.error:
+        if job.refused_radius:
+            job.error += "; tick Force to run with this radius anyway"
+        settings.status = job.error
+        return {"CANCELLED"}
+    settings.progress = 100.0 * job.fraction
+    if job.cancelled:
+        settings.status = f"cancelled after {job.done} of {job.total} frames (the cache keeps them)"
+    else:
+        settings.status = f"baked {job.done} frame(s) to {job.output}"
+    if job.done and os.path.exists(job.output):
+        if job.usd:
+            bpy.ops.wm.usd_import(filepath=job.output)
+        else:
+            settings.archive = job.output
+            scene.load_archive(context, job.output)
+    return {"FINISHED"}
+
+
+class MENISCUS_OT_bake(bpy.types.Operator):
+    """Bake the particle sequence to the cache, off Blender's main thread"""
+
+    bl_idname = "meniscus.bake"
+    bl_label = "Bake"
+
+    _timer = None
+
+    def execute(self, context):
+        # Run through (scripts, background mode): the bake on this thread.
+        settings = context.scene.meniscus
+        try:
+            job = _bake_job(settings)
+        except Exception as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        job.run()
+        result = _after_bake(context, settings, job)
+        if job.error:
+            self.report({"ERROR"}, job.error)
+        return result
+
+    def invoke(self, context, event):
+        if _job["job"] is not None:
+            self.report({"WARNING"}, "a bake is under way")
+            return {"CANCELLED"}
+        settings = context.scene.meniscus
+        try:
+            job = _bake_job(settings)
+        except Exception as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        _job["job"] = job
+        settings.progress, settings.status = 0.0, f"baking {job.total} frame(s)…"
+        job.start()
+        self._timer = context.window_manager.event_timer_add(0.25, window=context.window)
+        context.window_manager.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        job = _job["job"]
+        settings = context.scene.meniscus
+        if event.type == "ESC":
+            job.cancel()
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        settings.progress = 100.0 * job.fraction
+        if job.last:
+            settings.status = f"frame {job.last.get('frame')} {job.last.get('status')} ({job.done}/{job.total})"
+        for area in context.screen.areas if context.screen else []:
+            area.tag_redraw()
+        if not job.finished:
+            return {"PASS_THROUGH"}
+        context.window_manager.event_timer_remove(self._timer)
+        _job["job"] = None
+        result = _after_bake(context, settings, job)
+        if job.error:
+            self.report({"ERROR"}, job.error)
+        return result
+
+
+class MENISCUS_OT_cancel(bpy.types.Operator):
+    """Stop the bake after the frame under way (the cache keeps the frames done)"""
+
+    bl_idname = "meniscus.cancel"
+    bl_label = "Cancel"
+
+    def execute(self, context):
+        if _job["job"] is not None:
+            _job["job"].cancel()
+        return {"FINISHED"}
+
+
+class MENISCUS_OT_load(bpy.types.Operator):
+    """Play a .mseq archive back as an animated mesh (each frame decoded on frame change)"""
+
+    bl_idname = "meniscus.load_archive"
+    bl_label = "Play Archive"
+
+    filepath: StringProperty(subtype="FILE_PATH")
+
+    def execute(self, context):
+        path = self.filepath or context.scene.meniscus.archive
+        try:
+            scene.load_archive(context, path)
+        except Exception as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+
+class MENISCUS_PT_panel(bpy.types.Panel):
+    bl_label = "meniscus"
+    bl_idname = "MENISCUS_PT_panel"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "meniscus"
+
+    def draw(self, context):
+        settings = context.scene.meniscus
+        layout = self.layout
+        box = layout.box()
+        box.label(text="Bake")
+        box.prop(settings, "source")
+        if settings.source_info:
+            box.label(text=settings.source_info)
+        if settings.estimated_radius > 0:
+            box.label(text=f"Estimated radius: {settings.estimated_radius:.5g}")
+        row = box.row()
+        row.prop(settings, "radius")
+        row.prop(settings, "force_radius", text="Force")
+        box.prop(settings, "preset")
+        box.prop(settings, "output")
+        if _job["job"] is not None:
+            box.progress(factor=settings.progress / 100.0, text=settings.status)
+            box.operator("meniscus.cancel", icon="CANCEL")
+        else:
+            box.operator("meniscus.bake", icon="RENDER_ANIMATION")
+            if settings.status:
+                box.label(text=settings.status)
+        box = layout.box()
+        box.label(text="Playback")
+        box.prop(settings, "archive")
+        box.operator("meniscus.load_archive", icon="PLAY")
+        if scene.last_swap["frame"] is not None:
+            box.label(text=f"frame {scene.last_swap['frame']}: {1000 * scene.last_swap['seconds']:.0f} ms")
+
+
+classes = (MeniscusSettings, MENISCUS_OT_bake, MENISCUS_OT_cancel, MENISCUS_OT_load, MENISCUS_PT_panel)
+
+
+def register():
+    for c in classes:
+        bpy.utils.register_class(c)
+    bpy.types.Scene.meniscus = PointerProperty(type=MeniscusSettings)
+
+
+def unregister():
+    del bpy.types.Scene.meniscus
+    for c in reversed(classes):
+        bpy.utils.unregister_class(c)
