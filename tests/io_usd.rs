@@ -244,7 +244,15 @@ fn droplets_are_points_with_widths_or_an_instancer_by_option() {
     assert!(!points.contains("PointInstancer"));
     // widths = 2 r_i: the template's radius is 0.05, the scales 1 and 2.
     let widths = &points[points.find("float[] widths.timeSamples").unwrap()..];
-    assert!(widths.contains("1: [0.1, 0.2]"), "{widths}");
+    let widths = &widths[widths.find("1: [").unwrap() + 4..];
+    let widths: Vec<f32> = widths[..widths.find(']').unwrap()]
+        .split(", ")
+        .map(|w| w.parse().unwrap())
+        .collect();
+    assert_eq!(widths.len(), 2);
+    for (w, want) in widths.iter().zip([0.1, 0.2]) {
+        assert!((w - want).abs() < 1e-6, "{widths:?}");
+    }
     let droplets = &points[points.find("def Points").unwrap()..];
     assert!(droplets.contains("vector3f[] velocities.timeSamples"));
     assert!(droplets.contains("interpolation = \"vertex\""));
