@@ -35,9 +35,9 @@ def main(zip_path, archive, rounds=3):
     for _ in range(rounds):
         for f in player.frames:
             start = time.perf_counter()
-            (v, t, a), (c, r, d) = player.decode(f)
+            (v, t, a, e), (c, r, d) = player.decode(f)
             decoded = time.perf_counter()
-            scene_mod.set_fluid(fluid.data, v, t, a)
+            scene_mod.set_fluid(fluid.data, v, t, a, e)
             scene_mod.set_droplets(drops.data, c, r, d)
             swapped = time.perf_counter()
             times[f][0].append(decoded - start)

@@ -128,6 +128,10 @@ class Mesh:
         """The fluid surface alone, without the spheres and without merging (what a player
         swaps in each frame): ``(vertices (V, 3), triangles (T, 3), normals (V, 3) or (0, 3),
         attributes name -> (V,) or (V, k))``."""
+    def fluid_edges(self) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int32]]:
+        """The fluid surface's edges as Blender's meshes store them: ``(edges (E, 2) int32,
+        each vertex pair once, corner_edges (3T,) int32, the edge from corner k of a
+        triangle to its next corner)``."""
     @property
     def sphere_attributes(self) -> dict[str, npt.NDArray[np.float32]]:
         """Per-sphere attributes (each isolated particle's value): name -> (S,) or (S, k)

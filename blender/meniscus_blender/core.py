@@ -217,8 +217,9 @@ class ArchivePlayer:
 
     def decode(self, frame):
         """``(fluid, droplets)`` of archive frame ``frame``: fluid = (vertices, triangles,
-        attributes), droplets = (centres, radii, attributes)."""
+        attributes, (edges, corner_edges)), droplets = (centres, radii, attributes)."""
         mesh = self.archive[frame]
         vertices, triangles, _normals, attributes = mesh.fluid()
+        edges = mesh.fluid_edges()
         radii = mesh.sphere_scales * mesh.sphere_radius
-        return (vertices, triangles, attributes), (mesh.sphere_centers, radii, mesh.sphere_attributes)
+        return (vertices, triangles, attributes, edges), (mesh.sphere_centers, radii, mesh.sphere_attributes)
