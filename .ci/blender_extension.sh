@@ -20,9 +20,8 @@ mkdir -p "$work/dam"
 for k in 1 9 17; do
   cp "datasets/dambreak_small/ParticleData_Fluid_$k.xyz" "$work/dam/f_$k.xyz"
 done
-cargo build --release --quiet --bin meniscus
 for output in "$work/cli.mseq" "$work/cli_{}.ply"; do
-  target/release/meniscus reconstruct "$work/dam/f_{}.xyz" -o "$output" --quiet
+  cargo run --release --quiet -- reconstruct "$work/dam/f_{}.xyz" -o "$output" --quiet
 done
 velocity=$(cargo run --release --quiet --example particle_sequence -- "$work/velocity")
 BLENDER_USER_RESOURCES="$PWD/$work/user" "$venv/bin/python" tests/blender/extension_check.py \
