@@ -94,6 +94,11 @@ pub(crate) fn ineffective_options(
             ));
         }
     }
+    if given("usd_droplets") && !profile.stage_metadata {
+        warnings.push(format!(
+            "--usd-droplets has no effect: it says how a USD stage (.usdc, .usda, .usd) holds the isolated particles, and {output:?} is not one"
+        ));
+    }
     if given("skip_existing") && profile.written_whole {
         warnings.push(format!(
             "--skip-existing has no effect: {output:?} holds the whole sequence and is written whole"
