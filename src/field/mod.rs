@@ -154,6 +154,16 @@ impl FieldOptions {
                 message: format!("must be a finite number > 0, got {}", self.particle_radius),
             });
         }
+        let (lo, hi) = crate::radius::RADIUS_LIMITS;
+        if !(lo..=hi).contains(&self.particle_radius) {
+            return Err(Error::InvalidOption {
+                option: "particle_radius",
+                message: format!(
+                    "must lie within {lo:e}–{hi:e} world units (the squares of the reaches must stay finite in f32), got {:?}",
+                    self.particle_radius
+                ),
+            });
+        }
         if !positive(self.influence_radius) {
             return Err(Error::InvalidOption {
                 option: "influence_radius",

@@ -58,8 +58,24 @@ impl RadiusAttribute {
     }
 }
 
+/// The widest ratio, either way, of a particle's radius to its frame's median radius
+/// ([`ParticleRadii::median`]): every radius must lie within `median / RADIUS_SPREAD` and
+/// `median × RADIUS_SPREAD`. Foam or spray particles several times the fluid's radius, or
+/// an adaptive simulation's radii spanning 1:10, pass; a particle 100× or 1000× the others
+/// (a stray `pscale`) is refused before any work. Why a bound at all: the lattice stays
+/// one cell size (`h·r`), so a particle ρ times the reference radius covers ρ³ times the
+/// field blocks of a normal one, and the reach of every particle's neighbour search grows
+/// with the largest ρ of the frame (one particle of 1000× asked for terabytes).
+pub const RADIUS_SPREAD: f32 = 10.0;
+
+/// The smallest and the largest radius (world units) any run accepts, the reference
+/// radius `r` as well as each particle's: beyond them the squares of a particle's reaches
+/// (up to 64 cells of up to [`RADIUS_SPREAD`]× r) leave f32's range and the surface turns
+/// to NaN (a radius of `f32::MAX` gave a surface of NaN coordinates).
+pub const RADIUS_LIMITS: (f32, f32) = (1e-12, 1e12);
+
 /// Each particle's radius (world units, input order), checked: one finite number > 0
-/// per particle.
+/// per particle, within [`RADIUS_LIMITS`] and within [`RADIUS_SPREAD`]× of the median.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ParticleRadii {
     /// The attribute they were read from.
@@ -92,8 +108,10 @@ impl ParticleRadii {
         Ok(radii)
     }
 
-    /// Checks that there are `count` radii, each finite and > 0; else an
-    /// [`Error::InvalidRadius`] naming `path`, the attribute and the first bad particle.
+    /// Checks that there are `count` radii, each finite and > 0, within [`RADIUS_LIMITS`]
+    /// and within [`RADIUS_SPREAD`]× of the median either way; else an
+    /// [`Error::InvalidRadius`] naming `path`, the attribute, the first bad particle and
+    /// its value.
     pub fn check(&self, path: &Path, count: usize) -> Result<()> {
         let fail = |particle: Option<usize>, message: String| Error::InvalidRadius {
             path: path.to_path_buf(),
@@ -108,18 +126,45 @@ impl ParticleRadii {
                 format!("holds {n} values for {count} particles"),
             ));
         }
-        match self
+        if let Some(i) = self
             .values
             .iter()
             .position(|&v| !(v.is_finite() && v > 0.0))
         {
-            Some(i) => Err(fail(
+            return Err(fail(
                 Some(i),
                 format!(
                     "radius {:?}; a radius must be a finite number > 0",
                     self.values[i]
                 ),
-            )),
+            ));
+        }
+        let (lo, hi) = RADIUS_LIMITS;
+        if let Some(i) = self.values.iter().position(|&v| !(lo..=hi).contains(&v)) {
+            return Err(fail(
+                Some(i),
+                format!(
+                    "radius {:?}; a radius must lie within {lo:e}–{hi:e} world units (the squares of its reaches must stay finite in f32)",
+                    self.values[i]
+                ),
+            ));
+        }
+        if count == 0 {
+            return Ok(());
+        }
+        let median = self.median();
+        let (low, high) = (median / RADIUS_SPREAD, median * RADIUS_SPREAD);
+        match self.values.iter().position(|&v| !(low..=high).contains(&v)) {
+            Some(i) => {
+                let v = self.values[i];
+                Err(fail(
+                    Some(i),
+                    format!(
+                        "radius {v:?} is {:.3} × the frame's median radius {median:?}; a particle's radius must lie within 1/{RADIUS_SPREAD}×–{RADIUS_SPREAD}× the median (docs/radius.md)",
+                        v / median
+                    ),
+                ))
+            }
             None => Ok(()),
         }
     }

@@ -27,7 +27,10 @@ use rayon::prelude::*;
 use std::path::Path;
 
 mod attribute;
-pub use attribute::{radii_of, read_radii, ParticleRadii, RadiusAttribute, HOUDINI_RADIUS};
+pub use attribute::{
+    radii_of, read_radii, ParticleRadii, RadiusAttribute, HOUDINI_RADIUS, RADIUS_LIMITS,
+    RADIUS_SPREAD,
+};
 
 /// Particles sampled at most (evenly through the input).
 pub const SAMPLE: usize = 4096;
