@@ -136,6 +136,10 @@ struct Model<'a> {
     payload: u64,
     /// Bytes per particle the kernels add.
     kernel_bytes_per_particle: u64,
+    /// The field blocks that particles larger than the reference radius reach (or their
+    /// count): [`LARGE_SUPPORT_BYTES_PER_BLOCK`] each, all of them in the untiled run,
+    /// those of the fullest tile in a tiled one.
+    large: &'a std::result::Result<Vec<BlockKey>, u64>,
 }
 
 impl Model<'_> {
@@ -148,7 +152,10 @@ impl Model<'_> {
         } else {
             0
         };
-        (self.shape.untiled_bytes() + particles * self.kernel_bytes_per_particle).max(self.output)
+        (self.shape.untiled_bytes()
+            + self.large_bytes(None)
+            + particles * self.kernel_bytes_per_particle)
+            .max(self.output)
             + particles * kept
     }
 
@@ -182,7 +189,32 @@ impl Model<'_> {
             .max(1.0);
         let per_particle = (TILE_BYTES_PER_PARTICLE as f64 * surface_factor) as u64
             + self.kernel_bytes_per_particle;
-        self.densest_zone(t) * per_particle
+        self.densest_zone(t) * per_particle + self.large_bytes(Some(t))
+    }
+
+    /// Bytes of the large particles' blocks: all of them (`None`), or those of the tile
+    /// of `t` blocks that holds the most (with the tiles' field ring of one block).
+    fn large_bytes(&self, t: Option<i32>) -> u64 {
+        let blocks = match (self.large, t) {
+            (Err(count), _) => *count,
+            (Ok(blocks), None) => blocks.len() as u64,
+            (Ok(blocks), Some(t)) => {
+                let mut per_tile: HashMap<BlockKey, u64> = HashMap::new();
+                for b in blocks {
+                    let lo = [0, 1, 2].map(|a| (b[a] - self.origin[a] - 1).div_euclid(t));
+                    let hi = [0, 1, 2].map(|a| (b[a] - self.origin[a] + 1).div_euclid(t));
+                    for tz in lo[2]..=hi[2] {
+                        for ty in lo[1]..=hi[1] {
+                            for tx in lo[0]..=hi[0] {
+                                *per_tile.entry([tx, ty, tz]).or_default() += 1;
+                            }
+                        }
+                    }
+                }
+                per_tile.values().copied().max().unwrap_or(0)
+            }
+        };
+        blocks * LARGE_SUPPORT_BYTES_PER_BLOCK
     }
 
     /// Peak of a tiled run: the tiles over what they produced, or the surface after them
@@ -223,6 +255,59 @@ pub(super) struct BudgetInput<'a> {
     /// for the whole run, and 8 more per particle of a tile (its ratios, and those of the
     /// field's particles).
     pub radius_column: bool,
+    /// The field blocks that particles larger than the reference radius reach
+    /// ([`large_support_blocks`]), or their count when it passed the cap.
+    pub large_support_blocks: std::result::Result<Vec<BlockKey>, u64>,
+}
+
+/// Bytes per field block that a large particle's support adds: the block's values
+/// (2 KiB) and its share of the candidate lists and surfaces. A lone particle 40 × r
+/// (support 41³ = 68 921 blocks, 6 cells of h = r per block reach) peaked at 177 MiB,
+/// 2.7 KB per block of its support.
+pub(crate) const LARGE_SUPPORT_BYTES_PER_BLOCK: u64 = 2700;
+
+/// The blocks within reach of the home blocks of `large` (home block → how many blocks
+/// its largest particle reaches, more than a particle of the reference radius does): the
+/// union of the cubes of `2k + 1` blocks about each. Counted by separable dilation (per
+/// reach, along x, then y, then z), so a cluster of large particles costs their union,
+/// not the sum of their cubes. `Err(cap + 1)` once the count passes `cap` (the budget
+/// refuses it then, and the blocks are not listed).
+pub(crate) fn large_support_blocks(
+    large: &HashMap<BlockKey, i32>,
+    cap: u64,
+) -> std::result::Result<Vec<BlockKey>, u64> {
+    use hashbrown::HashSet;
+    let over = cap.saturating_add(1);
+    let mut reaches: Vec<i32> = large.values().copied().collect();
+    reaches.sort_unstable();
+    reaches.dedup();
+    let mut union: HashSet<BlockKey> = HashSet::new();
+    for k in reaches {
+        let mut set: HashSet<BlockKey> = large
+            .iter()
+            .filter(|(_, &r)| r == k)
+            .map(|(b, _)| *b)
+            .collect();
+        for axis in 0..3 {
+            let mut grown: HashSet<BlockKey> = HashSet::with_capacity(set.len());
+            for b in &set {
+                for d in -k..=k {
+                    let mut c = *b;
+                    c[axis] += d;
+                    grown.insert(c);
+                }
+                if (grown.len() + union.len()) as u64 > over.saturating_mul(2) {
+                    return Err(over);
+                }
+            }
+            set = grown;
+        }
+        union.extend(set);
+    }
+    if union.len() as u64 > cap {
+        return Err(over);
+    }
+    Ok(union.into_iter().collect())
 }
 
 /// Bytes per particle of a radius column held for the run.
@@ -251,6 +336,7 @@ pub(super) fn choose_tile_blocks(
         0
     };
     let model = Model {
+        large: &input.large_support_blocks,
         block_counts: input.block_counts,
         origin: input.origin,
         reach: input.reach,
@@ -465,6 +551,7 @@ mod tests {
                 kernel_bytes_per_particle: 0,
                 decimated_in_tiles: true,
                 radius_column: false,
+                large_support_blocks: Ok(Vec::new()),
             };
             choose_tile_blocks(&input, &options)
         };
@@ -482,6 +569,55 @@ mod tests {
             "the spray is tiled under {between} bytes"
         );
         assert!(spray_estimate <= between);
+    }
+
+    /// Large particles' supports count as the union of their cubes (a cluster costs
+    /// about one cube, not one per particle), and a budget below them is refused.
+    #[test]
+    fn large_particles_count_the_union_of_their_supports() {
+        let one: HashMap<BlockKey, i32> = [([0, 0, 0], 5)].into_iter().collect();
+        assert_eq!(
+            large_support_blocks(&one, u64::MAX).unwrap().len(),
+            11 * 11 * 11
+        );
+        let cluster: HashMap<BlockKey, i32> = [([0, 0, 0], 5), ([1, 0, 0], 5), ([0, 1, 0], 3)]
+            .into_iter()
+            .collect();
+        assert_eq!(
+            large_support_blocks(&cluster, u64::MAX).unwrap().len(),
+            12 * 11 * 11
+        );
+        assert_eq!(large_support_blocks(&one, 1000), Err(1001));
+        let counts: HashMap<BlockKey, u64> = [([0, 0, 0], 3)].into_iter().collect();
+        let input = |large| BudgetInput {
+            block_counts: &counts,
+            origin: [-7, -7, -7],
+            reach: 6,
+            output_cost: OutputCost::NONE,
+            payload_width: 0,
+            kernel_bytes_per_particle: 0,
+            decimated_in_tiles: true,
+            radius_column: true,
+            large_support_blocks: large,
+        };
+        let blocks = large_support_blocks(&one, u64::MAX);
+        let support = 1331 * LARGE_SUPPORT_BYTES_PER_BLOCK;
+        assert!(1001 * LARGE_SUPPORT_BYTES_PER_BLOCK > support / 2);
+        let (_, alone) =
+            choose_tile_blocks(&input(Ok(Vec::new())), &TileOptions::default()).unwrap();
+        let (_, with) =
+            choose_tile_blocks(&input(blocks.clone()), &TileOptions::default()).unwrap();
+        assert_eq!(with, alone + support);
+        let tight = TileOptions {
+            memory_budget_bytes: Some(alone + support / 2),
+            ..TileOptions::default()
+        };
+        // Tiles hold the blocks of the support that fall in them: the run is tiled.
+        let (tiles, estimate) = choose_tile_blocks(&input(blocks), &tight).unwrap();
+        assert!(tiles.is_some() && estimate <= alone + support / 2);
+        // Past the cap every tile is counted the whole support, and refused.
+        let err = choose_tile_blocks(&input(Err(1001)), &tight).unwrap_err();
+        assert!(matches!(err, Error::MemoryBudget { .. }), "{err}");
     }
 
     #[test]

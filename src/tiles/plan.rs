@@ -110,8 +110,11 @@ pub(crate) fn plan_tiles<S: ParticleSource + ?Sized>(
         });
     }
     let payload_width = crate::attributes::payload_width(&source.attribute_layout());
-    let block_counts = count_home_blocks(source, field_options, cancel)?;
+    let (block_counts, large) = count_home_blocks(source, field_options, sizes, cancel)?;
     let origin = tile_origin(&block_counts, reach);
+    // Counted up to the blocks the budget (or, without one, 64 GiB) holds.
+    let cap = tile_options.memory_budget_bytes.unwrap_or(64 << 30)
+        / super::budget::LARGE_SUPPORT_BYTES_PER_BLOCK;
     let budget = BudgetInput {
         block_counts: &block_counts,
         origin,
@@ -121,6 +124,7 @@ pub(crate) fn plan_tiles<S: ParticleSource + ?Sized>(
         kernel_bytes_per_particle: field_options.kernel_bytes_per_particle(),
         decimated_in_tiles,
         radius_column: sizes.is_some(),
+        large_support_blocks: super::budget::large_support_blocks(&large, cap),
     };
     let (tile_blocks, estimated_peak_bytes) = choose_tile_blocks(&budget, tile_options)?;
     crate::allocator::fit_retention_to_budget(tile_options.memory_budget_bytes);
@@ -178,14 +182,24 @@ impl TilePlan {
 
 /// One pass over `source`: checks every position and counts the particles per home
 /// block, in parallel pieces (runs of equal home blocks, then one map per piece), the maps
-/// added up after: counts do not depend on the order of the additions.
+/// added up after: counts do not depend on the order of the additions. With `sizes`, also
+/// the home blocks of the particles that reach more blocks than one of the reference
+/// radius, with the most blocks one of each reaches (for the memory model).
+#[allow(clippy::type_complexity)]
 fn count_home_blocks<S: ParticleSource + ?Sized>(
     source: &S,
     field_options: &FieldOptions,
+    sizes: Option<Sizes<'_>>,
     cancel: &CancelToken,
-) -> Result<HashMap<BlockKey, u64>> {
+) -> Result<(HashMap<BlockKey, u64>, HashMap<BlockKey, i32>)> {
     let inv_h = 1.0 / field_options.cell_size_world();
     let mut block_counts: HashMap<BlockKey, u64> = HashMap::new();
+    let mut large: HashMap<BlockKey, i32> = HashMap::new();
+    // A particle of ratio ρ reaches ⌈ρ·unit⌉ blocks.
+    let unit = crate::field::kernel_reach(field_options, None)
+        / field_options.cell_size
+        / crate::grid::BLOCK_EDGE as f32;
+    let base = unit.ceil() as i32;
     source.visit_chunks(&mut |chunk| {
         check_positions(
             chunk.first,
@@ -193,6 +207,16 @@ fn count_home_blocks<S: ParticleSource + ?Sized>(
             field_options.cell_size_world(),
             field_options.particle_radius,
         )?;
+        if let Some(sizes) = sizes {
+            let ratios = &sizes.ratios[chunk.first..chunk.first + chunk.positions.len()];
+            for (p, &rho) in chunk.positions.iter().zip(ratios) {
+                let k = (rho * unit).ceil() as i32;
+                if k > base {
+                    let e = large.entry(home_block(*p, inv_h)).or_default();
+                    *e = (*e).max(k);
+                }
+            }
+        }
         let counts = chunk
             .positions
             .par_chunks(COUNT_PIECE)
@@ -217,7 +241,7 @@ fn count_home_blocks<S: ParticleSource + ?Sized>(
         block_counts = add_counts(std::mem::take(&mut block_counts), counts);
         cancel.check()
     })?;
-    Ok(block_counts)
+    Ok((block_counts, large))
 }
 
 /// The sum of two maps of counts (the larger one is kept and the other added to it).
