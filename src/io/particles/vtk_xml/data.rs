@@ -7,9 +7,56 @@ use super::scan::{Array, Compressor, Layout, Location};
 use crate::error::{Error, Result};
 use std::io::{BufRead, Read, Seek};
 
-/// Largest inflation of one compressed block that is believed: zlib's limit is 1032:1,
-/// LZ4's 255:1. A header claiming more is refused before anything is allocated.
-const MAX_RATIO: u64 = 1032;
+/// Largest inflation of one compressed block that is believed, by compressor: zlib's
+/// limit is 1032:1, LZ4's 255:1 (a match of `15 + 255·n + 4` bytes costs `n + 3`). A
+/// header claiming more is refused before anything is allocated.
+fn max_ratio(compressor: Compressor) -> u64 {
+    match compressor {
+        Compressor::Lz4 => 255,
+        _ => 1032,
+    }
+}
+
+/// The bytes an LZ4 block inflates to, read from its sequences' length fields without
+/// inflating it (so that a block is never given a buffer larger than it fills); `None`
+/// when the lengths run past the block's end.
+fn lz4_inflated_len(block: &[u8]) -> Option<u64> {
+    let mut pos = 0usize;
+    let mut total = 0u64;
+    let length = |pos: &mut usize, nibble: u8| -> Option<u64> {
+        let mut n = nibble as u64;
+        if nibble == 15 {
+            loop {
+                let b = *block.get(*pos)?;
+                *pos += 1;
+                n += b as u64;
+                if b != 255 {
+                    break;
+                }
+            }
+        }
+        Some(n)
+    };
+    loop {
+        let token = *block.get(pos)?;
+        pos += 1;
+        let literals = length(&mut pos, token >> 4)?;
+        pos = pos.checked_add(usize::try_from(literals).ok()?)?;
+        if pos > block.len() {
+            return None;
+        }
+        total += literals;
+        if pos == block.len() {
+            return Some(total);
+        }
+        // A match: a 2-byte offset and its length (at least 4).
+        pos += 2;
+        if pos > block.len() {
+            return None;
+        }
+        total += length(&mut pos, token & 15)? + 4;
+    }
+}
 
 /// An `InvalidData` I/O error carrying `message` (what the value decoders report).
 fn invalid(message: String) -> std::io::Error {
@@ -176,6 +223,12 @@ impl<R: Read> Blocks<R> {
                 .take(u + 1)
                 .read_to_end(&mut self.block)
                 .map_err(|e| e.to_string()),
+            Compressor::Lz4 if lz4_inflated_len(&self.compressed) != Some(u) => {
+                Err(match lz4_inflated_len(&self.compressed) {
+                    Some(n) => format!("its sequences make {n} bytes"),
+                    None => "its sequences run past its end".to_string(),
+                })
+            }
             Compressor::Lz4 => {
                 self.block.resize(u as usize, 0);
                 lz4_flex::block::decompress_into(&self.compressed, &mut self.block)
@@ -362,7 +415,10 @@ impl Layout {
         for k in 0..blocks {
             let c = self.word(array, &mut r, "a compressed block size")?;
             let u = if k + 1 == blocks { last } else { block_size };
-            if u > c.saturating_mul(MAX_RATIO).saturating_add(64) {
+            if u > c
+                .saturating_mul(max_ratio(self.compressor))
+                .saturating_add(64)
+            {
                 return Err(self.error(
                     array,
                     format!("compressed block {k} of {blocks}: {c} bytes cannot inflate to {u}"),
