@@ -3,7 +3,7 @@
 //! This reads the entries as written (markup only, with the VTK XML scanner); what they
 //! mean as a frame sequence is [`crate::sequence`]'s.
 
-use super::scan::{attribute, shorten, Scanner};
+use super::scan::{attribute, shorten, shown, Scanner};
 use crate::error::{Error, Result};
 use std::path::Path;
 
@@ -44,7 +44,7 @@ pub(crate) fn datasets(path: &Path) -> Result<Vec<DataSetEntry>> {
             (None, other) if seen_file => {
                 return Err(at(line, format!(
                     "<{}> after the end of the <VTKFile>: a collection is one <VTKFile> element",
-                    shorten(other)
+                    shown(other)
                 )))
             }
             (None, "VTKFile") => {
@@ -63,7 +63,7 @@ pub(crate) fn datasets(path: &Path) -> Result<Vec<DataSetEntry>> {
             (None, other) => {
                 return Err(at(line, format!(
                     "not a VTK collection: the first element is <{}>, not <VTKFile type=\"Collection\">",
-                    shorten(other)
+                    shown(other)
                 )))
             }
             (Some("Collection"), "DataSet") => {
@@ -96,7 +96,7 @@ pub(crate) fn datasets(path: &Path) -> Result<Vec<DataSetEntry>> {
     if let Some(open) = stack.last() {
         return Err(s.error(format!(
             "the file ends inside <{}> ({} element(s) left open): the collection is cut off, or still being written",
-            shorten(open),
+            shown(open),
             stack.len()
         )));
     }

@@ -138,6 +138,7 @@ impl Scanner {
                 Tag::Other => {}
                 Tag::End(name) => {
                     if open.pop().as_deref() != Some(name.as_str()) {
+                        let name = shown(&name);
                         return Err(self.error(format!("</{name}> closes no open <{name}>")));
                     }
                 }
@@ -243,7 +244,7 @@ impl Scanner {
                     Error::parse(
                         &self.path,
                         format!("line {line} (byte offset {pos})"),
-                        format!("malformed tag <{}>", shorten(&text)),
+                        format!("malformed tag <{}>", shown(&text)),
                     )
                 })
             }
@@ -252,6 +253,22 @@ impl Scanner {
 }
 
 /// The first 60 characters of `text`.
+/// [`shorten`]ed `text` with its control characters escaped (`\u{1b}`), for a message
+/// that shows it unquoted: an input's terminal escapes never reach the terminal. (Inside
+/// `{:?}` use [`shorten`]: Debug escapes them.)
+pub(super) fn shown(text: &str) -> String {
+    shorten(text)
+        .chars()
+        .map(|c| {
+            if c.is_control() {
+                c.escape_debug().to_string()
+            } else {
+                c.to_string()
+            }
+        })
+        .collect()
+}
+
 pub(super) fn shorten(text: &str) -> String {
     let mut s: String = text.chars().take(60).collect();
     if s.len() < text.len() {
@@ -363,7 +380,7 @@ pub(super) fn scan(path: &Path) -> Result<Layout> {
             (None, other) => {
                 return Err(s.error(format!(
                     "not a VTK XML file: the first element is <{}>, not <VTKFile>",
-                    shorten(other)
+                    shown(other)
                 )))
             }
             (Some("UnstructuredGrid" | "PolyData"), "Piece") => {
