@@ -66,7 +66,7 @@ pub use merge::{merge, MergeStats};
 pub use options::{
     default_error_bound, ArchiveOptions, DEFAULT_ATTRIBUTE_ERROR_BOUND, DEFAULT_ERROR_BOUND_RADII,
 };
-pub use reader::{ArchiveReader, FrameInfo, VerifyReport};
+pub use reader::{ArchiveReader, FrameInfo, Unreadable, VerifyReport};
 pub use repair::{repair, RepairReport};
 pub use writer::ArchiveWriter;
 

@@ -85,6 +85,20 @@ impl VerifyReport {
         self.damaged.is_empty() && self.damage.is_empty() && self.trailing_bytes == 0
     }
 }
+/// Something [`ArchiveReader::open`] found that cannot be read ([`ArchiveReader::unreadable`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Unreadable {
+    /// The frame, when the index or an intact record header names it.
+    pub frame: Option<i64>,
+    /// What is wrong, and where.
+    pub message: String,
+    /// True when this is the mark of an interrupted write or a truncated file (no index,
+    /// a cut-off record or index at the end): the frames before it are whole. False for
+    /// damage in the middle of the archive, or an index that disagrees with the records,
+    /// where frames the archive holds are lost.
+    pub truncation: bool,
+}
+
 /// What kind of damage [`ArchiveReader::open`] found outside the frames' payloads.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) enum DamageKind {
@@ -188,10 +202,22 @@ impl ArchiveReader {
     }
 
     fn open_unguarded(path: &Path) -> Result<ArchiveReader> {
+        let bytes = Self::read_bytes(path)?;
+        let version = Self::header_version(path, &bytes)?;
+        Ok(Self::with_bytes(path, bytes, version))
+    }
+
+    fn read_bytes(path: &Path) -> Result<Vec<u8>> {
         let mut bytes = Vec::new();
         File::open(path)
             .and_then(|mut f| f.read_to_end(&mut bytes))
             .map_err(|e| Error::io(path, e))?;
+        Ok(bytes)
+    }
+
+    /// The version the file header of `bytes` gives; an error when its magic number or
+    /// version is not one of an archive this build reads.
+    fn header_version(path: &Path, bytes: &[u8]) -> Result<u32> {
         if bytes.len() < HEADER_LEN as usize || &bytes[0..8] != MAGIC {
             return Err(archive_error(
                 path,
@@ -208,6 +234,77 @@ impl ArchiveReader {
                 ),
             });
         }
+        Ok(version)
+    }
+
+    /// For `archive repair`: [`ArchiveReader::open`], and when the file header's magic
+    /// number or version is damaged (not an archive's, or a valid version under which not
+    /// even the first frame decodes) but the records and the index after it are sound
+    /// under another (every record whole, the index agreeing, every frame decoding), the
+    /// archive with the header rebuilt: the version the records need (5 with sphere
+    /// scales, 4 with attributes, else 3, or 1 when the frames decode only as version 1).
+    /// Says what it rebuilt.
+    pub(super) fn open_rebuilding_header(path: &Path) -> Result<(ArchiveReader, Option<String>)> {
+        let bytes = Self::read_bytes(path)?;
+        let (refused, bytes) = match Self::header_version(path, &bytes) {
+            Ok(version) => {
+                let reader = Self::with_bytes(path, bytes, version);
+                let first_fails = !reader.frames.is_empty() && reader.decode(0).is_err();
+                if !first_fails {
+                    return Ok((reader, None));
+                }
+                let ArchiveReader { bytes, .. } = reader;
+                (None, bytes)
+            }
+            Err(e) if bytes.len() >= HEADER_LEN as usize => (Some(e), bytes),
+            Err(e) => return Err(e),
+        };
+        let limit = read_index(&bytes).map_or(bytes.len(), |i| i.offset);
+        let flags = scan_records(&bytes, limit).iter().fold(0, |f, s| match s {
+            Span::Record(_, h) => f | h.flags,
+            Span::Damaged(..) => f,
+        });
+        let needed = if flags & frame::HAS_SCALES != 0 {
+            SCALES_VERSION
+        } else if flags & attributes::HAS_ATTRIBUTES != 0 {
+            super::container::ATTRIBUTES_VERSION
+        } else {
+            super::container::VERSION
+        };
+        let what = if &bytes[0..8] != MAGIC {
+            "magic number"
+        } else {
+            "version"
+        };
+        let original: [u8; HEADER_LEN as usize] =
+            bytes[..HEADER_LEN as usize].try_into().expect("16 bytes");
+        let mut bytes = bytes;
+        for version in [needed, 1] {
+            bytes[..HEADER_LEN as usize].copy_from_slice(&super::container::file_header(version));
+            let reader = Self::with_bytes(path, bytes, version);
+            let sound =
+                reader.damage.is_empty() && !reader.frames.is_empty() && reader.verify().is_clean();
+            if sound {
+                let message = format!(
+                    "the file header's {what} is damaged; the {} frame(s) and the index after it are sound: header rebuilt as version {version}",
+                    reader.frames.len()
+                );
+                return Ok((reader, Some(message)));
+            }
+            bytes = reader.bytes;
+        }
+        match refused {
+            Some(e) => Err(e),
+            None => {
+                // The header as it was: the frames are damaged, not the header.
+                bytes[..HEADER_LEN as usize].copy_from_slice(&original);
+                let version = Self::header_version(path, &bytes)?;
+                Ok((Self::with_bytes(path, bytes, version), None))
+            }
+        }
+    }
+
+    fn with_bytes(path: &Path, bytes: Vec<u8>, version: u32) -> ArchiveReader {
         let mut reader = ArchiveReader {
             path: path.to_path_buf(),
             version,
@@ -224,7 +321,7 @@ impl ArchiveReader {
             Some(index) => reader.use_index(index.offset, &index.entries),
             None => reader.scan(),
         }
-        Ok(reader)
+        reader
     }
 
     fn push_frame(&mut self, h: &RecordHeader, offset: usize) {
@@ -418,6 +515,22 @@ impl ArchiveReader {
                 }
             }
         }
+    }
+
+    /// What opening the archive found that cannot be read, in file order: frames the
+    /// index or a record header names but whose record is damaged, stretches of bytes
+    /// that hold no complete record, an index that disagrees with the records, a missing
+    /// index or a cut-off end. Empty for a sound archive. Reading commands report these
+    /// (their listings and extractions leave those frames out).
+    pub fn unreadable(&self) -> Vec<Unreadable> {
+        self.damage
+            .iter()
+            .map(|d| Unreadable {
+                frame: d.frame,
+                message: d.message.clone(),
+                truncation: matches!(d.kind, DamageKind::NoIndex | DamageKind::CutTail),
+            })
+            .collect()
     }
 
     /// The frames, in file order.

@@ -24,6 +24,9 @@ pub struct RepairReport {
     pub dropped: Vec<String>,
     /// True when the archive had no valid index (it was not finished).
     pub index_was_missing: bool,
+    /// What was wrong with the file header when its magic number or version was damaged
+    /// and the records and index after it were sound: the header was rebuilt.
+    pub header_rebuilt: Option<String>,
     /// Bytes of the repaired archive.
     pub bytes: u64,
 }
@@ -54,11 +57,12 @@ pub fn repair(input: &Path, output: &Path) -> Result<RepairReport> {
 
 fn repair_unguarded(input: &Path, output: &Path) -> Result<RepairReport> {
     super::merge::check_output(&[input.to_path_buf()], output)?;
-    let reader = ArchiveReader::open(input)?;
+    let (reader, header_rebuilt) = ArchiveReader::open_rebuilding_header(input)?;
     let bytes = &reader.bytes;
     let index = read_index(bytes);
     let mut report = RepairReport {
         index_was_missing: index.is_none(),
+        header_rebuilt,
         ..Default::default()
     };
     let limit = index.as_ref().map_or(bytes.len(), |i| i.offset);

@@ -3,7 +3,7 @@
 use super::ArchiveReader;
 use crate::error::{Error, Result};
 use crate::io::usd::{write_stage, UsdOptions, UsdStageWriter};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 impl ArchiveReader {
     /// Writes the frames `numbers` (every frame when `None`) as USD (`.usdc`, `.usda`,
@@ -38,6 +38,7 @@ impl ArchiveReader {
         options.validate()?;
         let all: Vec<i64> = self.frames.iter().map(|f| f.number).collect();
         let numbers = numbers.unwrap_or(&all);
+        crate::io::usd::check_time_codes(Path::new(output), numbers)?;
         let per_frame = crate::sequence::is_pattern(output);
         let paths: Vec<PathBuf> = match per_frame {
             true => numbers

@@ -14,11 +14,19 @@ pub(crate) enum ArchiveCommand {
     Info {
         /// The archive.
         file: PathBuf,
+        /// Read what can be read of a damaged archive and exit 0: its unreadable frames
+        /// are warned about (without it they make the exit status 1).
+        #[arg(long)]
+        skip_damaged: bool,
     },
     /// One line per frame.
     List {
         /// The archive.
         file: PathBuf,
+        /// Read what can be read of a damaged archive and exit 0: its unreadable frames
+        /// are warned about (without it they make the exit status 1).
+        #[arg(long)]
+        skip_damaged: bool,
     },
     /// Decode every frame and check its checksum; non-zero exit when one is damaged.
     Verify {
@@ -40,6 +48,10 @@ pub(crate) enum ArchiveCommand {
         output: String,
         #[command(flatten)]
         stage: StageArgs,
+        /// Read what can be read of a damaged archive and exit 0: its unreadable frames
+        /// are warned about (without it they make the exit status 1).
+        #[arg(long)]
+        skip_damaged: bool,
     },
     /// Join archives (one per farm task, say) into one, frames in increasing order,
     /// records copied as they are: the same bytes as one run writing every frame.
@@ -86,15 +98,16 @@ pub(crate) fn archive(
     cancel: &meniscus::CancelToken,
 ) -> Result<(), Failure> {
     match command {
-        ArchiveCommand::Info { file } => info(&file),
-        ArchiveCommand::List { file } => list(&file),
+        ArchiveCommand::Info { file, skip_damaged } => info(&file, skip_damaged),
+        ArchiveCommand::List { file, skip_damaged } => list(&file, skip_damaged),
         ArchiveCommand::Verify { file } => verify(&file),
         ArchiveCommand::Extract {
             file,
             frame,
             output,
             stage,
-        } => extract(&file, frame, &output, &stage, cancel),
+            skip_damaged,
+        } => extract(&file, frame, &output, &stage, skip_damaged, cancel),
         ArchiveCommand::Merge { inputs, output } => merge(&inputs, &output),
         ArchiveCommand::Repair { file, output } => repair(&file, output.as_deref()),
         ArchiveCommand::Pack {
@@ -113,8 +126,31 @@ pub(crate) fn archive(
     }
 }
 
+/// Warns of every frame or stretch of `file` that its reading left out
+/// ([`ArchiveReader::unreadable`]); a failure when frames the archive holds were lost,
+/// unless `skip_damaged` (a missing index or a cut-off end only warns: the frames before
+/// it are whole).
+fn report_unreadable(file: &Path, r: &ArchiveReader, skip_damaged: bool) -> Result<(), Failure> {
+    let unreadable = r.unreadable();
+    for u in &unreadable {
+        match u.frame {
+            Some(n) => eprintln!("warning: {}: frame {n}: {}", file.display(), u.message),
+            None => eprintln!("warning: {}: {}", file.display(), u.message),
+        }
+    }
+    let lost = unreadable.iter().filter(|u| !u.truncation).count();
+    if lost > 0 && !skip_damaged {
+        return Err(Failure::Run(format!(
+            "{}: damaged: {lost} damaged record(s) or index entries left out (listed above; `archive verify` checks every frame)\nhint: {}, or --skip-damaged reads what can be read",
+            file.display(),
+            meniscus::archive::repair_advice(file)
+        )));
+    }
+    Ok(())
+}
+
 /// `archive info`: frames, triangles, bytes, the error bounds and attributes.
-fn info(file: &Path) -> Result<(), Failure> {
+fn info(file: &Path, skip_damaged: bool) -> Result<(), Failure> {
     let r = ArchiveReader::open(file)?;
     let bytes = std::fs::metadata(file)
         .map_err(|e| meniscus::Error::io(file, e))?
@@ -170,11 +206,11 @@ fn info(file: &Path) -> Result<(), Failure> {
             f.attribute_error_bound.unwrap_or(0.0)
         );
     }
-    Ok(())
+    report_unreadable(file, &r, skip_damaged)
 }
 
 /// `archive list`: one line per frame, its record's bytes.
-fn list(file: &Path) -> Result<(), Failure> {
+fn list(file: &Path, skip_damaged: bool) -> Result<(), Failure> {
     let r = ArchiveReader::open(file)?;
     println!(
         "{:>8} {:>10} {:>10} {:>12}",
@@ -189,7 +225,7 @@ fn list(file: &Path) -> Result<(), Failure> {
             f.record_bytes()
         );
     }
-    Ok(())
+    report_unreadable(file, &r, skip_damaged)
 }
 
 /// `archive verify`: every frame decoded; a failure when anything is damaged.
@@ -239,6 +275,7 @@ fn extract(
     frame: Option<i64>,
     output: &str,
     stage: &StageArgs,
+    skip_damaged: bool,
     cancel: &meniscus::CancelToken,
 ) -> Result<(), Failure> {
     // A usage error (exit 2, as `reconstruct` gives it) before the archive is read.
@@ -263,7 +300,7 @@ fn extract(
         let written = r.extract_stage(numbers.as_deref(), output, &options, cancel)?;
         let frames = numbers.map_or(r.frames().len(), |n| n.len());
         eprintln!("{frames} frame(s) written to {} stage(s)", written.len());
-        return Ok(());
+        return unreadable_unless_one(file, &r, frame, skip_damaged);
     }
     let written = r.extract(
         numbers.as_deref(),
@@ -274,7 +311,21 @@ fn extract(
     if frame.is_none() {
         eprintln!("{} frame(s) written", written.len());
     }
-    Ok(())
+    unreadable_unless_one(file, &r, frame, skip_damaged)
+}
+
+/// [`report_unreadable`] after an extraction of every frame; one frame asked for and
+/// written misses nothing.
+fn unreadable_unless_one(
+    file: &Path,
+    r: &ArchiveReader,
+    frame: Option<i64>,
+    skip_damaged: bool,
+) -> Result<(), Failure> {
+    match frame {
+        Some(_) => Ok(()),
+        None => report_unreadable(file, r, skip_damaged),
+    }
 }
 
 /// `archive merge`: `inputs` joined into `output`.
@@ -299,6 +350,9 @@ fn repair(file: &Path, output: Option<&Path>) -> Result<(), Failure> {
     }
     for n in &report.relengthed {
         eprintln!("frame {n}: kept, the payload length in its record header corrected");
+    }
+    if let Some(why) = &report.header_rebuilt {
+        eprintln!("{why}");
     }
     eprintln!(
         "{} frame(s) kept, {} item(s) dropped{}: {} ({} bytes)",
