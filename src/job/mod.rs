@@ -156,7 +156,11 @@ fn run_frames_unguarded(
     } = callbacks;
     let mut reports = Vec::with_capacity(plan.len());
     for (i, (frame, out)) in plan.iter().enumerate() {
-        job.cancel.check()?;
+        if job.cancel.is_cancelled() {
+            // An interruption keeps the frames done, as a failed frame does.
+            sink.stop()?;
+            return Err(Error::Interrupted);
+        }
         *current.borrow_mut() = Some(frame.input.clone());
         on_frame(i, frame);
         if job.skip_existing && sink.holds(frame, out) {
@@ -171,7 +175,10 @@ fn run_frames_unguarded(
                 on_done(&report);
                 reports.push(report);
             }
-            Err(Error::Interrupted) => return Err(Error::Interrupted),
+            Err(Error::Interrupted) => {
+                sink.stop()?;
+                return Err(Error::Interrupted);
+            }
             Err(e) => {
                 let seconds = started.elapsed().as_secs_f64();
                 let report = FrameReport::not_done(frame, out, Some(&e), seconds);

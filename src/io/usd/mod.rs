@@ -204,6 +204,25 @@ impl UsdOptions {
     }
 }
 
+/// The largest frame number, either way, a USD stage takes: its time codes are doubles,
+/// which hold every integer up to 2^53 exactly; above it neighbouring frame numbers share
+/// one time code (three frames gave two samples).
+pub const MAX_STAGE_FRAME: i64 = 1 << 53;
+
+/// Refuses frame numbers a stage at `path` cannot give distinct time codes
+/// ([`MAX_STAGE_FRAME`]), naming the first.
+pub fn check_time_codes(path: &Path, frames: &[i64]) -> Result<()> {
+    match frames.iter().find(|n| n.unsigned_abs() > MAX_STAGE_FRAME as u64) {
+        Some(n) => Err(Error::UnsupportedFormat {
+            path: path.to_path_buf(),
+            message: format!(
+                "frame number {n}: a USD time code holds frame numbers up to ±2^53 ({MAX_STAGE_FRAME}) exactly, and larger ones would share time codes"
+            ),
+        }),
+        None => Ok(()),
+    }
+}
+
 /// Writes `surface` as a stage of one frame, `frame` (its time code: a single time sample
 /// there, the time range `frame`..`frame`), atomically: [`UsdStageWriter`] with one
 /// [`UsdStageWriter::append_frame`]. A stage per frame of a sequence, as a farm writes them
@@ -359,6 +378,7 @@ impl UsdStageWriter {
     /// fails too and removes the temporary file.
     pub fn append_frame(&mut self, frame: i64, surface: &Surface) -> Result<()> {
         self.check_usable()?;
+        check_time_codes(&self.path, &[frame])?;
         if self.frames.contains(&frame) {
             return Err(Error::FramesExist {
                 path: self.path.clone(),

@@ -65,6 +65,9 @@ impl FrameSink for UsdSink {
     fn open(plan: &[(Frame, PathBuf)], _: &ReconstructOptions, job: &JobOptions) -> Result<Self> {
         let options = stage_options(job);
         options.validate()?;
+        for (frame, path) in plan {
+            crate::io::usd::check_time_codes(path, &[frame.number])?;
+        }
         let Some((_, path)) = plan.first().filter(|_| one_file(plan)) else {
             return Ok(UsdSink::PerFrame(options));
         };
