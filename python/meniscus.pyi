@@ -182,7 +182,8 @@ def reconstruct(
         radius_attribute: the attribute of ``attributes`` holding each particle's radius
             (``"none"``: none). Default: Houdini's ``pscale`` when present. Without
             ``particle_radius``, ``r`` is its median; a given one is checked against the
-            median. Radii must be finite and > 0 (``FormatError`` naming the particle);
+            median. Radii must be finite, > 0 and within 10× of their median either way
+            (``FormatError`` naming the particle and its value);
             radii that differ give a ``UserWarning``: every particle is still meshed with
             the one radius ``r``.
         **options: the reconstruction settings (``ReconstructOptions``): influence_radius,
