@@ -2,7 +2,9 @@
 # A short cargo-fuzz run (FUZZ_SECONDS, default 30, per target) of the targets whose
 # readers changed: src/archive → archive targets, src/io/particles → particle targets,
 # src/io/mesh (or the rest of src/io) → mesh targets, src/sequence or the VTK XML
-# scanner under src/io/particles/vtk_xml (which reads the .pvd markup) → sequence_pvd.
+# scanner under src/io/particles/vtk_xml (which reads the .pvd markup) → sequence_pvd,
+# anything under src → reconstruct (the whole pipeline on small random particle sets with
+# random radii and attributes; each input runs in milliseconds, 30 s in all).
 # Changes are taken against FUZZ_BASE (default: origin/main, else main, else the
 # previous commit); with FUZZ_ALL=1 every target runs. Stable toolchain with
 # RUSTC_BOOTSTRAP=1, as fuzz/README.md explains; cargo-fuzz is installed when missing.
@@ -17,7 +19,7 @@ if [ -z "$base" ]; then
 fi
 # Since the branch left the base (its merge base), committed or not.
 since=$(git merge-base "$base" HEAD)
-changed=$( { git diff --name-only "$since" -- src/io src/archive src/sequence; git status --porcelain -- src/io src/archive src/sequence | cut -c4-; } | sort -u)
+changed=$( { git diff --name-only "$since" -- src; git status --porcelain -- src | cut -c4-; } | sort -u)
 targets=()
 if [ "${FUZZ_ALL:-0}" = 1 ] || grep -q '^src/archive/' <<<"$changed"; then
   targets+=(archive archive_payload)
@@ -31,8 +33,11 @@ fi
 if [ "${FUZZ_ALL:-0}" = 1 ] || grep -Eq '^src/(sequence/|io/particles/vtk_xml/)' <<<"$changed"; then
   targets+=(sequence_pvd)
 fi
+if [ "${FUZZ_ALL:-0}" = 1 ] || grep -q '^src/' <<<"$changed"; then
+  targets+=(reconstruct)
+fi
 if [ ${#targets[@]} -eq 0 ]; then
-  echo "no change to src/io, src/archive or src/sequence since $base (${since:0:8}): no fuzzing"
+  echo "no change to src since $base (${since:0:8}): no fuzzing"
   exit 0
 fi
 command -v cargo-fuzz >/dev/null || cargo install cargo-fuzz --locked
