@@ -9,14 +9,20 @@
 //! new format that holds a whole sequence in one file is one new file in `job/sink/`
 //! implementing the trait and defining its kind (extensions, [`OutputProfile`], opener),
 //! plus its line in the chooser's list.
+//!
+//! [`settings`] holds the job-level settings as users state them (fps, threads, error
+//! bounds, up axis, memory budget) and builds [`JobOptions`] from them for every front
+//! end.
 
 mod frame;
 mod plan;
 mod report;
+pub mod settings;
 mod sink;
 
 pub use plan::plan_frames;
 pub use report::{FrameReport, FrameStatus};
+pub use settings::JobSettings;
 pub use sink::{check_outputs, output_profile, OutputProfile};
 
 use crate::attributes::AttributeSelection;

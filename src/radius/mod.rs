@@ -16,6 +16,9 @@
 //!
 //! Particles of several sizes carry their own radius in a point attribute:
 //! [`RadiusAttribute`] says which, [`read_radii`] and [`radii_of`] read and check it.
+//!
+//! [`choose_radius`] is the policy every front end follows to pick a run's radius from
+//! a given one, the radius attribute and the estimate.
 
 use crate::error::{Error, Result};
 use crate::io::particles::{
@@ -27,10 +30,12 @@ use rayon::prelude::*;
 use std::path::Path;
 
 mod attribute;
+mod policy;
 pub use attribute::{
     radii_of, read_radii, ParticleRadii, RadiusAttribute, HOUDINI_RADIUS, RADIUS_LIMITS,
     RADIUS_SPREAD,
 };
+pub use policy::{choose_radius, RadiusBasis, RadiusChoice};
 
 /// Particles sampled at most (evenly through the input).
 pub const SAMPLE: usize = 4096;
