@@ -1,7 +1,7 @@
 //! `meniscus archive`: inspect, check, extract from, fill and merge `.mseq` mesh-sequence
 //! archives.
 
-use crate::{Failure, FarmArgs, StageArgs};
+use crate::cli::{Failure, FarmArgs, StageArgs};
 use clap::Subcommand;
 use meniscus::archive::{ArchiveOptions, ArchiveReader, ArchiveWriter};
 use meniscus::io::mesh::{read_mesh, MeshWriteOptions};
@@ -93,10 +93,7 @@ pub(crate) enum ArchiveCommand {
 }
 
 /// Runs one `meniscus archive` subcommand.
-pub(crate) fn archive(
-    command: ArchiveCommand,
-    cancel: &meniscus::CancelToken,
-) -> Result<(), Failure> {
+pub(crate) fn run(command: ArchiveCommand, cancel: &meniscus::CancelToken) -> Result<(), Failure> {
     match command {
         ArchiveCommand::Info { file, skip_damaged } => info(&file, skip_damaged),
         ArchiveCommand::List { file, skip_damaged } => list(&file, skip_damaged),

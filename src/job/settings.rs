@@ -12,7 +12,7 @@ use crate::cancel::CancelToken;
 use crate::error::{Error, Result};
 use crate::io::mesh::MeshWriteOptions;
 use crate::io::particles::ParticleFormat;
-use crate::io::usd::UpAxis;
+use crate::io::usd::{UpAxis, UsdDroplets};
 use crate::radius::RadiusAttribute;
 
 /// Default playback rate of a sequence in one glTF or USD stage, frames per second.
@@ -44,6 +44,8 @@ pub struct JobSettings {
     /// Meters in one world unit of a USD stage output. Default
     /// [`DEFAULT_METERS_PER_UNIT`].
     pub meters_per_unit: f64,
+    /// How a USD stage output holds the isolated particles. Default points.
+    pub usd_droplets: UsdDroplets,
     /// The point attributes carried to the surface. Default: the velocity, when present.
     pub attributes: AttributeSelection,
     /// The point attribute holding each particle's radius. Default Houdini's `pscale`
@@ -66,6 +68,7 @@ impl Default for JobSettings {
             fps: DEFAULT_FPS,
             up_axis: UpAxis::default(),
             meters_per_unit: DEFAULT_METERS_PER_UNIT,
+            usd_droplets: UsdDroplets::default(),
             attributes: AttributeSelection::default(),
             radius_attribute: RadiusAttribute::default(),
             threads: None,
@@ -99,6 +102,7 @@ impl JobSettings {
             fps: self.fps,
             up_axis: self.up_axis,
             meters_per_unit: self.meters_per_unit,
+            usd_droplets: self.usd_droplets,
             attributes: self.attributes.clone(),
             radius_attribute: self.radius_attribute.clone(),
             cancel: cancel.clone(),
@@ -135,6 +139,15 @@ pub fn check_fps(fps: f64) -> Result<()> {
 pub fn parse_memory_budget(text: &str) -> Result<u64> {
     crate::tiles::parse_memory_size(text).map_err(|message| Error::InvalidOption {
         option: "memory_budget",
+        message,
+    })
+}
+
+/// How a USD stage holds the isolated particles, as users write it: `points` or
+/// `instancer` ([`Error::InvalidOption`] `usd_droplets`).
+pub fn parse_usd_droplets(text: &str) -> Result<UsdDroplets> {
+    text.parse().map_err(|message| Error::InvalidOption {
+        option: "usd_droplets",
         message,
     })
 }
@@ -187,6 +200,14 @@ mod tests {
         assert_eq!(parse_memory_budget("2KiB").unwrap(), 2048);
         assert_eq!(option_of(parse_up_axis("X").unwrap_err()), "up_axis");
         assert_eq!(parse_up_axis("z").unwrap(), UpAxis::Z);
+        assert_eq!(
+            option_of(parse_usd_droplets("mesh").unwrap_err()),
+            "usd_droplets"
+        );
+        assert_eq!(
+            parse_usd_droplets("instancer").unwrap(),
+            UsdDroplets::Instancer
+        );
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! The warnings of `meniscus reconstruct` about options the chosen output makes
 //! pointless.
 
-use crate::ReconstructArgs;
+use super::ReconstructArgs;
 use clap::parser::ValueSource;
 use clap::ArgMatches;
 use meniscus::attributes::AttributeSelection;
