@@ -1,6 +1,7 @@
 //! `.mseq` archives from Python: the `Archive` class and `merge_archives`.
 
-use crate::{run_interruptible, Mesh};
+use crate::interrupt::run_interruptible;
+use crate::mesh::Mesh;
 use meniscus::archive::{ArchiveFrame, ArchiveOptions, ArchiveReader, ArchiveWriter};
 use meniscus::Error;
 use pyo3::exceptions::{PyKeyError, PyValueError};

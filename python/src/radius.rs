@@ -1,80 +1,69 @@
-//! The particle radius of a Python call: `particle_radius`, the radius attribute and the
-//! check of a given radius against the particles (as the CLI's `cli/radius.rs`).
+//! The particle radius of a Python call: the library's policy
+//! ([`meniscus::radius::choose_radius`], as the CLI's) worded as keywords:
+//! `particle_radius`, `radius_attribute`, `radius_check`.
 
-use crate::to_py;
-use meniscus::radius::{ParticleRadii, RadiusAttribute};
+use crate::errors::to_py;
+use meniscus::radius::{ParticleRadii, RadiusAttribute, RadiusBasis, RadiusCheck};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-/// The particle radius of a run. With `radii` (a radius attribute) their median, or
-/// `given` checked against it ([`radius_from_attribute`]). Otherwise `given` after
-/// checking it against the estimate (a `UserWarning` outside 0.25×–4×, a `ValueError`
-/// outside 0.05×–20×) unless not `radius_check`; without `given`, the estimate. `input`
-/// names the particles in errors.
+/// The particle radius of a run, and the particles' radii when `radii` (a radius
+/// attribute) holds them ([`meniscus::radius::choose_radius`]): with `radii` their
+/// median, or `given` checked against it; otherwise the estimate, or `given` checked
+/// against it; unless not `radius_check`. A doubtful `given` is a `UserWarning`, an
+/// implausible one a `ValueError`; an estimate that fails is raised, also with `given`.
+/// `input` names the particles in errors.
 pub(crate) fn resolve_radius(
     py: Python<'_>,
     given: Option<f32>,
     radius_check: bool,
     input: &std::path::Path,
-    radii: Option<&ParticleRadii>,
+    radii: Option<ParticleRadii>,
     estimate: impl FnOnce() -> meniscus::Result<meniscus::radius::RadiusEstimate> + Send,
-) -> PyResult<f32> {
-    use meniscus::radius::{verify_radius, RadiusCheck};
-    if let Some(radii) = radii {
-        return radius_from_attribute(py, given, radius_check, input, radii);
-    }
-    if let (Some(r), false) = (given, radius_check) {
-        return Ok(r);
-    }
-    let estimate = py.allow_threads(estimate).map_err(to_py)?;
-    let Some(r) = given else {
-        return Ok(estimate.radius);
-    };
-    if verify_radius(input, r, &estimate).map_err(to_py)? == RadiusCheck::Doubtful {
-        let message = format!(
-            "particle_radius {r:?} is {:.2} × the radius the spacing of {}'s particles implies ({:?}); radius_check=False silences this",
-            r / estimate.radius,
-            input.display(),
-            estimate.radius
-        );
-        user_warning(py, &message)?;
-    }
-    Ok(r)
-}
-
-/// The particle radius of a run whose particles carry a radius attribute: without
-/// `given` the median; `given` checked against the median as against the estimate
-/// (unless not `radius_check`).
-fn radius_from_attribute(
-    py: Python<'_>,
-    given: Option<f32>,
-    radius_check: bool,
-    input: &std::path::Path,
-    radii: &ParticleRadii,
-) -> PyResult<f32> {
-    use meniscus::radius::{check_radius, RadiusCheck};
-    let median = radii.median();
-    let source = format!("attribute {:?} of {}", radii.attribute, input.display());
-    let Some(r) = given else {
-        return Ok(median);
-    };
-    if !radius_check {
-        return Ok(r);
-    }
-    let ratio = r / median;
-    match check_radius(r, median) {
-        RadiusCheck::Plausible => {}
-        RadiusCheck::Doubtful => user_warning(
-            py,
-            &format!("particle_radius {r:?} is {ratio:.3} × the median radius {median:?} of {source}; radius_check=False silences this"),
-        )?,
-        RadiusCheck::Implausible => {
-            return Err(PyValueError::new_err(format!(
-                "particle_radius {r:?} is {ratio:.3e} × the median radius {median:?} of {source}; leave it out (the median is taken), or radius_check=False"
-            )))
+) -> PyResult<(f32, Option<ParticleRadii>)> {
+    let choice = py
+        .allow_threads(|| meniscus::radius::choose_radius(given, radius_check, Ok(radii), estimate))
+        .map_err(to_py)?;
+    let r = choice.radius;
+    match (choice.basis, choice.verdict) {
+        (RadiusBasis::Unmeasured(e), _) => return Err(to_py(e)),
+        (RadiusBasis::Estimate(estimate), Some(RadiusCheck::Doubtful)) => {
+            let message = format!(
+                "particle_radius {r:?} is {:.2} × the radius the spacing of {}'s particles implies ({:?}); radius_check=False silences this",
+                r / estimate.radius,
+                input.display(),
+                estimate.radius
+            );
+            user_warning(py, &message)?;
         }
+        (RadiusBasis::Estimate(estimate), Some(RadiusCheck::Implausible)) => {
+            return Err(to_py(meniscus::Error::ImplausibleRadius {
+                path: input.to_path_buf(),
+                given: r,
+                estimate: estimate.radius,
+                sample: estimate.sample,
+            }))
+        }
+        (RadiusBasis::Median(median), Some(verdict)) => {
+            let radii = choice.radii.as_ref().expect("a median of radii");
+            let source = format!("attribute {:?} of {}", radii.attribute, input.display());
+            let ratio = r / median;
+            match verdict {
+                RadiusCheck::Plausible => {}
+                RadiusCheck::Doubtful => user_warning(
+                    py,
+                    &format!("particle_radius {r:?} is {ratio:.3} × the median radius {median:?} of {source}; radius_check=False silences this"),
+                )?,
+                RadiusCheck::Implausible => {
+                    return Err(PyValueError::new_err(format!(
+                        "particle_radius {r:?} is {ratio:.3e} × the median radius {median:?} of {source}; leave it out (the median is taken), or radius_check=False"
+                    )))
+                }
+            }
+        }
+        _ => {}
     }
-    Ok(r)
+    Ok((r, choice.radii))
 }
 
 /// Issues a Python `UserWarning`.
