@@ -81,6 +81,7 @@
 //! pure function of the state, and collapses run in sorted order on one thread, so the
 //! output is deterministic and does not depend on the thread count.
 
+mod candidate;
 mod collapse;
 mod pieces;
 mod placement;
@@ -89,7 +90,8 @@ mod state;
 mod tri_list;
 
 use crate::mesh::TriMesh;
-use collapse::{Attempt, Candidate, Mark, Outcome, View, WalkTally};
+use candidate::{Candidate, Mark};
+use collapse::{Attempt, Outcome, View, WalkTally};
 use glam::{DVec3, Vec3};
 pub(crate) use pieces::place_survivors;
 pub(crate) use pieces::{decimate_band, Remap};

@@ -10,7 +10,7 @@
 //! every live edge of every pass is about a quarter of the decimation; the optimum's
 //! Cramer rule and the segment minimum were half of that.
 
-use super::collapse::Candidate;
+use super::candidate::Candidate;
 use super::quadric::Quadric;
 use glam::DVec3;
 
@@ -94,7 +94,7 @@ pub(super) fn place_candidates_at(
 /// dispatch). The `unsafe` blocks call SSE2 intrinsics, which x86-64 always has.
 #[cfg(target_arch = "x86_64")]
 mod lanes {
-    use super::super::collapse::Candidate;
+    use super::super::candidate::Candidate;
     use super::super::quadric::Quadric;
     use glam::DVec3;
     use std::arch::x86_64::*;

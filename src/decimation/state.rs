@@ -2,7 +2,7 @@
 //! their reference normals, vertex → triangle lists, flags, and the candidates of a pass
 //! (with the reuse of what the previous pass learnt, see the module docs of [`super`]).
 
-use super::collapse::Candidate;
+use super::candidate::Candidate;
 use super::placement::place_candidates_at;
 use super::quadric::{Plane, Quadric};
 use super::tri_list::TriList;
