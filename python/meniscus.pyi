@@ -183,12 +183,14 @@ def reconstruct(
             (``"none"``: none). Default: Houdini's ``pscale`` when present. Without
             ``particle_radius``, ``r`` is its median; a given one is checked against the
             median. Radii must be finite, > 0 and within 10× of their median either way
-            (``FormatError`` naming the particle and its value);
-            radii that differ give a ``UserWarning``: every particle is still meshed with
-            the one radius ``r``.
+            (``FormatError`` naming the particle and its value); where they differ each
+            particle is meshed with its own radius (influence radius, kernel, coverage
+            ball, containment depth, isolated sphere), while the cell size and the other
+            lengths stay multiples of ``r``.
         **options: the reconstruction settings (``ReconstructOptions``): influence_radius,
-            cell_size, t_low, t_high, particle_coverage, iso_offset, isolated_spheres,
-            decimate, decimate_error, smooth, subdivide, defer_subdivision, keep_inside, tile_size,
+            cell_size, t_low, t_high, particle_coverage, iso_offset, kernel, kernel_radius,
+            max_stretch, min_neighbours, centre_smoothing, isolated_spheres, decimate,
+            decimate_error, smooth, subdivide, defer_subdivision, keep_inside, tile_size,
             memory_budget, temp_dir.
     """
 

@@ -58,6 +58,38 @@ impl std::fmt::Display for Decimation {
     }
 }
 
+/// The reconstruction settings as the front ends name them, in the order of the Python
+/// stubs (`python/meniscus.pyi`): the fields of [`ReconstructSettings`] but
+/// `particle_radius`, which are the Python package's keywords and, with `-` for `_`, the
+/// flags of `meniscus reconstruct` (every one but `defer_subdivision`, which the CLI sets
+/// by itself for a `.mseq` output). A new setting is a field, its line here, its flag and
+/// its keyword: the CLI's test (every setting is a flag) and the Python package's
+/// `test_settings_agree.py` (the same names, defaults and units in the CLI, the package,
+/// the stubs and the README) fail until they all agree.
+pub const SETTINGS: &[&str] = &[
+    "influence_radius",
+    "cell_size",
+    "t_low",
+    "t_high",
+    "particle_coverage",
+    "iso_offset",
+    "kernel",
+    "kernel_radius",
+    "max_stretch",
+    "min_neighbours",
+    "centre_smoothing",
+    "isolated_spheres",
+    "decimate",
+    "decimate_error",
+    "smooth",
+    "subdivide",
+    "defer_subdivision",
+    "keep_inside",
+    "tile_size",
+    "memory_budget",
+    "temp_dir",
+];
+
 /// The options of one reconstruction in the units users give them. [`Self::new`] holds
 /// the defaults of the CLI and the Python package, [`Self::paper`] the pipeline of
 /// Akinci et al. 2013 exactly.
@@ -296,6 +328,69 @@ mod tests {
         assert_eq!((d.target_reduction, d.max_error), (Some(0.7), None));
         s.decimate = Decimation::Off;
         assert_eq!(s.options().unwrap().decimate, None);
+    }
+
+    /// Each field of `settings` with its value, as the pretty Debug form writes them
+    /// (a field starts a line indented by four).
+    fn fields(settings: &ReconstructSettings) -> Vec<(String, String)> {
+        let mut fields: Vec<(String, String)> = Vec::new();
+        for line in format!("{settings:#?}").lines() {
+            match (line.strip_prefix("    "), fields.last_mut()) {
+                (Some(field), _) if !field.starts_with(' ') => {
+                    let (name, value) = field.split_once(':').expect("name: value");
+                    fields.push((name.to_string(), value.to_string()));
+                }
+                (_, Some((_, value))) => value.push_str(line.trim()),
+                (_, None) => {}
+            }
+        }
+        fields
+    }
+
+    #[test]
+    fn the_settings_list_is_the_structs_fields() {
+        let names: Vec<String> = fields(&ReconstructSettings::new(1.0))
+            .into_iter()
+            .map(|(name, _)| name)
+            .filter(|name| name != "particle_radius")
+            .collect();
+        assert_eq!(names, SETTINGS);
+    }
+
+    #[test]
+    fn every_setting_survives_the_trip_to_the_options_and_back() {
+        // Each field changed from its default: one that `options` or `of` forgot comes
+        // back as the default.
+        let changed = ReconstructSettings {
+            particle_radius: 1.0,
+            influence_radius: 3.5,
+            cell_size: 1.25,
+            t_low: 0.5,
+            t_high: 3.0,
+            particle_coverage: 0.8,
+            iso_offset: 0.05,
+            kernel: Kernel::Isotropic,
+            kernel_radius: 3.0,
+            max_stretch: 1.5,
+            min_neighbours: 6,
+            centre_smoothing: 0.2,
+            isolated_spheres: Some(1),
+            decimate: Decimation::Fraction(0.5),
+            decimate_error: Some(0.2),
+            smooth: 1,
+            subdivide: 2,
+            defer_subdivision: true,
+            keep_inside: Some(0.5),
+            tile_size: Some(16),
+            memory_budget: Some(1 << 30),
+            temp_dir: Some("spill".into()),
+        };
+        let defaults = fields(&ReconstructSettings::new(1.0));
+        for ((name, value), (_, default)) in fields(&changed).iter().zip(&defaults).skip(1) {
+            assert_ne!(value, default, "{name} is changed");
+        }
+        let back = ReconstructSettings::of(&changed.options().unwrap(), 1.0);
+        assert_eq!(back, changed);
     }
 
     #[test]

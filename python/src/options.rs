@@ -11,30 +11,9 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
 
-/// The reconstruction settings taken as keywords, in the order of the stubs.
-pub const SETTINGS: &[&str] = &[
-    "influence_radius",
-    "cell_size",
-    "t_low",
-    "t_high",
-    "particle_coverage",
-    "iso_offset",
-    "kernel",
-    "kernel_radius",
-    "max_stretch",
-    "min_neighbours",
-    "centre_smoothing",
-    "isolated_spheres",
-    "decimate",
-    "decimate_error",
-    "smooth",
-    "subdivide",
-    "defer_subdivision",
-    "keep_inside",
-    "tile_size",
-    "memory_budget",
-    "temp_dir",
-];
+/// The reconstruction settings taken as keywords, in the order of the stubs: the
+/// library's one list of them.
+pub use meniscus::settings::SETTINGS;
 
 /// The keywords that turn the defaults into the pipeline of Akinci et al. 2013 exactly
 /// (`meniscus.PAPER`): where [`ReconstructSettings::paper`] differs from

@@ -201,3 +201,33 @@ pub(crate) enum KernelArg {
     Isotropic,
     Anisotropic,
 }
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    /// The long flags of `meniscus reconstruct`.
+    fn flags() -> Vec<String> {
+        let cli = crate::Cli::command();
+        let reconstruct = cli
+            .find_subcommand("reconstruct")
+            .expect("the reconstruct subcommand");
+        reconstruct
+            .get_arguments()
+            .filter_map(|a| a.get_long().map(str::to_string))
+            .collect()
+    }
+
+    #[test]
+    fn every_setting_is_a_flag() {
+        let flags = flags();
+        for name in meniscus::settings::SETTINGS {
+            // A `.mseq` output defers subdivision by itself.
+            if *name == "defer_subdivision" {
+                continue;
+            }
+            let flag = name.replace('_', "-");
+            assert!(flags.contains(&flag), "--{flag} is missing");
+        }
+    }
+}
