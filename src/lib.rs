@@ -14,15 +14,19 @@
 //!
 //! [`pipeline::reconstruct`] runs that list for one frame ([`pipeline::ReconstructOptions`]
 //! holds every stage's options, [`pipeline::ReconstructionStats`] what each stage did);
-//! [`job::run_frames`] runs it over files and `{}` sequences into an output
-//! (files, one animated glTF, a `.mseq` archive). The modules, bottom up:
+//! [`pipeline::reconstruct_sized`] is the same for a streamed source with per-particle
+//! radii, the entry the front ends reach. [`job::run_frames`] runs it over files and `{}`
+//! sequences into an output (files, one animated glTF, a `.mseq` archive, USD stages). The
+//! modules, bottom up:
 //!
 //! * [`error`], [`cancel`]: typed errors naming the input; cancellation between stages.
 //! * [`grid`]: the global lattice, its sparse 8³ blocks and half-blocks.
 //! * [`mesh`]: the indexed triangle mesh, normals, topology checks, inside test.
 //! * [`attributes`]: particle attributes (velocity, ...) and which a run carries.
-//! * [`io`]: particle readers (xyz, VTK, PLY, BGEO) and mesh readers and writers (glTF,
-//!   PLY, OBJ, VTK).
+//! * [`io`]: particle readers (xyz, VTK legacy and XML, `.pvd`, PLY, BGEO), mesh readers
+//!   and writers (glTF, PLY, OBJ, VTK) and USD stages.
+//! * [`radius`]: the particle radius a frame's spacing implies, per-particle radii from a
+//!   point attribute, and the policy every front end follows to choose a run's radius.
 //! * [`field`]: the scalar field (the paper's isotropic one and anisotropic kernels).
 //! * [`marching_cubes`]: surface extraction with globally keyed vertices.
 //! * [`decimation`], [`smoothing`], [`containment`], [`subdivision`], [`isolated`]: the
@@ -30,8 +34,11 @@
 //! * [`tiles`]: the out-of-core engine (tiles under a memory budget, spill files,
 //!   stitching).
 //! * [`pipeline`]: one frame, stage by stage, with its options and timings.
-//! * [`settings`]: the options as the command line and the Python package take them.
-//! * [`sequence`], [`job`]: frame patterns and selections; runs over many frames.
+//! * [`settings`]: the reconstruction options as the command line and the Python package
+//!   take them (names, defaults, units: [`settings::SETTINGS`]).
+//! * [`sequence`], [`job`]: frame patterns and selections; runs over many frames, with
+//!   their job-level settings ([`job::settings`]: fps, threads, error bounds, up axis,
+//!   memory budget).
 //! * [`archive`]: the `.mseq` container for whole mesh sequences.
 //!
 //! `docs/architecture.md` draws the engine and its invariants.

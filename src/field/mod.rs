@@ -1,11 +1,26 @@
-//! The scalar field of Solenthaler, Schläfli and Pajarola 2007, "A Unified Particle Model
-//! for Fluid-Solid Interactions" (§ surface reconstruction), as used by Akinci et al. 2013.
+//! The scalar field whose zero set is the surface, with either particle kernel
+//! ([`Kernel`]):
+//!
+//! * **anisotropic** (the default): Yu & Turk 2013 kernels, each particle's ellipsoid from
+//!   the weighted covariance of its neighbours within `R` ([`compute_kernels`], in
+//!   `kernels.rs`; gathers in `gather.rs`, the 3×3 eigen-solver in `eigen.rs`), and
+//!   `phi(v) = (v − vbar(v))·n(v) − ρ_s·r` with `vbar` the ellipsoid-weighted mean, `n`
+//!   the direction in which that weight falls off and `ρ_s` =
+//!   [`AnisotropyOptions::surface_distance`] (`anisotropic.rs`);
+//! * **isotropic** (the paper's): the field of Solenthaler, Schläfli and Pajarola 2007, "A
+//!   Unified Particle Model for Fluid-Solid Interactions" (§ surface reconstruction), as
+//!   used by Akinci et al. 2013 (`isotropic.rs`, the concavity factor in `concavity.rs`),
+//!   detailed below.
+//!
+//! Both evaluate block by block over `evaluate.rs`; a particle the surface would leave
+//! outside is then covered by a ball (`coverage.rs`), and the iso offset shifts the level.
+//! [`compute_tile`] is the one path of a tile's field.
 //!
 //! **Input:** particle centres (world units) and [`FieldOptions`].
 //! **Output:** a [`SparseField`] holding `phi` (world units, negative inside the fluid) at
 //! every lattice vertex that has a particle within the influence radius `R`, in 8³ blocks.
 //!
-//! For a vertex `v`, with `k(s) = max(0, (1 − s²)³)` and `w_i = k(|v − x_i| / R)`:
+//! For the isotropic field at a vertex `v`, with `k(s) = max(0, (1 − s²)³)` and `w_i = k(|v − x_i| / R)`:
 //! * `vbar(v) = Σ w_i x_i / Σ w_i`,
 //! * `phi(v) = |v − vbar(v)| − r·f(v)`,
 //! * `f = 1` when `EVmax < t_low`, else `γ³ − 3γ² + 3γ` with

@@ -3,7 +3,8 @@
 //! 1. plan: one pass over the particles checks them and cuts the lattice into tiles under
 //!    the memory budget (`tiles::plan_tiles`);
 //! 2. store: the particles held for the tiles, in memory or spilled to disk;
-//! 3. tiles: isolated particles split off, the Solenthaler field ([`crate::field`]) and
+//! 3. tiles: isolated particles split off, the field ([`crate::field`]: anisotropic
+//!    kernels by default, the paper's isotropic Solenthaler field with `paper`) and
 //!    marching cubes ([`crate::marching_cubes`]), tile by tile, into a sink that
 //!    stitches the pieces exactly, or decimates each as it comes
 //!    (`tiles::TileDecimation`);
