@@ -14,7 +14,7 @@
 //!
 //! Both evaluate block by block over `evaluate.rs`; a particle the surface would leave
 //! outside is then covered by a ball (`coverage.rs`), and the iso offset shifts the level.
-//! [`compute_tile`] is the one path of a tile's field.
+//! `compute_tile` is the one path of a tile's field.
 //!
 //! **Input:** particle centres (world units) and [`FieldOptions`].
 //! **Output:** a [`SparseField`] holding `phi` (world units, negative inside the fluid) at
