@@ -90,6 +90,16 @@ pub const SETTINGS: &[&str] = &[
     "temp_dir",
 ];
 
+/// A memory budget as users write it (`512MiB`, `2GiB`, `2GB`, bytes; see
+/// [`crate::tiles::parse_memory_size`]), in bytes, for
+/// [`ReconstructSettings::memory_budget`] ([`Error::InvalidOption`] `memory_budget`).
+pub fn parse_memory_budget(text: &str) -> Result<u64> {
+    crate::tiles::parse_memory_size(text).map_err(|message| Error::InvalidOption {
+        option: "memory_budget",
+        message,
+    })
+}
+
 /// The options of one reconstruction in the units users give them. [`Self::new`] holds
 /// the defaults of the CLI and the Python package, [`Self::paper`] the pipeline of
 /// Akinci et al. 2013 exactly.
@@ -336,7 +346,7 @@ mod tests {
         let mut fields: Vec<(String, String)> = Vec::new();
         for line in format!("{settings:#?}").lines() {
             match (line.strip_prefix("    "), fields.last_mut()) {
-                (Some(field), _) if !field.starts_with(' ') => {
+                (Some(field), _) if field.starts_with(|c: char| c.is_ascii_lowercase()) => {
                     let (name, value) = field.split_once(':').expect("name: value");
                     fields.push((name.to_string(), value.to_string()));
                 }
@@ -406,5 +416,8 @@ mod tests {
         s.decimate = Decimation::Fraction(1.0);
         assert_eq!(name(s), "decimate");
         assert_eq!(name(ReconstructSettings::new(-1.0)), "particle_radius");
+        let e = parse_memory_budget("2g").unwrap_err();
+        assert!(e.to_string().starts_with("invalid memory_budget: "), "{e}");
+        assert_eq!(parse_memory_budget("2KiB").unwrap(), 2048);
     }
 }

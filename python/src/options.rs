@@ -193,8 +193,7 @@ pub fn settings(particle_radius: f32, keywords: &Keywords<'_>) -> PyResult<Recon
                     "invalid memory_budget: bytes (int) or a size such as \"2GiB\"",
                 )
             })?;
-            meniscus::tiles::parse_memory_size(&text)
-                .map_err(|e| PyValueError::new_err(format!("invalid memory_budget: {e}")))?
+            meniscus::settings::parse_memory_budget(&text).map_err(crate::errors::to_py)?
         }),
         _ => None,
     };

@@ -2,9 +2,10 @@
 //! the Python package's `reconstruct_file` keywords say about a run over files besides
 //! the reconstruction itself (that is [`crate::settings::ReconstructSettings`]). Both
 //! front ends take their defaults from here, check with [`JobSettings::validate`] (and
-//! [`check_threads`], [`parse_memory_budget`], [`parse_up_axis`]) and build the run's
-//! [`JobOptions`] with [`JobSettings::options`]; they only print or raise. The particle
-//! radius a run takes is [`crate::radius::choose_radius`]'s.
+//! [`check_threads`], [`parse_up_axis`], [`parse_usd_droplets`]) and build the run's [`JobOptions`] with
+//! [`JobSettings::options`]; they only print or raise. The particle radius a run takes is
+//! [`crate::radius::choose_radius`]'s; the memory budget, a reconstruction setting, is
+//! read by [`crate::settings::parse_memory_budget`].
 
 use super::JobOptions;
 use crate::attributes::AttributeSelection;
@@ -133,16 +134,6 @@ pub fn check_fps(fps: f64) -> Result<()> {
     Ok(())
 }
 
-/// A memory budget as users write it (`512MiB`, `2GiB`, `2GB`, bytes; see
-/// [`crate::tiles::parse_memory_size`]), in bytes ([`Error::InvalidOption`]
-/// `memory_budget`).
-pub fn parse_memory_budget(text: &str) -> Result<u64> {
-    crate::tiles::parse_memory_size(text).map_err(|message| Error::InvalidOption {
-        option: "memory_budget",
-        message,
-    })
-}
-
 /// How a USD stage holds the isolated particles, as users write it: `points` or
 /// `instancer` ([`Error::InvalidOption`] `usd_droplets`).
 pub fn parse_usd_droplets(text: &str) -> Result<UsdDroplets> {
@@ -193,11 +184,6 @@ mod tests {
         }
         s.fps = 30.0;
         assert!(s.validate().is_ok());
-        assert_eq!(
-            option_of(parse_memory_budget("2g").unwrap_err()),
-            "memory_budget"
-        );
-        assert_eq!(parse_memory_budget("2KiB").unwrap(), 2048);
         assert_eq!(option_of(parse_up_axis("X").unwrap_err()), "up_axis");
         assert_eq!(parse_up_axis("z").unwrap(), UpAxis::Z);
         assert_eq!(

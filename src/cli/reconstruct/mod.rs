@@ -153,7 +153,7 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, Failure> {
         memory_budget: args
             .memory_budget
             .as_deref()
-            .map(meniscus::job::settings::parse_memory_budget)
+            .map(meniscus::settings::parse_memory_budget)
             .transpose()?,
         temp_dir: args.temp_dir.clone(),
     };
