@@ -75,6 +75,7 @@ pub mod pipeline;
 pub mod radius;
 pub mod sequence;
 pub mod settings;
+pub mod shading;
 pub mod smoothing;
 pub mod subdivision;
 #[cfg(test)]

@@ -14,7 +14,8 @@
 //!    subdivision will make ([`crate::containment`]);
 //! 7. Loop subdivision ([`crate::subdivision`]);
 //! 8. icospheres of radius `r` at the isolated particles ([`crate::isolated`]);
-//! 9. area-weighted vertex normals;
+//! 9. the shading normals: area-weighted vertex normals, smoothed by option
+//!    ([`crate::shading`]);
 //! 10. the particles' payload carried to the final vertices ([`crate::attributes`]).
 //!
 //! Every stage is timed; [`ReconstructionStats`] is the paper's Table 1 for one frame.
@@ -27,6 +28,7 @@ use crate::field::Sizes;
 use crate::io::particles::ParticleSource;
 use crate::mesh::{SphereInstances, Surface, TriMesh};
 use crate::radius::ParticleRadii;
+use crate::shading::shading_normals;
 use crate::smoothing::smooth;
 use crate::subdivision::subdivide;
 use crate::tiles::{
@@ -39,7 +41,10 @@ use std::time::Instant;
 
 mod options;
 mod stats;
-pub use options::{ReconstructOptions, DEFAULT_DECIMATION, DEFAULT_DECIMATION_ERROR};
+pub use options::{
+    ReconstructOptions, DEFAULT_DECIMATION, DEFAULT_DECIMATION_ERROR, STEADY_CELL_SIZE,
+    STEADY_NORMAL_SMOOTHING, STEADY_SMOOTHING_STEPS,
+};
 use stats::Recorder;
 pub use stats::{peak_rss_bytes, ReconstructionStats, StageTiming};
 
@@ -186,7 +191,7 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
     })?;
     // 9. Normals.
     run.stage("normals", &mut fluid, |fluid, stats| {
-        fluid.compute_normals();
+        shading_normals(fluid, &options.shading);
         stats.fluid_triangles = fluid.triangle_count();
         Ok(())
     })?;

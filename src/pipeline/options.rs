@@ -1,8 +1,9 @@
 //! The options of one reconstruction: one tree of the stages' own options, each type with
 //! its documented defaults and its own checks ([`ReconstructOptions::validate`] runs them
-//! all), and three presets spelled out field by field: [`ReconstructOptions::new`]
-//! (meniscus's defaults), [`ReconstructOptions::paper`] (Akinci et al. 2013 exactly) and
-//! [`ReconstructOptions::raw`] (marching cubes alone). The settings of the command line and
+//! all), and four presets spelled out field by field: [`ReconstructOptions::new`]
+//! (meniscus's defaults for a still), [`ReconstructOptions::steady`] (the surface for
+//! animations: steady from frame to frame), [`ReconstructOptions::paper`] (Akinci et al.
+//! 2013 exactly) and [`ReconstructOptions::raw`] (marching cubes alone). The settings of the command line and
 //! the Python package ([`crate::settings`]) read their defaults from here.
 
 use crate::containment::ContainmentOptions;
@@ -11,6 +12,7 @@ use crate::error::Result;
 use crate::field::{FieldOptions, Kernel};
 use crate::marching_cubes::STITCH_BYTES_PER_TRIANGLE;
 use crate::mesh::MESH_BYTES_PER_TRIANGLE;
+use crate::shading::ShadingOptions;
 use crate::smoothing::SmoothOptions;
 use crate::subdivision::SubdivideOptions;
 use crate::tiles::{OutputCost, TileOptions};
@@ -30,6 +32,17 @@ pub const DEFAULT_DECIMATION: f32 = 0.81;
 /// local measure can tell (see [`crate::containment`]). On calm frames it does not bind:
 /// dam break frame 25, the analytic sphere and box come out the same.
 pub const DEFAULT_DECIMATION_ERROR: f32 = 0.1;
+
+/// Marching-cubes cell of the steady surface ([`ReconstructOptions::steady`]), multiples
+/// of `r`: fine enough that the lattice's own noise is small and regular, so that a few
+/// plain smoothing steps remove it (`docs/quality.md`, "Steady in motion").
+pub const STEADY_CELL_SIZE: f32 = 0.71;
+
+/// Plain Laplacian steps of the steady surface, on the marching-cubes mesh.
+pub const STEADY_SMOOTHING_STEPS: u32 = 10;
+
+/// Smoothing steps of the steady surface's shading normals.
+pub const STEADY_NORMAL_SMOOTHING: u32 = 3;
 
 /// Options of the whole pipeline, one field per stage. [`Self::new`] gives meniscus's
 /// defaults, [`Self::paper`] the pipeline of Akinci et al. 2013 exactly, [`Self::raw`] the
@@ -60,6 +73,9 @@ pub struct ReconstructOptions {
     /// smoothing and subdivision, or `None` to leave the surface as they made it.
     /// Default: at least 0.25 r deep ([`ContainmentOptions::default`]).
     pub containment: Option<ContainmentOptions>,
+    /// The shading normals written with the surface. Default: area-weighted
+    /// ([`ShadingOptions::default`]).
+    pub shading: ShadingOptions,
 }
 
 /// The fraction of triangles the memory estimate assumes a decimation without a triangle
@@ -90,7 +106,27 @@ impl ReconstructOptions {
             subdivide: SubdivideOptions::default(),
             deferred_subdivision: 0,
             containment: Some(ContainmentOptions::default()),
+            shading: ShadingOptions::default(),
         }
+    }
+
+    /// The surface for animations, steady from frame to frame, for particle radius `r`:
+    /// [`Self::new`]'s field marched at the finer cell [`STEADY_CELL_SIZE`], no decimation
+    /// (its triangulation changes from frame to frame, and smoothing cannot remove what
+    /// that changes), [`STEADY_SMOOTHING_STEPS`] plain Laplacian steps on the regular
+    /// marching-cubes mesh, every non-isolated centre kept inside, no subdivision,
+    /// shading normals smoothed by [`STEADY_NORMAL_SMOOTHING`] steps, icospheres of
+    /// level 2. Measured in `docs/quality.md` ("Steady in motion").
+    pub fn steady(particle_radius: f32) -> Self {
+        let mut options = Self::new(particle_radius);
+        options.field.cell_size = STEADY_CELL_SIZE;
+        options.decimate = None;
+        options.smooth = Some(SmoothOptions::laplacian(STEADY_SMOOTHING_STEPS));
+        options.subdivide = SubdivideOptions { levels: 0 };
+        options.shading = ShadingOptions {
+            normal_smoothing: STEADY_NORMAL_SMOOTHING,
+        };
+        options
     }
 
     /// The pipeline of Akinci et al. 2013 exactly: the Solenthaler field with isotropic
@@ -109,6 +145,7 @@ impl ReconstructOptions {
             subdivide: SubdivideOptions::default(),
             deferred_subdivision: 0,
             containment: None,
+            shading: ShadingOptions::default(),
         }
     }
 
@@ -125,6 +162,7 @@ impl ReconstructOptions {
             subdivide: SubdivideOptions { levels: 0 },
             deferred_subdivision: 0,
             containment: None,
+            shading: ShadingOptions::default(),
         }
     }
 
@@ -141,6 +179,7 @@ impl ReconstructOptions {
         if let Some(containment) = &self.containment {
             containment.validate()?;
         }
+        self.shading.validate()?;
         Ok(())
     }
 
@@ -188,6 +227,12 @@ impl ReconstructOptions {
             triangles * MESH_BYTES_PER_TRIANGLE,
             "fewer subdivision steps",
         );
+        if self.shading.normal_smoothing > 0 {
+            raise(
+                triangles * (MESH_BYTES_PER_TRIANGLE + crate::shading::BYTES_PER_TRIANGLE),
+                "no normal smoothing",
+            );
+        }
         OutputCost {
             bytes_per_triangle: peak.0,
             advice: peak.1,
