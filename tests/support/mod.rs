@@ -8,6 +8,7 @@
 #![allow(dead_code)]
 
 pub mod archive;
+pub mod flicker;
 pub mod particle_sequence;
 pub mod splash;
 
