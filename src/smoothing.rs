@@ -45,6 +45,12 @@ pub struct SmoothOptions {
     /// Inflating weight `μ`, below `−λ`; 0 for plain Laplacian smoothing (no μ pass).
     /// Default −0.31.
     pub mu: f32,
+    /// Farthest a vertex may move inwards, along its normal before smoothing, world
+    /// units, or `None` for no bound. Default `None`. Plain steps shrink tips, thin
+    /// sheets and small drops most; the bound keeps them where the field put them
+    /// (and every particle centre under them), and leaves the small-scale noise, whose
+    /// moves are far smaller, to the steps.
+    pub max_inward: Option<f32>,
 }
 
 impl Default for SmoothOptions {
@@ -53,6 +59,7 @@ impl Default for SmoothOptions {
             steps: 2,
             lambda: 0.3,
             mu: -0.31,
+            max_inward: None,
         }
     }
 }
@@ -73,6 +80,7 @@ impl SmoothOptions {
             steps,
             lambda: 1.0,
             mu: 0.0,
+            max_inward: None,
         }
     }
 
@@ -85,6 +93,12 @@ impl SmoothOptions {
             return Err(crate::error::Error::InvalidOption {
                 option: "smooth.lambda",
                 message: format!("must lie in (0, 1) ((0, 1] with μ = 0), got {l}"),
+            });
+        }
+        if let Some(bound) = self.max_inward.filter(|b| !(b.is_finite() && *b >= 0.0)) {
+            return Err(crate::error::Error::InvalidOption {
+                option: "smooth.max_inward",
+                message: format!("must be finite and >= 0 (world units), got {bound}"),
             });
         }
         if !(laplacian || m > -1.0 && m < -l) {
@@ -126,6 +140,15 @@ pub fn smooth(mesh: &mut TriMesh, options: &SmoothOptions) -> SmoothStats {
     } else {
         &[options.lambda as f64, options.mu as f64]
     };
+    // The bound's reference: each vertex's start and its outward normal there.
+    let start = options.max_inward.map(|bound| {
+        mesh.compute_normals();
+        (
+            bound as f64,
+            current.clone(),
+            std::mem::take(&mut mesh.normals),
+        )
+    });
     for _ in 0..options.steps {
         for &weight in passes {
             next.par_iter_mut().enumerate().for_each(|(v, out)| {
@@ -140,7 +163,17 @@ pub fn smooth(mesh: &mut TriMesh, options: &SmoothOptions) -> SmoothStats {
             });
             std::mem::swap(&mut current, &mut next);
         }
+        if let Some((bound, start, normals)) = &start {
+            current.par_iter_mut().enumerate().for_each(|(v, p)| {
+                let n = normals[v].as_dvec3();
+                let inward = -(*p - start[v]).dot(n);
+                if inward > *bound {
+                    *p += (inward - bound) * n;
+                }
+            });
+        }
     }
+    drop(start);
     drop(next);
     for (p, &new) in mesh.positions.iter_mut().zip(&current) {
         let shift = (new - p.as_dvec3()).length();
@@ -372,6 +405,7 @@ pub(crate) mod tests {
                 steps: 1,
                 lambda,
                 mu,
+                max_inward: None,
             };
             assert!(options.validate().is_err(), "{lambda} {mu}");
         }

@@ -41,6 +41,17 @@ pub const STEADY_CELL_SIZE: f32 = 0.71;
 /// Plain Laplacian steps of the steady surface, on the marching-cubes mesh.
 pub const STEADY_SMOOTHING_STEPS: u32 = 10;
 
+/// Farthest the steady surface's smoothing moves a vertex inwards, multiples of `r`:
+/// the marching-cubes surface holds every centre about a coverage radius (0.9 r) deep,
+/// so the containment depth (0.25 r) is kept where the steps would shrink a tip, a thin
+/// sheet or a small drop further.
+pub const STEADY_MAX_INWARD: f32 = 0.35;
+
+/// Iso-surface offset of the steady surface, multiples of `r`: the smoothed surface sits
+/// about 0.04 r further out than the particles' shell (it flattens the crests between
+/// them less than their tops), so the field's level is taken this much further in.
+pub const STEADY_ISO_OFFSET: f32 = -0.05;
+
 /// Smoothing steps of the steady surface's shading normals.
 pub const STEADY_NORMAL_SMOOTHING: u32 = 3;
 
@@ -120,8 +131,12 @@ impl ReconstructOptions {
     pub fn steady(particle_radius: f32) -> Self {
         let mut options = Self::new(particle_radius);
         options.field.cell_size = STEADY_CELL_SIZE;
+        options.field.iso_offset = STEADY_ISO_OFFSET;
         options.decimate = None;
-        options.smooth = Some(SmoothOptions::laplacian(STEADY_SMOOTHING_STEPS));
+        options.smooth = Some(SmoothOptions {
+            max_inward: Some(STEADY_MAX_INWARD * particle_radius),
+            ..SmoothOptions::laplacian(STEADY_SMOOTHING_STEPS)
+        });
         options.subdivide = SubdivideOptions { levels: 0 };
         options.shading = ShadingOptions {
             normal_smoothing: STEADY_NORMAL_SMOOTHING,
