@@ -9,7 +9,7 @@
 //!  (io)         (tiles)  (tiles)  (tiles, field::compute_tile, marching_cubes)            │
 //!      ┌───────────────────────────────────────────────────────────────────────────────────┘
 //!      └► decimation ─► smoothing ─► containment ─► subdivision ─► spheres ─► normals ─► attributes ─► write
-//!         (decimation)  (smoothing)  (containment)  (subdivision)  (isolated)  (mesh)    (transfer)    (io, job)
+//!         (decimation)  (smoothing)  (containment)  (subdivision)  (isolated)  (shading) (transfer)    (io, job)
 //! ```
 //!
 //! [`pipeline::reconstruct`] runs that list for one frame ([`pipeline::ReconstructOptions`]
@@ -29,7 +29,8 @@
 //!   point attribute, and the policy every front end follows to choose a run's radius.
 //! * [`field`]: the scalar field (the paper's isotropic one and anisotropic kernels).
 //! * [`marching_cubes`]: surface extraction with globally keyed vertices.
-//! * [`decimation`], [`smoothing`], [`containment`], [`subdivision`], [`isolated`]: the
+//! * [`decimation`], [`smoothing`], [`containment`], [`subdivision`], [`isolated`],
+//!   [`shading`] (the written normals): the
 //!   post-processing stages, each usable on its own mesh.
 //! * [`tiles`]: the out-of-core engine (tiles under a memory budget, spill files,
 //!   stitching).
