@@ -124,8 +124,10 @@ impl ReconstructOptions {
     /// The surface for animations, steady from frame to frame, for particle radius `r`:
     /// [`Self::new`]'s field marched at the finer cell [`STEADY_CELL_SIZE`], no decimation
     /// (its triangulation changes from frame to frame, and smoothing cannot remove what
-    /// that changes), [`STEADY_SMOOTHING_STEPS`] plain Laplacian steps on the regular
-    /// marching-cubes mesh, every non-isolated centre kept inside, no subdivision,
+    /// that changes), the level [`STEADY_ISO_OFFSET`] further in,
+    /// [`STEADY_SMOOTHING_STEPS`] plain Laplacian steps on the regular marching-cubes mesh
+    /// (no vertex moved inwards by more than [`STEADY_MAX_INWARD`]), every non-isolated
+    /// centre kept inside, no subdivision,
     /// shading normals smoothed by [`STEADY_NORMAL_SMOOTHING`] steps, icospheres of
     /// level 2. Measured in `docs/quality.md` ("Steady in motion").
     pub fn steady(particle_radius: f32) -> Self {

@@ -66,11 +66,6 @@ impl<'a> Closest<'a> {
         }
         best
     }
-
-    /// The stored vertex normals of triangle `t` interpolated at its point `q`.
-    pub fn shading_normal(&self, t: u32, q: DVec3) -> DVec3 {
-        shading_normal(self.mesh, t, q)
-    }
 }
 
 /// The vertex normals of triangle `t` interpolated at its point `q` (barycentric).
@@ -162,7 +157,8 @@ pub fn normal_flicker(
             continue;
         };
         let n = shading_normal(now, t, x);
-        let mean = (prev.shading_normal(tp, qp) + next.shading_normal(tn, qn)).normalize_or_zero();
+        let mean =
+            (shading_normal(before, tp, qp) + shading_normal(after, tn, qn)).normalize_or_zero();
         angles.push(n.dot(mean).clamp(-1.0, 1.0).acos().to_degrees());
     }
     let kept = angles.len() as f64 / samples as f64;
