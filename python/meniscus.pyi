@@ -173,8 +173,10 @@ def reconstruct(
         positions: (N, 3) float32 or float64 array, world units. A C-contiguous float32
             array is used in place, not copied.
         particle_radius: ``r``, world units (> 0). Default: estimated from the particles'
-            spacing. A given ``r`` outside 0.25x-4x of the estimate is warned about
-            (``UserWarning``), outside 0.05x-20x a ``ValueError``.
+            spacing. A given ``r`` outside 0.5x-2x of the estimate is warned about
+            (``UserWarning``); one that would leave most of the fluid's particles
+            without a neighbour within the kernel's reach, or above 4x (one blob), is a
+            ``ValueError`` (the CLI's message, naming ``radius_check=False``).
         attributes: name -> (N,) or (N, k) array of per-particle values (e.g. velocity),
             carried to the surface vertices (``Mesh.attributes``).
         threads: worker threads (default: all cores). The output does not depend on it.

@@ -120,19 +120,25 @@ pub enum Error {
         /// Bytes free for this user.
         available: u64,
     },
-    /// A given particle radius far from the one the particles' spacing implies (outside
-    /// [`crate::radius::POSSIBLE`] of [`crate::radius::estimate_radius`]): refused before
-    /// any work, as such a run hangs or writes an absurd mesh.
-    #[error("{}: a particle radius of {given:?} is {} × the {estimate:?} the particles' spacing implies (r is half the rest spacing; estimated from {sample} sampled particles)", path.display(), ratio(*given, *estimate))]
+    /// A given particle radius refused before any work ([`crate::radius::check_radius`]):
+    /// so small that most of the fluid's particles would have no neighbour within the
+    /// kernel's reach (each meshed as a sphere of its own), or so large that the surface
+    /// would swell into one blob. Says both radii and, in `force`, how to run anyway.
+    #[error("{}", implausible_radius(path, *given, *estimate, origin, problem, force))]
     ImplausibleRadius {
-        /// The input whose particles were sampled.
+        /// The input whose particles were measured.
         path: PathBuf,
         /// The radius given, world units.
         given: f32,
-        /// The estimate, world units.
+        /// The radius the particles imply, world units (see `origin`).
         estimate: f32,
-        /// Particles sampled.
-        sample: usize,
+        /// Where `estimate` comes from.
+        origin: crate::radius::RadiusSource,
+        /// What a run with `given` would do.
+        problem: crate::radius::RadiusProblem,
+        /// How the caller runs with `given` anyway, in its own terms (a flag, a keyword,
+        /// a check box); the message ends with it.
+        force: String,
     },
     /// A particle radius attribute ([`crate::radius::ParticleRadii`]) that is not one
     /// finite number > 0 per particle.
@@ -157,6 +163,23 @@ pub enum Error {
 }
 
 /// `a / b` to three significant digits.
+/// The message of [`Error::ImplausibleRadius`]: the same words in every front end, which
+/// differ only in `force`.
+fn implausible_radius(
+    path: &std::path::Path,
+    given: f32,
+    estimate: f32,
+    origin: &crate::radius::RadiusSource,
+    problem: &crate::radius::RadiusProblem,
+    force: &str,
+) -> String {
+    format!(
+        "{}: a particle radius of {given:?} is refused: it is {} × the {estimate:?} {origin}, and {problem}; give about {estimate:?}, or {force} to run with {given:?} anyway",
+        path.display(),
+        ratio(given, estimate)
+    )
+}
+
 fn ratio(a: f32, b: f32) -> String {
     let x = a / b;
     if (0.01..1000.0).contains(&x) {

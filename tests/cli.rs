@@ -584,38 +584,42 @@ fn new_user_errors_name_the_real_cause() {
             vec!["--particle-radius: must be a finite number > 0"],
             vec!["-- -1", "unexpected argument"],
         ),
-        // A radius far from the one the spacing implies (0.0249 for the sphere, r = 0.025)
-        // is refused before any work, naming both values and the way out: 100x too large
-        // would run for minutes, 1e-9 would fail deep in the lattice.
+        // A radius far from the one the spacing implies (0.0248 for the sphere, r = 0.025)
+        // is refused before any work with the library's message, naming both values,
+        // what the run would do and the flag that forces it: 100x too large would run for
+        // minutes, 1e-9 would fail deep in the lattice.
         (
             vec!["reconstruct", sphere, "-r", "2.5", "-o", &out],
             2,
             vec![
-                "sphere.xyz: a particle radius of 2.5 is 100.",
+                "sphere.xyz: a particle radius of 2.5 is refused: it is 100.",
                 "the 0.0248",
                 "r is half the rest spacing",
-                "hint: give -r about 0.0248",
-                "--no-radius-check",
+                "one blob",
+                "give about 0.0248",
+                "or --no-radius-check to run with 2.5 anyway",
             ],
-            vec!["--cell-size", "warning"],
+            vec!["--cell-size", "warning", "radius_check"],
         ),
         (
             vec!["reconstruct", sphere, "-r", "1e-9", "-o", &out],
             2,
             vec![
-                "a particle radius of 1e-9 is 4.02e-8 × the 0.0248",
-                "hint: give -r about",
+                "a particle radius of 1e-9 is refused: it is 4.02e-8 × the 0.0248",
+                "100% of the fluid's particles would have no neighbour within the kernel's reach (4 r)",
+                "--no-radius-check",
             ],
             vec!["--cell-size", "lattice"],
         ),
-        // Outside 0.25x-4x: a warning, and the run goes on.
+        // Outside 0.5x-2x: a warning, and the run goes on.
         (
-            vec!["reconstruct", sphere, "-r", "0.2", "-q", "-o", &out],
+            vec!["reconstruct", sphere, "-r", "0.06", "-q", "-o", &out],
             0,
             vec![
-                "warning: -r 0.2 is 8.04 × the particle radius the spacing of",
-                "sphere.xyz's particles implies (0.0248",
-                "--no-radius-check silences this",
+                "warning: ",
+                "sphere.xyz: a particle radius of 0.06 is 2.41 × the 0.0248",
+                "the particles' spacing implies",
+                "(--no-radius-check silences this)",
             ],
             vec!["error"],
         ),

@@ -3,7 +3,9 @@
 mod support;
 
 use meniscus::io::particles::read_particles;
-use meniscus::radius::{check_radius, estimate_radius, estimate_radius_of_file, RadiusCheck};
+use meniscus::radius::{
+    check_radius, estimate_radius, estimate_radius_of_file, RadiusCheck, RadiusProblem,
+};
 use std::path::PathBuf;
 use support::{dataset, shipped_frames};
 
@@ -93,21 +95,87 @@ fn the_estimate_scales_with_the_frame_and_needs_two_distinct_points() {
     assert!(estimate_radius(&[]).is_err());
 }
 
+/// The bands by the ratio alone (no sample of the spacing): plausible within 0.5x-2x,
+/// refused above 4x (one blob) or where the kernel's reach (4 r) is shorter than the
+/// particles' radius; doubtful between.
 #[test]
 fn a_given_radius_is_plausible_doubtful_or_implausible() {
+    let isolated = |fraction| {
+        RadiusCheck::Implausible(RadiusProblem::Isolated {
+            fraction,
+            influence_radius: 4.0,
+        })
+    };
     for (given, want) in [
         (1.0, RadiusCheck::Plausible),
-        (0.25, RadiusCheck::Plausible),
-        (4.0, RadiusCheck::Plausible),
-        (0.2, RadiusCheck::Doubtful),
-        (2.0 * 2.0 + 0.5, RadiusCheck::Doubtful),
-        (0.05, RadiusCheck::Doubtful),
-        (20.0, RadiusCheck::Doubtful),
-        (0.04, RadiusCheck::Implausible),
-        (100.0, RadiusCheck::Implausible),
+        (0.5, RadiusCheck::Plausible),
+        (2.0, RadiusCheck::Plausible),
+        (0.45, RadiusCheck::Doubtful { isolated: 0.0 }),
+        (0.3, RadiusCheck::Doubtful { isolated: 0.0 }),
+        (2.2, RadiusCheck::Doubtful { isolated: 0.0 }),
+        (4.0, RadiusCheck::Doubtful { isolated: 0.0 }),
+        (0.2, isolated(1.0)),
+        (0.04, isolated(1.0)),
+        (4.5, RadiusCheck::Implausible(RadiusProblem::Blob)),
+        (100.0, RadiusCheck::Implausible(RadiusProblem::Blob)),
     ] {
-        assert_eq!(check_radius(given * 0.025, 0.025), want, "{given}");
+        assert_eq!(
+            check_radius(given * 0.025, 0.025, None, 4.0),
+            want,
+            "{given}"
+        );
     }
+}
+
+/// Measured on the sample of a shipped dam-break frame (r = 0.012): at 0.1x and 0.4x of
+/// the estimate most of the fluid's particles would have no neighbour within the
+/// kernel's reach (all of them, and about 83 %: SPH packs them 1.5-1.9 r apart, beyond
+/// 4 x 0.4 r), so those radii are refused; at 0.45x fewer than half would, a warning. A
+/// longer reach (R = 6) keeps 0.4x. The analytic droplets' 500 loners (10 r apart)
+/// are not the fluid's body: their radius is plausible.
+#[test]
+fn isolation_is_measured_on_the_sample() {
+    let path = dataset("dambreak_small/ParticleData_Fluid_25.xyz");
+    let e = estimate_radius_of_file(&path, None).unwrap();
+    let fraction =
+        |ratio: f32, reach: f32| match check_radius(ratio * e.radius, e.radius, Some(&e), reach) {
+            RadiusCheck::Implausible(RadiusProblem::Isolated { fraction, .. }) => fraction,
+            RadiusCheck::Doubtful { isolated } => isolated,
+            other => panic!("{ratio}: {other:?}"),
+        };
+    assert!(fraction(0.1, 4.0) > 0.99);
+    assert!(
+        (0.7..0.95).contains(&fraction(0.4, 4.0)),
+        "{}",
+        fraction(0.4, 4.0)
+    );
+    assert!(matches!(
+        check_radius(0.4 * e.radius, e.radius, Some(&e), 4.0),
+        RadiusCheck::Implausible(RadiusProblem::Isolated { .. })
+    ));
+    assert!(
+        (0.2..0.5).contains(&fraction(0.45, 4.0)),
+        "{}",
+        fraction(0.45, 4.0)
+    );
+    assert!(fraction(0.4, 6.0) < 0.05, "{}", fraction(0.4, 6.0));
+    assert_eq!(
+        check_radius(e.radius, e.radius, Some(&e), 4.0),
+        RadiusCheck::Plausible
+    );
+    assert_eq!(
+        check_radius(2.5 * e.radius, e.radius, Some(&e), 4.0),
+        RadiusCheck::Doubtful { isolated: 0.0 }
+    );
+    assert_eq!(
+        check_radius(10.0 * e.radius, e.radius, Some(&e), 4.0),
+        RadiusCheck::Implausible(RadiusProblem::Blob)
+    );
+    let droplets = estimate_radius_of_file(&dataset("analytic/droplets.xyz"), None).unwrap();
+    assert_eq!(
+        check_radius(0.025, droplets.radius, Some(&droplets), 4.0),
+        RadiusCheck::Plausible
+    );
 }
 
 /// Without `-r` the CLI estimates r from the first frame, prints it, and runs with it: the
@@ -149,4 +217,73 @@ fn without_r_the_cli_runs_with_the_estimate_it_prints() {
     // Quiet: nothing printed.
     let (ok, err) = support::run(&["reconstruct", input, "-q", "-o", given.to_str().unwrap()]);
     assert!(ok && err.is_empty(), "{err}");
+}
+
+/// The issue's case: `-r` at 0.1x the radius the spacing implies on a shipped dam-break
+/// frame (every particle a sphere of its own, a 405 MB glb before) exits 2 before any
+/// work with nothing written, the message naming the given and estimated radii, what the
+/// run would do and the flag that forces it; so does 0.4x (83 % isolated) and 10x (a
+/// blob). 0.45x of the double dam break's radius (27 % isolated) and 2.4x warn and run.
+#[test]
+fn a_radius_that_isolates_most_particles_or_makes_a_blob_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = dataset("dambreak_small/ParticleData_Fluid_25.xyz");
+    let frame = frame.to_str().unwrap();
+    let out = dir.path().join("fluid.glb");
+    let out = out.to_str().unwrap();
+    for (r, what) in [
+        (
+            "0.0012",
+            "100% of the fluid's particles would have no neighbour",
+        ),
+        ("0.0048", "of the fluid's particles would have no neighbour"),
+        ("0.12", "one blob"),
+    ] {
+        let (ok, err) = support::run(&["reconstruct", frame, "-r", r, "-o", out]);
+        assert!(!ok, "{r}: {err}");
+        for part in [
+            &format!("ParticleData_Fluid_25.xyz: a particle radius of {r} is refused"),
+            "the 0.0119",
+            "the particles' spacing implies",
+            what,
+            "give about 0.0119",
+            &format!("or --no-radius-check to run with {r} anyway"),
+        ] {
+            assert!(err.contains(part), "{r}: {part:?} not in {err}");
+        }
+        assert!(
+            !err.contains("radius_check") && !err.contains("warning"),
+            "{err}"
+        );
+        assert!(
+            std::fs::read_dir(dir.path()).unwrap().next().is_none(),
+            "{r}: written"
+        );
+    }
+    let small = dataset("double_dambreak/ParticleData_Fluid_9.xyz");
+    for (r, what) in [
+        (
+            "0.0114",
+            "of the fluid's particles would be meshed each as a sphere of its own",
+        ),
+        ("0.06", "is 2.36 ×"),
+    ] {
+        let (ok, err) = support::run(&[
+            "reconstruct",
+            small.to_str().unwrap(),
+            "-r",
+            r,
+            "-q",
+            "-o",
+            out,
+        ]);
+        assert!(ok, "{r}: {err}");
+        assert!(
+            err.starts_with("warning: ")
+                && err.contains(what)
+                && err.contains("(--no-radius-check silences this)"),
+            "{r}: {err}"
+        );
+        assert!(std::fs::metadata(out).unwrap().len() > 0);
+    }
 }

@@ -285,17 +285,21 @@ fn the_cli_reports_bad_and_differing_radii() {
             vec!["-r", "2.5"],
             2,
             vec![
-                "-r 2.5 is 1.000e2 × the median radius 0.025 of attribute \"pscale\"",
-                "hint: leave out -r",
-                "--no-radius-check",
+                "uniform.ply: a particle radius of 2.5 is refused: it is 100.000 × the 0.025 median of the particles' radius attribute \"pscale\"",
+                "one blob",
+                "give about 0.025, or --no-radius-check to run with 2.5 anyway",
             ],
         ),
         (
             &uniform,
             &out,
-            vec!["-r", "0.2", "-q"],
+            vec!["-r", "0.06", "-q"],
             0,
-            vec!["warning: -r 0.2 is 8.000 × the median radius 0.025"],
+            vec![
+                "warning: ",
+                "a particle radius of 0.06 is 2.40 × the 0.025 median of the particles' radius attribute \"pscale\"",
+                "(--no-radius-check silences this)",
+            ],
         ),
         (
             &differing,

@@ -112,6 +112,12 @@ def estimate_radius(sequence):
     return float(meniscus.estimate_radius(positions))
 
 
+# How the library's refusal of a radius says to force it from Python, and the panel's
+# check box that does the same.
+FORCE_KEYWORD = "radius_check=False"
+FORCE_BOX = "tick Force radius"
+
+
 class BakeCancelled(Exception):
     """Raised in the progress callback to stop a bake the user cancelled."""
 
@@ -170,8 +176,12 @@ class BakeJob:
             self.cancelled = True
         except Exception as e:  # shown to the user as it is: the library's message
             self.error = str(e)
+            # A refused radius: the library's message, its way to force it (the keyword
+            # radius_check=False) worded as the panel's check box.
             self.refused_radius = self.radius_check and self.radius is not None and isinstance(e, ValueError) \
-                and "radius" in self.error
+                and FORCE_KEYWORD in self.error
+            if self.refused_radius:
+                self.error = self.error.replace(FORCE_KEYWORD, FORCE_BOX)
         finally:
             self.finished = True
 

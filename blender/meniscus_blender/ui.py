@@ -60,8 +60,6 @@ def _bake_job(settings):
 
 def _after_bake(context, settings, job):
     if job.error:
-        if job.refused_radius:
-            job.error += "; tick Force to run with this radius anyway"
         settings.status = job.error
         return {"CANCELLED"}
     settings.progress = 100.0 * job.fraction

@@ -58,7 +58,10 @@ pub(crate) fn reconstruct(
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Mesh> {
     check_threads(threads).map_err(to_py)?;
-    reconstruct_options(py, "reconstruct", particle_radius.unwrap_or(1.0), options)?;
+    let influence_radius =
+        reconstruct_options(py, "reconstruct", particle_radius.unwrap_or(1.0), options)?
+            .field
+            .influence_radius;
     let which = self::radius_attribute(radius_attribute)?;
     let positions = positions_of(positions)?;
     let slice = positions.as_slice();
@@ -73,10 +76,15 @@ pub(crate) fn reconstruct(
     }
     let input = std::path::Path::new("particles in memory");
     let radii = radii_of(input, &columns, slice.len(), &which).map_err(to_py)?;
-    let (particle_radius, radii) =
-        resolve_radius(py, particle_radius, radius_check, input, radii, || {
-            meniscus::radius::estimate_radius(slice)
-        })?;
+    let (particle_radius, radii) = resolve_radius(
+        py,
+        particle_radius,
+        radius_check,
+        influence_radius,
+        input,
+        radii,
+        || meniscus::radius::estimate_radius(slice),
+    )?;
     let options = reconstruct_options(py, "reconstruct", particle_radius, options)?;
     let source = ParticleSlices {
         positions: slice,
@@ -208,12 +216,14 @@ pub(crate) fn reconstruct_file<'py>(
     job.validate().map_err(to_py)?;
     job.up_axis = parse_up_axis(up_axis).map_err(to_py)?;
     job.usd_droplets = parse_usd_droplets(usd_droplets).map_err(to_py)?;
-    reconstruct_options(
+    let influence_radius = reconstruct_options(
         py,
         "reconstruct_file",
         particle_radius.unwrap_or(1.0),
         options,
-    )?;
+    )?
+    .field
+    .influence_radius;
     job.attributes = selection(attributes)?;
     let choice = options::frame_choice(start, end, frames, shard)?;
     let input_format = input_format
@@ -234,10 +244,15 @@ pub(crate) fn reconstruct_file<'py>(
         Err(_) if particle_radius.is_some() => None,
         Err(e) => return Err(to_py(e)),
     };
-    let (particle_radius, _) =
-        resolve_radius(py, particle_radius, radius_check, &first, radii, || {
-            meniscus::radius::estimate_radius_of_file(&first, input_format)
-        })?;
+    let (particle_radius, _) = resolve_radius(
+        py,
+        particle_radius,
+        radius_check,
+        influence_radius,
+        &first,
+        radii,
+        || meniscus::radius::estimate_radius_of_file(&first, input_format),
+    )?;
     let options = reconstruct_options(py, "reconstruct_file", particle_radius, options)?;
     let progress = progress.filter(|p| !p.is_none()).map(Bound::unbind);
     // An exception of the progress callback: it stops the run and is raised.

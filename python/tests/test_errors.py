@@ -1,10 +1,11 @@
+import subprocess
 import warnings
 
 import numpy as np
 import pytest
 
 import meniscus
-from conftest import RADIUS
+from conftest import DATA, RADIUS, ROOT, cli_command
 
 
 @pytest.mark.parametrize("radius", [0.0, -1.0, float("nan")])
@@ -81,13 +82,36 @@ def test_the_radius_is_estimated_and_checked(frame25):
     given = meniscus.reconstruct(frame25, r)
     assert np.array_equal(estimated.triangles, given.triangles)
     assert np.array_equal(estimated.vertices, given.vertices)
-    with pytest.raises(ValueError, match="the particles' spacing implies"):
+    with pytest.raises(ValueError, match="the particles' spacing implies") as refused:
         meniscus.reconstruct(frame25, 100 * RADIUS)
-    with pytest.warns(UserWarning, match="radius_check=False"):
-        meniscus.reconstruct(frame25, 6 * RADIUS)
+    assert "one blob" in str(refused.value)
+    with pytest.warns(UserWarning, match="radius_check=False silences this"):
+        meniscus.reconstruct(frame25, 3 * RADIUS)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         meniscus.reconstruct(frame25, 6 * RADIUS, radius_check=False)
+
+
+def test_a_radius_that_isolates_most_particles_is_refused_with_the_keyword(tmp_path):
+    # The issue's case, r at 0.1x the spacing's radius: the library's message (as the
+    # CLI's), naming the keyword that forces it and no CLI flag; nothing is written.
+    frame = str(DATA / "ParticleData_Fluid_25.xyz")
+    out = tmp_path / "fluid.glb"
+    for r, what in [(0.0012, "100% of the fluid's particles would have no neighbour"),
+                    (0.0048, "of the fluid's particles would have no neighbour")]:
+        with pytest.raises(ValueError) as refused:
+            meniscus.reconstruct_file(frame, str(out), r)
+        message = str(refused.value)
+        for part in [f"a particle radius of {r} is refused", "the 0.0119", what,
+                     "give about 0.0119", f"or radius_check=False to run with {r} anyway"]:
+            assert part in message, (part, message)
+        assert "--no-radius-check" not in message
+        assert not out.exists()
+        # The same words as the CLI's, but for the way to force it.
+        run = subprocess.run(cli_command("reconstruct", frame, "-r", str(r), "-o", str(out)),
+                             cwd=ROOT, capture_output=True, text=True)
+        assert run.returncode == 2
+        assert run.stderr.strip() == "error: " + message.replace("radius_check=False", "--no-radius-check")
 
 
 def test_the_radius_attribute_gives_r_and_is_checked(frame25):
@@ -106,7 +130,7 @@ def test_the_radius_attribute_gives_r_and_is_checked(frame25):
         meniscus.reconstruct(frame25, attributes={"size": bad}, radius_attribute="size")
     # Ignored with "none"; a given radius far from the median is refused.
     meniscus.reconstruct(frame25, RADIUS, attributes={"pscale": bad}, radius_attribute="none")
-    with pytest.raises(ValueError, match="median radius"):
+    with pytest.raises(ValueError, match="median of the particles' radius attribute \"pscale\""):
         meniscus.reconstruct(frame25, 100 * RADIUS, attributes=uniform)
     # Each particle meshed with its own radius: radii of 1.5 r reach farther and the
     # surface encloses more, with r (the lattice) still the given one.

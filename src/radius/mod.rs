@@ -12,7 +12,9 @@
 //! and films closer, so half the median nearest-neighbour distance is 0.70–1.0 r on the
 //! shipped frames and splashsurf's examples, where this estimate is within 8 % (0.3 % on
 //! the dam break; the analytic sheet, two particles thick, 8.6 % high).
-//! [`check_radius`] compares a given radius with it.
+//! [`check_radius`] compares a given radius with it: refused when most of the fluid's
+//! particles would be isolated (measured on the sample) or far above it, warned about
+//! outside [`PLAUSIBLE`].
 //!
 //! Particles of several sizes carry their own radius in a point attribute:
 //! [`RadiusAttribute`] says which, [`read_radii`] and [`radii_of`] read and check it.
@@ -35,13 +37,13 @@ pub use attribute::{
     radii_of, read_radii, ParticleRadii, RadiusAttribute, HOUDINI_RADIUS, RADIUS_LIMITS,
     RADIUS_SPREAD,
 };
-pub use policy::{choose_radius, RadiusBasis, RadiusChoice};
+pub use policy::{choose_radius, RadiusBasis, RadiusCheckOptions, RadiusChoice};
 
 /// Particles sampled at most (evenly through the input).
 pub const SAMPLE: usize = 4096;
 
 /// The radius a frame implies (see the module's documentation).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct RadiusEstimate {
     /// The estimated particle radius r, world units.
     pub radius: f32,
@@ -49,48 +51,148 @@ pub struct RadiusEstimate {
     pub half_nearest: f32,
     /// Particles sampled.
     pub sample: usize,
+    /// The distance from each sampled particle to its nearest neighbour, world units, in
+    /// increasing order; only those found within the search's reach (several
+    /// spacings), so loners far from the rest may be missing.
+    pub nearest: Vec<f32>,
 }
 
-/// How a given radius compares with the estimate (see [`check_radius`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum RadiusCheck {
-    /// Within 0.25×–4× of the estimate.
-    Plausible,
-    /// Outside 0.25×–4× of the estimate but within 0.05×–20×: worth a warning.
-    Doubtful,
-    /// Outside 0.05×–20× of the estimate: a run would hang or write an absurd mesh.
-    Implausible,
-}
-
-/// Ratios of a given radius to the estimate that are believed without a word.
-pub const PLAUSIBLE: (f32, f32) = (0.25, 4.0);
-/// Ratios outside which a given radius is refused.
-pub const POSSIBLE: (f32, f32) = (0.05, 20.0);
-
-/// Where `given` lies relative to `estimate` (both world units, > 0).
-pub fn check_radius(given: f32, estimate: f32) -> RadiusCheck {
-    let ratio = given / estimate;
-    if (PLAUSIBLE.0..=PLAUSIBLE.1).contains(&ratio) {
-        RadiusCheck::Plausible
-    } else if (POSSIBLE.0..=POSSIBLE.1).contains(&ratio) {
-        RadiusCheck::Doubtful
-    } else {
-        RadiusCheck::Implausible
+impl RadiusEstimate {
+    /// Of the sampled particles with a neighbour within `body_reach` (world units: the
+    /// kernel's reach at the radius the particles imply, so the fluid's body rather
+    /// than its loners), the fraction with none within `reach`: the share of the fluid a
+    /// run whose kernel reaches `reach` would mesh as separate spheres. 0 without such
+    /// particles.
+    pub fn isolated_fraction(&self, reach: f32, body_reach: f32) -> f32 {
+        let body = self.nearest.partition_point(|&d| d <= body_reach);
+        let kept = self.nearest.partition_point(|&d| d <= reach).min(body);
+        if body == 0 {
+            0.0
+        } else {
+            (body - kept) as f32 / body as f32
+        }
     }
 }
 
-/// Checks radius `given` against the estimate for the particles of `path`: `Ok` with
-/// the verdict when it is at most [`RadiusCheck::Doubtful`], else an
-/// [`Error::ImplausibleRadius`] naming both values.
-pub fn verify_radius(path: &Path, given: f32, estimate: &RadiusEstimate) -> Result<RadiusCheck> {
-    match check_radius(given, estimate.radius) {
-        RadiusCheck::Implausible => Err(Error::ImplausibleRadius {
-            path: path.to_path_buf(),
-            given,
-            estimate: estimate.radius,
-            sample: estimate.sample,
-        }),
-        verdict => Ok(verdict),
+/// How a given radius compares with the one the particles imply (see [`check_radius`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RadiusCheck {
+    /// Within [`PLAUSIBLE`] of the particles' radius.
+    Plausible,
+    /// Outside [`PLAUSIBLE`] but not refused: worth a warning. `isolated` is the share of
+    /// the fluid's particles that would be meshed as separate spheres.
+    Doubtful {
+        /// The fraction of the fluid's particles without a neighbour within the kernel's
+        /// reach ([`RadiusEstimate::isolated_fraction`]).
+        isolated: f32,
+    },
+    /// A run would write a meaningless mesh: refused ([`crate::Error::ImplausibleRadius`]).
+    Implausible(RadiusProblem),
+}
+
+/// What a run with an implausible radius would do.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RadiusProblem {
+    /// More than [`ISOLATED`] of the fluid's particles would have no neighbour within the
+    /// kernel's reach and be meshed each as a sphere of its own.
+    Isolated {
+        /// That fraction (measured on the sample, or 1 when the reach is shorter than
+        /// the radius the particles imply).
+        fraction: f32,
+        /// The kernel's reach, multiples of the given radius (the influence radius R).
+        influence_radius: f32,
+    },
+    /// Above [`BLOB`] × the particles' radius: the surface would stand several radii
+    /// off the particles and fill the gaps between the fluid's parts, one blob.
+    Blob,
+}
+
+impl std::fmt::Display for RadiusProblem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RadiusProblem::Isolated {
+                fraction,
+                influence_radius,
+            } => write!(
+                f,
+                "{:.0}% of the fluid's particles would have no neighbour within the kernel's reach ({influence_radius} r) and be meshed each as a sphere of its own",
+                100.0 * fraction
+            ),
+            RadiusProblem::Blob => write!(
+                f,
+                "above {BLOB} × the surface would stand several radii off the particles and fill the gaps between them: one blob"
+            ),
+        }
+    }
+}
+
+/// What a given radius was compared with.
+#[derive(Clone, Debug, PartialEq)]
+pub enum RadiusSource {
+    /// The particles' spacing ([`estimate_radius`]).
+    Spacing {
+        /// Particles sampled.
+        sample: usize,
+    },
+    /// The median of the particles' radius attribute ([`ParticleRadii::median`]).
+    Attribute {
+        /// The attribute's name.
+        name: String,
+    },
+}
+
+impl std::fmt::Display for RadiusSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RadiusSource::Spacing { sample } => write!(
+                f,
+                "the particles' spacing implies (r is half the rest spacing; estimated from {sample} sampled particles)"
+            ),
+            RadiusSource::Attribute { name } => {
+                write!(f, "median of the particles' radius attribute {name:?}")
+            }
+        }
+    }
+}
+
+/// Ratios of a given radius to the particles' that are believed without a word.
+pub const PLAUSIBLE: (f32, f32) = (0.5, 2.0);
+/// Ratio of a given radius to the particles' above which it is refused
+/// ([`RadiusProblem::Blob`]).
+pub const BLOB: f32 = 4.0;
+/// Fraction of the fluid's particles isolated above which a given radius is refused
+/// ([`RadiusProblem::Isolated`]): most of them.
+pub const ISOLATED: f32 = 0.5;
+
+/// Where `given` lies relative to `reference`, the radius the particles imply (both
+/// world units, > 0), for a run whose kernel reaches `influence_radius` × r: refused when
+/// more than [`ISOLATED`] of the fluid's particles would have no neighbour within the
+/// kernel's reach ([`RadiusEstimate::isolated_fraction`] on `spacing`'s sample; without
+/// it, when the reach is shorter than `reference`, half the rest spacing) or when above
+/// [`BLOB`] × `reference`; else plausible within [`PLAUSIBLE`], doubtful outside.
+pub fn check_radius(
+    given: f32,
+    reference: f32,
+    spacing: Option<&RadiusEstimate>,
+    influence_radius: f32,
+) -> RadiusCheck {
+    let ratio = given / reference;
+    let isolated = match spacing {
+        Some(e) => e.isolated_fraction(influence_radius * given, influence_radius * reference),
+        None if influence_radius * ratio < 1.0 => 1.0,
+        None => 0.0,
+    };
+    if isolated > ISOLATED {
+        RadiusCheck::Implausible(RadiusProblem::Isolated {
+            fraction: isolated,
+            influence_radius,
+        })
+    } else if ratio > BLOB {
+        RadiusCheck::Implausible(RadiusProblem::Blob)
+    } else if (PLAUSIBLE.0..=PLAUSIBLE.1).contains(&ratio) {
+        RadiusCheck::Plausible
+    } else {
+        RadiusCheck::Doubtful { isolated }
     }
 }
 
@@ -395,14 +497,17 @@ fn from_sample(sampler: Sampler, visit: &mut Visit<'_>) -> Result<RadiusEstimate
         .map(|(&d, _)| d)
         .collect();
     if dense.is_empty() {
-        dense = found;
+        dense = found.clone();
     }
     let half_nearest = 0.5 * quantile(&mut dense, 0.5);
     let radius = 0.5 / bulk.cbrt();
+    let mut nearest = found;
+    nearest.sort_by(f32::total_cmp);
     Ok(RadiusEstimate {
         radius,
         half_nearest,
         sample: s,
+        nearest,
     })
 }
 

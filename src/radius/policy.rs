@@ -1,13 +1,15 @@
-//! The particle radius a run takes: the one policy the CLI's `reconstruct` and the Python
-//! package's `reconstruct`/`reconstruct_file` follow ([`choose_radius`]). The front ends
-//! only word what it decided in their own terms (`-r` or `particle_radius`,
-//! `--no-radius-check` or `radius_check=False`) and refuse a given radius whose verdict
-//! is [`RadiusCheck::Implausible`].
+//! The particle radius a run takes: the one policy the CLI's `reconstruct`, the Python
+//! package's `reconstruct`/`reconstruct_file` and the Blender extension follow
+//! ([`choose_radius`]). It refuses an implausible given radius itself, with the same
+//! [`Error::ImplausibleRadius`] everywhere; the front ends only say how to force it and
+//! how to silence a warning in their own terms (`--no-radius-check`,
+//! `radius_check=False`, a check box).
 
-use super::{check_radius, ParticleRadii, RadiusCheck, RadiusEstimate};
+use super::{check_radius, ParticleRadii, RadiusCheck, RadiusEstimate, RadiusSource};
 use crate::error::{Error, Result};
+use std::path::Path;
 
-/// What the radius of a run was taken from, or checked against.
+/// What a given radius was taken from, or checked against.
 #[derive(Debug)]
 pub enum RadiusBasis {
     /// The given radius, as given: no check was asked for.
@@ -33,70 +35,136 @@ pub struct RadiusChoice {
     pub radii: Option<ParticleRadii>,
     /// What `radius` was taken from or checked against.
     pub basis: RadiusBasis,
-    /// How a given, checked radius compares with the basis; `None` without one. The
-    /// caller refuses [`RadiusCheck::Implausible`] (a run would hang or write an absurd
-    /// mesh), warns about [`RadiusCheck::Doubtful`].
+    /// How a given, checked radius compares with the basis; `None` without one. Never
+    /// [`RadiusCheck::Implausible`] ([`choose_radius`] refuses that).
     pub verdict: Option<RadiusCheck>,
+    /// With a [`RadiusCheck::Doubtful`] verdict, the warning it deserves (the input, both
+    /// radii, and how many particles would be isolated); the front end adds how to
+    /// silence it.
+    pub warning: Option<String>,
 }
 
-/// The particle radius of a run, from the radius `given` (world units, or `None`), the
-/// first frame's radius attribute `radii` (as [`super::read_radii`] or
+/// How [`choose_radius`] checks a given radius.
+#[derive(Clone, Copy, Debug)]
+pub struct RadiusCheckOptions<'a> {
+    /// The run's influence radius R, multiples of r: the kernel's reach, within which a
+    /// particle needs a neighbour not to be meshed as a sphere of its own.
+    pub influence_radius: f32,
+    /// How the caller runs with a refused radius anyway, in its own terms (the refusal
+    /// ends "..., or {force} to run with it anyway"): `--no-radius-check`,
+    /// `radius_check=False`.
+    pub force: &'a str,
+}
+
+/// The particle radius of a run on `input`, from the radius `given` (world units, or
+/// `None`), the first frame's radius attribute `radii` (as [`super::read_radii`] or
 /// [`super::radii_of`] gave it) and its spacing (`estimate`, only called when needed):
 ///
-/// * with a radius attribute, its median, or `given` checked against that median (unless
-///   not `check`);
-/// * otherwise the estimate, or `given` checked against the estimate (unless not
-///   `check`): within 0.25×–4× plausible, within 0.05×–20× doubtful, else implausible
-///   ([`check_radius`]).
+/// * with a radius attribute, its median, or `given` checked against that median;
+/// * otherwise the estimate, or `given` checked against the estimate;
+///
+/// a given radius checked (unless `check` is `None`) by [`check_radius`] with the
+/// sampled spacing: an implausible one is refused with [`Error::ImplausibleRadius`]
+/// (naming both radii, what a run would do, and `check.force`), a doubtful one comes
+/// with a [`RadiusChoice::warning`].
 ///
 /// A `given` radius is taken unchecked ([`RadiusBasis::Unmeasured`]) when the radii or
 /// the estimate fail; without one their error is returned.
 pub fn choose_radius(
+    input: &Path,
     given: Option<f32>,
-    check: bool,
+    check: Option<RadiusCheckOptions<'_>>,
     radii: Result<Option<ParticleRadii>>,
     estimate: impl FnOnce() -> Result<RadiusEstimate>,
 ) -> Result<RadiusChoice> {
-    let choice = |radius, radii, basis, verdict| RadiusChoice {
+    let unchecked = |radius, radii, basis| RadiusChoice {
         radius,
         radii,
         basis,
-        verdict,
+        verdict: None,
+        warning: None,
     };
-    match radii {
-        Ok(Some(radii)) => {
-            let median = radii.median();
-            return Ok(match given {
-                None => choice(median, Some(radii), RadiusBasis::Median(median), None),
-                Some(r) if !check => choice(r, Some(radii), RadiusBasis::Given, None),
-                Some(r) => {
-                    let verdict = Some(check_radius(r, median));
-                    choice(r, Some(radii), RadiusBasis::Median(median), verdict)
-                }
-            });
-        }
-        Ok(None) => {}
+    let radii = match radii {
+        Ok(radii) => radii,
         Err(e) => {
             return match given {
-                Some(r) => Ok(choice(r, None, RadiusBasis::Unmeasured(e), None)),
+                Some(r) => Ok(unchecked(r, None, RadiusBasis::Unmeasured(e))),
                 None => Err(e),
             }
         }
-    }
-    if let (Some(r), false) = (given, check) {
-        return Ok(choice(r, None, RadiusBasis::Given, None));
-    }
-    let estimate = match (estimate(), given) {
-        (Ok(estimate), _) => estimate,
-        (Err(e), Some(r)) => return Ok(choice(r, None, RadiusBasis::Unmeasured(e), None)),
-        (Err(e), None) => return Err(e),
     };
-    Ok(match given {
-        None => choice(estimate.radius, None, RadiusBasis::Estimate(estimate), None),
-        Some(r) => {
-            let verdict = Some(check_radius(r, estimate.radius));
-            choice(r, None, RadiusBasis::Estimate(estimate), verdict)
+    let (given, check) = match (given, check) {
+        (None, _) => {
+            return Ok(match radii {
+                Some(radii) => {
+                    let median = radii.median();
+                    unchecked(median, Some(radii), RadiusBasis::Median(median))
+                }
+                None => {
+                    let e = estimate()?;
+                    unchecked(e.radius, None, RadiusBasis::Estimate(e))
+                }
+            })
         }
+        (Some(r), None) => return Ok(unchecked(r, radii, RadiusBasis::Given)),
+        (Some(r), Some(check)) => (r, check),
+    };
+    // The spacing's sample measures isolation, also against a radius attribute's median
+    // (without it, isolation is judged from the ratio alone).
+    let (reference, source, spacing, basis) = match &radii {
+        Some(radii) => {
+            let median = radii.median();
+            let source = RadiusSource::Attribute {
+                name: radii.attribute.clone(),
+            };
+            (median, source, estimate().ok(), RadiusBasis::Median(median))
+        }
+        None => match estimate() {
+            Ok(e) => {
+                let source = RadiusSource::Spacing { sample: e.sample };
+                (e.radius, source, None, RadiusBasis::Estimate(e))
+            }
+            Err(e) => return Ok(unchecked(given, None, RadiusBasis::Unmeasured(e))),
+        },
+    };
+    let sampled = match &basis {
+        RadiusBasis::Estimate(e) => Some(e),
+        _ => spacing.as_ref(),
+    };
+    let verdict = check_radius(given, reference, sampled, check.influence_radius);
+    let warning = match verdict {
+        RadiusCheck::Implausible(problem) => {
+            return Err(Error::ImplausibleRadius {
+                path: input.to_path_buf(),
+                given,
+                estimate: reference,
+                origin: source,
+                problem,
+                force: check.force.to_string(),
+            })
+        }
+        RadiusCheck::Plausible => None,
+        RadiusCheck::Doubtful { isolated } => {
+            let mut w = format!(
+                "{}: a particle radius of {given:?} is {:.2} × the {reference:?} {source}",
+                input.display(),
+                given / reference
+            );
+            if isolated >= 0.005 {
+                w += &format!(
+                    "; {:.0}% of the fluid's particles would be meshed each as a sphere of its own",
+                    100.0 * isolated
+                );
+            }
+            Some(w)
+        }
+    };
+    Ok(RadiusChoice {
+        radius: given,
+        radii,
+        basis,
+        verdict: Some(verdict),
+        warning,
     })
 }
 
@@ -104,13 +172,16 @@ pub fn choose_radius(
 mod tests {
     use super::*;
     use crate::attributes::Attribute;
-    use std::path::Path;
+    use crate::radius::RadiusProblem;
 
+    /// An estimate of `radius` whose ten sampled particles sit 1.8 radii from their
+    /// nearest neighbours (as in compressed SPH).
     fn estimate(radius: f32) -> Result<RadiusEstimate> {
         Ok(RadiusEstimate {
             radius,
-            half_nearest: radius,
+            half_nearest: 0.9 * radius,
             sample: 10,
+            nearest: vec![1.8 * radius; 10],
         })
     }
 
@@ -128,20 +199,69 @@ mod tests {
         Error::EmptyInput { path: "p".into() }
     }
 
+    const CHECK: Option<RadiusCheckOptions> = Some(RadiusCheckOptions {
+        influence_radius: 4.0,
+        force: "force=True",
+    });
+
+    fn choose(
+        given: Option<f32>,
+        check: Option<RadiusCheckOptions>,
+        radii: Result<Option<ParticleRadii>>,
+        estimate: impl FnOnce() -> Result<RadiusEstimate>,
+    ) -> Result<RadiusChoice> {
+        choose_radius(Path::new("p.xyz"), given, check, radii, estimate)
+    }
+
     #[test]
     fn the_estimate_is_taken_or_checks_a_given_radius() {
-        let c = choose_radius(None, true, Ok(None), || estimate(0.5)).unwrap();
+        let c = choose(None, CHECK, Ok(None), || estimate(0.5)).unwrap();
         assert_eq!((c.radius, c.verdict), (0.5, None));
         assert!(matches!(c.basis, RadiusBasis::Estimate(_)));
-        for (r, verdict) in [
-            (0.6, RadiusCheck::Plausible),
-            (3.0, RadiusCheck::Doubtful),
-            (30.0, RadiusCheck::Implausible),
-        ] {
-            let c = choose_radius(Some(r), true, Ok(None), || estimate(0.5)).unwrap();
-            assert_eq!((c.radius, c.verdict), (r, Some(verdict)));
-        }
-        let c = choose_radius(Some(30.0), false, Ok(None), || panic!("not measured")).unwrap();
+        assert!(c.warning.is_none());
+        let c = choose(Some(0.6), CHECK, Ok(None), || estimate(0.5)).unwrap();
+        assert_eq!((c.verdict, c.warning), (Some(RadiusCheck::Plausible), None));
+        // 0.46 x: the reach 4 x 0.23 = 0.92 still finds the neighbours at 0.9.
+        let c = choose(Some(0.23), CHECK, Ok(None), || estimate(0.5)).unwrap();
+        assert_eq!(c.verdict, Some(RadiusCheck::Doubtful { isolated: 0.0 }));
+        let w = c.warning.unwrap();
+        assert!(
+            w.starts_with("p.xyz: a particle radius of 0.23 is 0.46 × the 0.5"),
+            "{w}"
+        );
+        let c = choose(Some(1.5), CHECK, Ok(None), || estimate(0.5)).unwrap();
+        assert_eq!(c.verdict, Some(RadiusCheck::Doubtful { isolated: 0.0 }));
+        // 0.44 x: no neighbour within 0.88, every particle isolated: refused.
+        let e = choose(Some(0.22), CHECK, Ok(None), || estimate(0.5)).unwrap_err();
+        let Error::ImplausibleRadius {
+            given,
+            estimate: reference,
+            problem,
+            ..
+        } = &e
+        else {
+            panic!("{e}")
+        };
+        assert_eq!((*given, *reference), (0.22, 0.5));
+        assert!(matches!(problem, RadiusProblem::Isolated { fraction, .. } if *fraction == 1.0));
+        let m = e.to_string();
+        assert!(
+            m.contains("100% of the fluid's particles")
+                && m.ends_with("or force=True to run with 0.22 anyway"),
+            "{m}"
+        );
+        let e = choose(Some(2.5), CHECK, Ok(None), || estimate(0.5)).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                Error::ImplausibleRadius {
+                    problem: RadiusProblem::Blob,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        let c = choose(Some(30.0), None, Ok(None), || panic!("not measured")).unwrap();
         assert_eq!((c.radius, c.verdict), (30.0, None));
         assert!(matches!(c.basis, RadiusBasis::Given));
     }
@@ -149,28 +269,44 @@ mod tests {
     #[test]
     fn a_radius_attribute_gives_the_median_or_checks_a_given_radius() {
         let no_estimate = || -> Result<RadiusEstimate> { panic!("not measured") };
-        let c = choose_radius(None, true, radii(vec![1.0, 2.0, 9.0]), no_estimate).unwrap();
+        let c = choose(None, CHECK, radii(vec![1.0, 2.0, 9.0]), no_estimate).unwrap();
         assert_eq!((c.radius, c.verdict), (2.0, None));
         assert!(matches!(c.basis, RadiusBasis::Median(m) if m == 2.0));
         assert!(c.radii.is_some());
-        let c = choose_radius(Some(100.0), true, radii(vec![2.0]), no_estimate).unwrap();
-        assert_eq!(c.verdict, Some(RadiusCheck::Implausible));
-        let c = choose_radius(Some(100.0), false, radii(vec![2.0]), no_estimate).unwrap();
+        let e = choose(Some(100.0), CHECK, radii(vec![2.0]), || estimate(2.0)).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("median of the particles' radius attribute \"pscale\""),
+            "{e}"
+        );
+        // Isolation measured on the spacing's sample, or judged from the ratio without it.
+        let e = choose(Some(0.8), CHECK, radii(vec![2.0]), || estimate(2.0)).unwrap_err();
+        assert!(matches!(
+            e,
+            Error::ImplausibleRadius {
+                problem: RadiusProblem::Isolated { .. },
+                ..
+            }
+        ));
+        let c = choose(Some(0.8), CHECK, radii(vec![2.0]), || Err(unreadable())).unwrap();
+        assert!(matches!(c.verdict, Some(RadiusCheck::Doubtful { .. })));
+        assert!(choose(Some(0.4), CHECK, radii(vec![2.0]), || Err(unreadable())).is_err());
+        let c = choose(Some(100.0), None, radii(vec![2.0]), no_estimate).unwrap();
         assert_eq!((c.radius, c.verdict), (100.0, None));
         assert!(c.radii.is_some());
     }
 
     #[test]
     fn a_given_radius_survives_an_unreadable_frame() {
-        let c = choose_radius(Some(0.5), true, Err(unreadable()), || estimate(1.0)).unwrap();
+        let c = choose(Some(0.5), CHECK, Err(unreadable()), || estimate(1.0)).unwrap();
         assert!(matches!(
             c.basis,
             RadiusBasis::Unmeasured(Error::EmptyInput { .. })
         ));
-        let c = choose_radius(Some(0.5), true, Ok(None), || Err(unreadable())).unwrap();
+        let c = choose(Some(0.5), CHECK, Ok(None), || Err(unreadable())).unwrap();
         assert!(matches!(c.basis, RadiusBasis::Unmeasured(_)));
         assert_eq!(c.radius, 0.5);
-        assert!(choose_radius(None, true, Err(unreadable()), || estimate(1.0)).is_err());
-        assert!(choose_radius(None, true, Ok(None), || Err(unreadable())).is_err());
+        assert!(choose(None, CHECK, Err(unreadable()), || estimate(1.0)).is_err());
+        assert!(choose(None, CHECK, Ok(None), || Err(unreadable())).is_err());
     }
 }

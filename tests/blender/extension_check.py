@@ -91,8 +91,10 @@ def main(zip_path, work, dambreak, velocity_pattern):
     except RuntimeError as e:
         print(f"     (the operator reported: {e})")
     estimate = str(np.float32(settings.estimated_radius))
-    check("radius" in settings.status and estimate in settings.status and "Force" in settings.status,
-          f"a radius 30x too small is refused, naming the estimate {estimate} and Force: {settings.status!r}")
+    check("is refused" in settings.status and estimate in settings.status
+          and "tick Force radius to run with" in settings.status and "radius_check" not in settings.status,
+          f"a radius 30x too small is refused with the library's message, naming the estimate {estimate} "
+          f"and the Force radius box: {settings.status!r}")
     check(not (work / "wrong.mseq").exists(), "and nothing is written")
     settings.radius = 0.0
 
