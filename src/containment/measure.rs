@@ -17,6 +17,9 @@ const COARSE: f64 = 8.0;
 /// Nearest vertices whose parent triangles' neighbourhoods a measure covers.
 const PROBE_VERTICES: usize = 3;
 
+/// Points whose cells [`CellIndex::new`] finds in parallel at once.
+const SPLIT_CHUNK: usize = 1 << 16;
+
 /// Cells per block edge of the cell index.
 const BLOCK: i32 = 1 << 3;
 const BLOCK_CELLS: usize = (BLOCK * BLOCK * BLOCK) as usize;
@@ -54,16 +57,23 @@ pub(super) struct CellIndex {
 impl CellIndex {
     pub(super) fn new(positions: &[Vec3], cell: f64) -> Self {
         // Each point's block slot (slots in order of first point: points in mesh order
-        // come block by block) and cell in the block.
+        // come block by block) and cell in the block. The cells are found in parallel, a
+        // chunk of points at a time; the slots then in order.
         let mut blocks: HashMap<[i32; 3], u32> = HashMap::new();
         let mut last: Option<([i32; 3], u32)> = None;
         let mut locals = Vec::with_capacity(positions.len());
-        let slots: Vec<u32> = positions
-            .iter()
-            .map(|&p| {
-                let (block, local) = split_cell(floor(p.as_dvec3() / cell));
+        let mut slots: Vec<u32> = Vec::with_capacity(positions.len());
+        let mut split = Vec::with_capacity(SPLIT_CHUNK.min(positions.len()));
+        for chunk in positions.chunks(SPLIT_CHUNK) {
+            split.clear();
+            split.par_extend(
+                chunk
+                    .par_iter()
+                    .map(|&p| split_cell(floor(p.as_dvec3() / cell))),
+            );
+            for &(block, local) in &split {
                 locals.push(local);
-                match last {
+                slots.push(match last {
                     Some((b, slot)) if b == block => slot,
                     _ => {
                         let next = blocks.len() as u32;
@@ -71,9 +81,10 @@ impl CellIndex {
                         last = Some((block, slot));
                         slot
                     }
-                }
-            })
-            .collect();
+                });
+            }
+        }
+        drop(split);
         // Counting sort by (slot, cell).
         let mut starts = vec![[0u32; BLOCK_CELLS + 1]; blocks.len()];
         for (&slot, &local) in slots.iter().zip(&locals) {

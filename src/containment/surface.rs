@@ -203,12 +203,16 @@ fn edge_point(control: &TriMesh, tris: &VertexTriangles, t: u32, k: usize, smoot
     let (a, b, c) = (tri[k], tri[(k + 1) % 3], tri[(k + 2) % 3]);
     let x = |v: u32| control.positions[v as usize].as_dvec3();
     let pair = |u: u32, w: u32| if u < w { x(u) + x(w) } else { x(w) + x(u) };
+    if !smooth {
+        // The control mesh itself: no need to look for the triangle across.
+        return (0.5 * pair(a, b)).as_vec3();
+    }
     let mut across = tris
         .of(a)
         .iter()
         .filter(|&&u| u != t && control.triangles[u as usize].contains(&b));
-    let d = match (smooth, across.next(), across.next()) {
-        (true, Some(&u), None) => control.triangles[u as usize]
+    let d = match (across.next(), across.next()) {
+        (Some(&u), None) => control.triangles[u as usize]
             .into_iter()
             .find(|&w| w != a && w != b),
         _ => None,
