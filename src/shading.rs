@@ -43,11 +43,22 @@ impl ShadingOptions {
 /// Sets `mesh.normals` to its area-weighted vertex normals smoothed by
 /// `options.normal_smoothing` steps.
 pub fn shading_normals(mesh: &mut TriMesh, options: &ShadingOptions) {
+    shading_normals_with(mesh, options, None);
+}
+
+/// [`shading_normals`] with the vertices' rings when they are at hand (built by the
+/// smoothing of the same triangles; `None`: built here).
+pub(crate) fn shading_normals_with(
+    mesh: &mut TriMesh,
+    options: &ShadingOptions,
+    rings: Option<Rings>,
+) {
     mesh.compute_normals();
     if options.normal_smoothing == 0 || mesh.positions.is_empty() {
         return;
     }
-    let rings = Rings::new(mesh);
+    let rings = rings.unwrap_or_else(|| Rings::new(mesh));
+    debug_assert_eq!(rings.vertices(), mesh.positions.len());
     let mut current = std::mem::take(&mut mesh.normals);
     let mut next = vec![Vec3::ZERO; current.len()];
     for _ in 0..options.normal_smoothing {

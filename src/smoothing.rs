@@ -31,8 +31,13 @@ use rayon::prelude::*;
 
 /// Peak of Taubin smoothing per control-mesh triangle: the mesh (24 B), the vertices'
 /// neighbour lists (≈ 14 B, and ≈ 14 B of vertex → triangle lists while they are built)
-/// and two f64 copies of the positions (≈ 24 B), bytes.
+/// and two f64 copies of the positions (≈ 24 B), bytes. The inward bound adds the start
+/// positions and normals (≈ 12 B), below the lists' building.
 pub(crate) const BYTES_PER_INPUT_TRIANGLE: f64 = 72.0;
+
+/// The vertices' neighbour lists ([`Rings`]) per triangle, bytes: what the pipeline
+/// holds between smoothing and the shading normals when it hands them over.
+pub(crate) const RINGS_BYTES_PER_TRIANGLE: f64 = 14.0;
 
 /// Options of [`smooth`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -128,9 +133,19 @@ pub struct SmoothStats {
 /// normals.
 /// Options must be valid ([`SmoothOptions::validate`]).
 pub fn smooth(mesh: &mut TriMesh, options: &SmoothOptions) -> SmoothStats {
+    smooth_keeping_rings(mesh, options).0
+}
+
+/// [`smooth`], and the vertices' rings it built (`None` when it had nothing to do): the
+/// pipeline hands them to the shading normals when the triangles stay as they are
+/// (containment only moves vertices), instead of building them again.
+pub(crate) fn smooth_keeping_rings(
+    mesh: &mut TriMesh,
+    options: &SmoothOptions,
+) -> (SmoothStats, Option<Rings>) {
     let mut stats = SmoothStats::default();
     if options.steps == 0 || mesh.positions.is_empty() {
-        return stats;
+        return (stats, None);
     }
     let rings = Rings::new(mesh);
     let mut current: Vec<DVec3> = mesh.positions.iter().map(|p| p.as_dvec3()).collect();
@@ -140,12 +155,13 @@ pub fn smooth(mesh: &mut TriMesh, options: &SmoothOptions) -> SmoothStats {
     } else {
         &[options.lambda as f64, options.mu as f64]
     };
-    // The bound's reference: each vertex's start and its outward normal there.
+    // The bound's reference: each vertex's start (the f32 positions, which `current`
+    // holds exactly) and its outward normal there.
     let start = options.max_inward.map(|bound| {
         mesh.compute_normals();
         (
             bound as f64,
-            current.clone(),
+            mesh.positions.clone(),
             std::mem::take(&mut mesh.normals),
         )
     });
@@ -166,7 +182,7 @@ pub fn smooth(mesh: &mut TriMesh, options: &SmoothOptions) -> SmoothStats {
         if let Some((bound, start, normals)) = &start {
             current.par_iter_mut().enumerate().for_each(|(v, p)| {
                 let n = normals[v].as_dvec3();
-                let inward = -(*p - start[v]).dot(n);
+                let inward = -(*p - start[v].as_dvec3()).dot(n);
                 if inward > *bound {
                     *p += (inward - bound) * n;
                 }
@@ -185,7 +201,7 @@ pub fn smooth(mesh: &mut TriMesh, options: &SmoothOptions) -> SmoothStats {
     stats.vertices = current.len() - stats.fixed_vertices;
     stats.mean_shift /= current.len() as f64;
     mesh.normals.clear();
-    stats
+    (stats, Some(rings))
 }
 
 /// Every vertex's edge neighbours (sorted, once each), or none for a vertex that keeps
@@ -251,6 +267,11 @@ impl Rings {
             rings.fixed.extend_from_slice(&fixed);
         }
         rings
+    }
+
+    /// Vertices listed.
+    pub(crate) fn vertices(&self) -> usize {
+        self.fixed.len()
     }
 
     /// The neighbours of `v`, or `None` when it is on a boundary or non-manifold edge,

@@ -28,8 +28,8 @@ use crate::field::Sizes;
 use crate::io::particles::ParticleSource;
 use crate::mesh::{SphereInstances, Surface, TriMesh};
 use crate::radius::ParticleRadii;
-use crate::shading::shading_normals;
-use crate::smoothing::smooth;
+use crate::shading::shading_normals_with;
+use crate::smoothing::smooth_keeping_rings;
 use crate::subdivision::subdivide;
 use crate::tiles::{
     plan_tiles, run_tiles, Isolated, ParticleStore, StitchSink, TileDecimation, TilePlan, TileSink,
@@ -150,10 +150,14 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
     let store = (carries_payload || options.containment.is_some()).then_some(store);
     // 4. Decimation (already done tile by tile when the run was tiled).
     decimation_stage(&mut fluid, decimated, options, &mut run)?;
-    // 5. Smoothing.
+    // 5. Smoothing. Its vertex rings serve the shading normals too when no stage
+    // between changes the triangles (containment only moves vertices).
+    let mut rings = None;
     if let Some(smooth_options) = &options.smooth {
         run.stage("smoothing", &mut fluid, |fluid, stats| {
-            stats.smoothing = Some(smooth(fluid, smooth_options));
+            let (smoothed, built) = smooth_keeping_rings(fluid, smooth_options);
+            stats.smoothing = Some(smoothed);
+            rings = built.filter(|_| options.keeps_rings());
             Ok(())
         })?;
     }
@@ -191,7 +195,7 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
     })?;
     // 9. Normals.
     run.stage("normals", &mut fluid, |fluid, stats| {
-        shading_normals(fluid, &options.shading);
+        shading_normals_with(fluid, &options.shading, rings.take());
         stats.fluid_triangles = fluid.triangle_count();
         Ok(())
     })?;
@@ -394,6 +398,7 @@ mod tests {
     use super::*;
     use crate::io::particles::read_particles;
     use crate::isolated::split_isolated;
+    use crate::shading::shading_normals;
 
     #[test]
     fn raw_is_the_marching_cubes_surface_of_the_field_alone() {
@@ -429,5 +434,29 @@ mod tests {
         assert_eq!(surface.fluid.triangles, mesh.triangles);
         assert_eq!(surface.fluid.positions, mesh.positions);
         assert_eq!(stats.fluid_triangles, stats.marching_cubes_triangles);
+    }
+
+    #[test]
+    fn the_shading_normals_from_the_smoothings_rings_are_those_of_fresh_ones() {
+        // The steady surface hands the smoothing's rings to the shading normals across
+        // containment (which moves vertices, not triangles): the normals are the ones
+        // the public entry computes from the output mesh alone, bit for bit.
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/datasets/double_dambreak/ParticleData_Fluid_9.xyz"
+        );
+        let positions = read_particles(path.as_ref(), None).unwrap().positions;
+        let options = ReconstructOptions::steady(0.025);
+        assert!(options.keeps_rings());
+        let (surface, stats) = reconstruct(&positions, &options).unwrap();
+        assert!(stats.containment.as_ref().unwrap().moved_vertices > 0);
+        let mut fresh = surface.fluid.clone();
+        shading_normals(&mut fresh, &options.shading);
+        assert!(!fresh.normals.is_empty());
+        assert_eq!(fresh.normals, surface.fluid.normals);
+        // Subdivision changes the triangles: the rings are not kept.
+        let mut subdivided = options.clone();
+        subdivided.subdivide.levels = 1;
+        assert!(!subdivided.keeps_rings());
     }
 }

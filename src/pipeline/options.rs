@@ -200,6 +200,14 @@ impl ReconstructOptions {
         Ok(())
     }
 
+    /// Whether the smoothing's vertex rings are held until the shading normals, which
+    /// smooth over the same triangles (no subdivision between).
+    pub(crate) fn keeps_rings(&self) -> bool {
+        self.smooth.as_ref().is_some_and(|s| s.steps > 0)
+            && self.subdivide.levels == 0
+            && self.shading.normal_smoothing > 0
+    }
+
     /// Memory the surface needs after the tiles, per marching-cubes triangle: the largest
     /// of the stages' own working sets, each at the triangle count it meets (an
     /// error-bounded decimation counts as [`ASSUMED_BOUNDED_REDUCTION`]), and what would
@@ -227,9 +235,15 @@ impl ReconstructOptions {
                 "no smoothing",
             );
         }
+        // The smoothing's rings, held for the shading normals through containment.
+        let rings = if self.keeps_rings() {
+            crate::smoothing::RINGS_BYTES_PER_TRIANGLE
+        } else {
+            0.0
+        };
         if self.containment.is_some() {
             raise(
-                triangles * crate::containment::BYTES_PER_INPUT_TRIANGLE,
+                triangles * (crate::containment::BYTES_PER_INPUT_TRIANGLE + rings),
                 "no containment",
             );
         }
