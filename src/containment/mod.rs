@@ -79,8 +79,8 @@ pub struct ContainmentOptions {
     /// Control triangles measured at once, about: the surface is measured in slabs of
     /// that many, so that the stage's memory follows the slab rather than the whole
     /// surface. `None`: from the memory budget (an eighth of it per slab, see
-    /// [`Self::slab_triangles`]), one slab without a budget. The output does not depend
-    /// on it. Default `None`.
+    /// [`Self::slab_triangles`]), slabs of [`UNBUDGETED_SLAB_TRIANGLES`] without a budget.
+    /// The output does not depend on it. Default `None`.
     #[serde(default)]
     pub chunk_triangles: Option<usize>,
 }
@@ -93,6 +93,13 @@ pub struct ContainmentOptions {
 /// tiles' leftovers; 80 kept as margin. (Before the slabs, 2026-11-26: 2685 MiB, 154 B.)
 /// Below the subdivision's, so the stage never sets a run's estimate.
 pub(crate) const BYTES_PER_INPUT_TRIANGLE: f64 = 80.0;
+
+/// Control triangles per slab without a memory budget: 2²², about 400 MB of slab
+/// ([`SLAB_BYTES_PER_TRIANGLE`]). The default surface of a 4M-particle splash (3.5 M
+/// control triangles) is measured whole; the steady surface's fine mesh of the same
+/// scene (32 M triangles, not decimated) in eight slabs, where measuring it whole
+/// peaked at 4.4 GiB.
+pub const UNBUDGETED_SLAB_TRIANGLES: usize = 1 << 22;
 
 /// Working set of a slab, bytes per control triangle in it: its triangle and vertex
 /// lists, the one-step surface's points (3.5 per triangle), their cell hash and what
@@ -123,12 +130,12 @@ impl ContainmentOptions {
 
     /// Control triangles per slab under a memory budget of `budget` bytes (`None`: no
     /// limit): [`Self::chunk_triangles`] when given, else as many as an eighth of the
-    /// budget holds, at least 2¹⁸.
+    /// budget holds, at least 2¹⁸; [`UNBUDGETED_SLAB_TRIANGLES`] without a budget.
     pub fn slab_triangles(&self, budget: Option<u64>) -> usize {
         match (self.chunk_triangles, budget) {
             (Some(n), _) => n.max(1),
             (None, Some(b)) => ((b / 8 / SLAB_BYTES_PER_TRIANGLE) as usize).max(1 << 18),
-            (None, None) => usize::MAX,
+            (None, None) => UNBUDGETED_SLAB_TRIANGLES,
         }
     }
 }

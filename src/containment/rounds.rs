@@ -214,7 +214,8 @@ impl Rounds {
         };
         let near_again = (!self.full_round).then(|| {
             let ps: Vec<Vec3> = again.iter().map(|w| w.position).collect();
-            self.slabs.near(&ps)
+            let near = self.slabs.near(&ps);
+            self.slabs.holding(control, &near)
         });
         let mut found = Found::default();
         for slab in 0..self.slabs.count() {
@@ -228,7 +229,7 @@ impl Rounds {
             cancel.check()?;
             // The one-step surface over the slab (where the centres measured again are).
             let clock = Instant::now();
-            let ids = self.slabs.triangles(control, slab, near_again.as_ref());
+            let ids = self.slabs.triangles(control, slab, near_again.as_deref());
             let slots_here = std::mem::take(&mut self.slots);
             let surface = LoopSurface::new(control, &self.tris, ids, input.levels > 0, slots_here);
             let cells = CellIndex::new(&surface.points, 2.0 * self.r);

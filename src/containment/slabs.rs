@@ -140,9 +140,25 @@ impl Slabs {
         self.bounds.partition_point(|&b| b <= p[self.axis])
     }
 
-    /// The control triangles of slab `k`'s surface, ascending; only those that centres
-    /// of `near` can read when given.
-    pub(super) fn triangles(&self, control: &TriMesh, k: usize, near: Option<&Near>) -> Vec<u32> {
+    /// Per control vertex: whether its reach meets a cell of `near` (the centres of
+    /// `near` can read the triangles at it). Taken once per round, for every slab.
+    pub(super) fn holding(&self, control: &TriMesh, near: &Near) -> Vec<bool> {
+        control
+            .positions
+            .par_iter()
+            .zip(&self.reach)
+            .map(|(&p, &m)| near.holds(p, m))
+            .collect()
+    }
+
+    /// The control triangles of slab `k`'s surface, ascending; only those with a corner
+    /// of `holds` ([`Self::holding`]) when given.
+    pub(super) fn triangles(
+        &self,
+        control: &TriMesh,
+        k: usize,
+        holds: Option<&[bool]>,
+    ) -> Vec<u32> {
         let all: Vec<u32>;
         let members = if self.bounds.is_empty() {
             all = (0..control.triangles.len() as u32).collect();
@@ -150,16 +166,9 @@ impl Slabs {
         } else {
             &self.members[self.starts[k]..self.starts[k + 1]]
         };
-        let Some(near) = near else {
+        let Some(holds) = holds else {
             return members.to_vec();
         };
-        // Each vertex looked up once (not once per triangle at it).
-        let holds: Vec<bool> = control
-            .positions
-            .par_iter()
-            .zip(&self.reach)
-            .map(|(&p, &m)| near.holds(p, m))
-            .collect();
         members
             .par_iter()
             .copied()
