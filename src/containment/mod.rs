@@ -94,11 +94,11 @@ pub struct ContainmentOptions {
 /// Below the subdivision's, so the stage never sets a run's estimate.
 pub(crate) const BYTES_PER_INPUT_TRIANGLE: f64 = 80.0;
 
-/// Control triangles per slab without a memory budget: 2²², about 400 MB of slab
-/// ([`SLAB_BYTES_PER_TRIANGLE`]). The default surface of a 4M-particle splash (3.5 M
+/// Control triangles per slab without a memory budget: 2²², about 400 MB of slab (96 B
+/// per control triangle of it). The default surface of a 4M-particle splash (3.5 M
 /// control triangles) is measured whole; the steady surface's fine mesh of the same
 /// scene (32 M triangles, not decimated) in eight slabs, where measuring it whole
-/// peaked at 4.4 GiB.
+/// peaked at 4.3 GiB.
 pub const UNBUDGETED_SLAB_TRIANGLES: usize = 1 << 22;
 
 /// Working set of a slab, bytes per control triangle in it: its triangle and vertex
