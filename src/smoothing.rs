@@ -166,9 +166,11 @@ pub(crate) fn smooth_keeping_rings(
         )
     });
     for _ in 0..options.steps {
-        for &weight in passes {
+        for (pass, &weight) in passes.iter().enumerate() {
+            // The bound after each step's last pass, in the same sweep.
+            let bound = start.as_ref().filter(|_| pass + 1 == passes.len());
             next.par_iter_mut().enumerate().for_each(|(v, out)| {
-                *out = match rings.of(v) {
+                let mut p = match rings.of(v) {
                     Some(ring) => {
                         let mean = ring.iter().map(|&n| current[n as usize]).sum::<DVec3>()
                             / ring.len() as f64;
@@ -176,17 +178,16 @@ pub(crate) fn smooth_keeping_rings(
                     }
                     None => current[v],
                 };
+                if let Some((bound, start, normals)) = bound {
+                    let n = normals[v].as_dvec3();
+                    let inward = -(p - start[v].as_dvec3()).dot(n);
+                    if inward > *bound {
+                        p += (inward - bound) * n;
+                    }
+                }
+                *out = p;
             });
             std::mem::swap(&mut current, &mut next);
-        }
-        if let Some((bound, start, normals)) = &start {
-            current.par_iter_mut().enumerate().for_each(|(v, p)| {
-                let n = normals[v].as_dvec3();
-                let inward = -(*p - start[v].as_dvec3()).dot(n);
-                if inward > *bound {
-                    *p += (inward - bound) * n;
-                }
-            });
         }
     }
     drop(start);
