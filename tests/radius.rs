@@ -95,17 +95,11 @@ fn the_estimate_scales_with_the_frame_and_needs_two_distinct_points() {
     assert!(estimate_radius(&[]).is_err());
 }
 
-/// The bands by the ratio alone (no sample of the spacing): plausible within 0.5x-2x,
-/// refused above 4x (one blob) or where the kernel's reach (4 r) is shorter than the
-/// particles' radius; doubtful between.
+/// The bands by the ratio alone (as against a radius attribute's median, where each
+/// particle keeps its own reach): plausible within 0.5x-2x, refused above 4x (one blob)
+/// or below 0.05x (a lattice so fine a run hangs); doubtful between.
 #[test]
 fn a_given_radius_is_plausible_doubtful_or_implausible() {
-    let isolated = |fraction| {
-        RadiusCheck::Implausible(RadiusProblem::Isolated {
-            fraction,
-            influence_radius: 4.0,
-        })
-    };
     for (given, want) in [
         (1.0, RadiusCheck::Plausible),
         (0.5, RadiusCheck::Plausible),
@@ -114,8 +108,9 @@ fn a_given_radius_is_plausible_doubtful_or_implausible() {
         (0.3, RadiusCheck::Doubtful { isolated: 0.0 }),
         (2.2, RadiusCheck::Doubtful { isolated: 0.0 }),
         (4.0, RadiusCheck::Doubtful { isolated: 0.0 }),
-        (0.2, isolated(1.0)),
-        (0.04, isolated(1.0)),
+        (0.2, RadiusCheck::Doubtful { isolated: 0.0 }),
+        (0.05, RadiusCheck::Doubtful { isolated: 0.0 }),
+        (0.04, RadiusCheck::Implausible(RadiusProblem::FineLattice)),
         (4.5, RadiusCheck::Implausible(RadiusProblem::Blob)),
         (100.0, RadiusCheck::Implausible(RadiusProblem::Blob)),
     ] {

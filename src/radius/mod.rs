@@ -96,8 +96,7 @@ pub enum RadiusProblem {
     /// More than [`ISOLATED`] of the fluid's particles would have no neighbour within the
     /// kernel's reach and be meshed each as a sphere of its own.
     Isolated {
-        /// That fraction (measured on the sample, or 1 when the reach is shorter than
-        /// the radius the particles imply).
+        /// That fraction, measured on the estimate's sample.
         fraction: f32,
         /// The kernel's reach, multiples of the given radius (the influence radius R).
         influence_radius: f32,
@@ -105,6 +104,9 @@ pub enum RadiusProblem {
     /// Above [`BLOB`] × the particles' radius: the surface would stand several radii
     /// off the particles and fill the gaps between the fluid's parts, one blob.
     Blob,
+    /// Below [`FINEST`] × the particles' radius: lattice cells (multiples of the given
+    /// radius) so fine that each particle's kernel spans thousands of them.
+    FineLattice,
 }
 
 impl std::fmt::Display for RadiusProblem {
@@ -117,6 +119,10 @@ impl std::fmt::Display for RadiusProblem {
                 f,
                 "{:.0}% of the fluid's particles would have no neighbour within the kernel's reach ({influence_radius} r) and be meshed each as a sphere of its own",
                 100.0 * fraction
+            ),
+            RadiusProblem::FineLattice => write!(
+                f,
+                "below {FINEST} × the lattice's cells would be so fine that each particle's kernel spans thousands of them: a run would hang"
             ),
             RadiusProblem::Blob => write!(
                 f,
@@ -163,13 +169,18 @@ pub const BLOB: f32 = 4.0;
 /// Fraction of the fluid's particles isolated above which a given radius is refused
 /// ([`RadiusProblem::Isolated`]): most of them.
 pub const ISOLATED: f32 = 0.5;
+/// Ratio of a given radius to the particles' below which it is refused
+/// ([`RadiusProblem::FineLattice`]).
+pub const FINEST: f32 = 0.05;
 
 /// Where `given` lies relative to `reference`, the radius the particles imply (both
 /// world units, > 0), for a run whose kernel reaches `influence_radius` × r: refused when
 /// more than [`ISOLATED`] of the fluid's particles would have no neighbour within the
-/// kernel's reach ([`RadiusEstimate::isolated_fraction`] on `spacing`'s sample; without
-/// it, when the reach is shorter than `reference`, half the rest spacing) or when above
-/// [`BLOB`] × `reference`; else plausible within [`PLAUSIBLE`], doubtful outside.
+/// kernel's reach ([`RadiusEstimate::isolated_fraction`] on `spacing`'s sample), below
+/// [`FINEST`] × `reference` (a lattice so fine that a run hangs) or above [`BLOB`] ×
+/// `reference`; else plausible within [`PLAUSIBLE`], doubtful outside. `spacing` is
+/// `None` where each particle is meshed with its own radius (a radius attribute): its
+/// reach, hence isolation, does not depend on `given` then, only the lattice does.
 pub fn check_radius(
     given: f32,
     reference: f32,
@@ -177,16 +188,16 @@ pub fn check_radius(
     influence_radius: f32,
 ) -> RadiusCheck {
     let ratio = given / reference;
-    let isolated = match spacing {
-        Some(e) => e.isolated_fraction(influence_radius * given, influence_radius * reference),
-        None if influence_radius * ratio < 1.0 => 1.0,
-        None => 0.0,
-    };
+    let isolated = spacing.map_or(0.0, |e| {
+        e.isolated_fraction(influence_radius * given, influence_radius * reference)
+    });
     if isolated > ISOLATED {
         RadiusCheck::Implausible(RadiusProblem::Isolated {
             fraction: isolated,
             influence_radius,
         })
+    } else if ratio < FINEST {
+        RadiusCheck::Implausible(RadiusProblem::FineLattice)
     } else if ratio > BLOB {
         RadiusCheck::Implausible(RadiusProblem::Blob)
     } else if (PLAUSIBLE.0..=PLAUSIBLE.1).contains(&ratio) {

@@ -63,8 +63,9 @@ pub struct RadiusCheckOptions<'a> {
 /// * with a radius attribute, its median, or `given` checked against that median;
 /// * otherwise the estimate, or `given` checked against the estimate;
 ///
-/// a given radius checked (unless `check` is `None`) by [`check_radius`] with the
-/// sampled spacing: an implausible one is refused with [`Error::ImplausibleRadius`]
+/// a given radius checked (unless `check` is `None`) by [`check_radius`], with the
+/// estimate's sample measuring isolation (not against a radius attribute, whose
+/// particles each keep their own reach): an implausible one is refused with [`Error::ImplausibleRadius`]
 /// (naming both radii, what a run would do, and `check.force`), a doubtful one comes
 /// with a [`RadiusChoice::warning`].
 ///
@@ -109,27 +110,27 @@ pub fn choose_radius(
         (Some(r), None) => return Ok(unchecked(r, radii, RadiusBasis::Given)),
         (Some(r), Some(check)) => (r, check),
     };
-    // The spacing's sample measures isolation, also against a radius attribute's median
-    // (without it, isolation is judged from the ratio alone).
-    let (reference, source, spacing, basis) = match &radii {
+    // With a radius attribute each particle is meshed with its own radius, whatever the
+    // given one: isolation is not the given radius's doing, and is not measured.
+    let (reference, source, basis) = match &radii {
         Some(radii) => {
             let median = radii.median();
             let source = RadiusSource::Attribute {
                 name: radii.attribute.clone(),
             };
-            (median, source, estimate().ok(), RadiusBasis::Median(median))
+            (median, source, RadiusBasis::Median(median))
         }
         None => match estimate() {
             Ok(e) => {
                 let source = RadiusSource::Spacing { sample: e.sample };
-                (e.radius, source, None, RadiusBasis::Estimate(e))
+                (e.radius, source, RadiusBasis::Estimate(e))
             }
             Err(e) => return Ok(unchecked(given, None, RadiusBasis::Unmeasured(e))),
         },
     };
     let sampled = match &basis {
         RadiusBasis::Estimate(e) => Some(e),
-        _ => spacing.as_ref(),
+        _ => None,
     };
     let verdict = check_radius(given, reference, sampled, check.influence_radius);
     let warning = match verdict {
@@ -273,24 +274,30 @@ mod tests {
         assert_eq!((c.radius, c.verdict), (2.0, None));
         assert!(matches!(c.basis, RadiusBasis::Median(m) if m == 2.0));
         assert!(c.radii.is_some());
-        let e = choose(Some(100.0), CHECK, radii(vec![2.0]), || estimate(2.0)).unwrap_err();
+        let e = choose(Some(100.0), CHECK, radii(vec![2.0]), no_estimate).unwrap_err();
         assert!(
             e.to_string()
                 .contains("median of the particles' radius attribute \"pscale\""),
             "{e}"
         );
-        // Isolation measured on the spacing's sample, or judged from the ratio without it.
-        let e = choose(Some(0.8), CHECK, radii(vec![2.0]), || estimate(2.0)).unwrap_err();
-        assert!(matches!(
-            e,
-            Error::ImplausibleRadius {
-                problem: RadiusProblem::Isolated { .. },
-                ..
-            }
-        ));
-        let c = choose(Some(0.8), CHECK, radii(vec![2.0]), || Err(unreadable())).unwrap();
-        assert!(matches!(c.verdict, Some(RadiusCheck::Doubtful { .. })));
-        assert!(choose(Some(0.4), CHECK, radii(vec![2.0]), || Err(unreadable())).is_err());
+        // Each particle keeps its own reach: a small given radius only makes the lattice
+        // finer, refused below 0.05x.
+        let c = choose(Some(0.4), CHECK, radii(vec![2.0]), no_estimate).unwrap();
+        assert_eq!(c.verdict, Some(RadiusCheck::Doubtful { isolated: 0.0 }));
+        // Radii of 1:4, -r the smallest (the finest surface): a warning, not a refusal.
+        let c = choose(Some(0.5), CHECK, radii(vec![0.5, 2.0, 2.0]), no_estimate).unwrap();
+        assert_eq!(c.verdict, Some(RadiusCheck::Doubtful { isolated: 0.0 }));
+        let e = choose(Some(0.09), CHECK, radii(vec![2.0]), no_estimate).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                Error::ImplausibleRadius {
+                    problem: RadiusProblem::FineLattice,
+                    ..
+                }
+            ),
+            "{e}"
+        );
         let c = choose(Some(100.0), None, radii(vec![2.0]), no_estimate).unwrap();
         assert_eq!((c.radius, c.verdict), (100.0, None));
         assert!(c.radii.is_some());
