@@ -175,7 +175,7 @@ def reconstruct(
         particle_radius: ``r``, world units (> 0). Default: estimated from the particles'
             spacing. A given ``r`` outside 0.5x-2x of the estimate is warned about
             (``UserWarning``); one that would leave most of the fluid's particles
-            without a neighbour within the kernel's reach, or above 4x (one blob), is a
+            without a neighbour within the kernel's reach, below 0.05x or above 4x (one blob), is a
             ``ValueError`` (the CLI's message, naming ``radius_check=False``).
         attributes: name -> (N,) or (N, k) array of per-particle values (e.g. velocity),
             carried to the surface vertices (``Mesh.attributes``).
