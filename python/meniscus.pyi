@@ -34,7 +34,7 @@ class ReconstructOptions(TypedDict, total=False):
     influence_radius: float
     """Kernel support R, multiples of r. Default 4."""
     cell_size: float
-    """Marching-cubes cell size h, multiples of r. Default 1."""
+    """Marching-cubes cell size h, multiples of r. Default 1 (``"steady"``: 0.71)."""
     t_low: float
     """Lower eigenvalue threshold of the concavity factor. Default 0.4."""
     t_high: float
@@ -43,7 +43,8 @@ class ReconstructOptions(TypedDict, total=False):
     """Coverage radius, multiples of r: particles the surface would leave outside are
     enclosed in a ball of this radius (0: off). Default 0.9."""
     iso_offset: float
-    """Iso-level offset, multiples of r (moves the surface outwards). Default 0."""
+    """Iso-level offset, multiples of r (moves the surface outwards). Default 0
+    (``"steady"``: -0.05)."""
     kernel: Literal["isotropic", "anisotropic"]
     """Particle kernel: ``"isotropic"`` (the paper's Solenthaler field) or
     ``"anisotropic"`` (Yu & Turk 2013 kernels stretched along the local surface).
@@ -68,10 +69,18 @@ class ReconstructOptions(TypedDict, total=False):
     """Error bound of decimation, multiples of r (no collapse moves the surface by more);
     with a fraction, whichever is reached first stops it; None: no bound. Default 0.1."""
     smooth: int
-    """Taubin smoothing steps after decimation (0: off): removes the field's small bumps
-    without shrinking the surface. Default 2."""
+    """Smoothing steps after decimation (0: off): remove the field's small bumps.
+    Default 2 (``"steady"``: 10)."""
+    smooth_method: Literal["taubin", "laplacian"]
+    """How the smoothing steps move the vertices: ``"taubin"`` (little shrinkage, the
+    finest noise stays) or ``"laplacian"`` (each vertex to its neighbours' mean: removes
+    the noise, shrinks unless bounded by ``smooth_max_inward``). Default ``"taubin"``
+    (``"steady"``: ``"laplacian"``)."""
+    smooth_max_inward: float | None
+    """Farthest smoothing may move a vertex inwards, multiples of r; None: no bound.
+    Default None (``"steady"``: 0.35)."""
     subdivide: int
-    """Loop subdivision steps after decimation (0: off). Default 1."""
+    """Loop subdivision steps after decimation (0: off). Default 1 (``"steady"``: 0)."""
     defer_subdivision: bool
     """Leave the ``subdivide`` Loop steps to whoever reads the mesh: it comes back as the
     control mesh, its particles kept inside the surface it becomes once subdivided
@@ -82,6 +91,9 @@ class ReconstructOptions(TypedDict, total=False):
     multiples of r, in [0, 1]: where decimation or subdivision left one shallower or
     outside, the surface over it is pushed out; None leaves the surface as they made it.
     Default 0.25."""
+    normal_smoothing: int
+    """Smoothing steps of the written vertex normals (0: the area-weighted normals):
+    steadier shading from frame to frame. Default 0 (``"steady"``: 3)."""
     tile_size: int | None
     """Tile edge in marching-cubes cells; default: from the memory budget."""
     memory_budget: int | str | None
@@ -91,8 +103,16 @@ class ReconstructOptions(TypedDict, total=False):
 
 PAPER: ReconstructOptions
 """The keywords that make the defaults the pipeline of Akinci et al. 2013 exactly:
-``{"kernel": "isotropic", "particle_coverage": 0.0, "decimate": 0.8, "decimate_error": None,
-"smooth": 0, "keep_inside": None}`` (``reconstruct(points, r, **PAPER)``; the CLI's ``--paper``)."""
+``{"particle_coverage": 0.0, "kernel": "isotropic", "decimate": 0.8, "decimate_error": None,
+"smooth": 0, "keep_inside": None}`` (``reconstruct(points, r, **PAPER)`` is
+``preset="paper"``; the CLI's ``--paper``)."""
+STEADY: ReconstructOptions
+"""The keywords that make the defaults the steady surface for animation (``preset="steady"``,
+the CLI's ``--preset steady``): ``{"cell_size": 0.71, "iso_offset": -0.05, "decimate": None,
+"decimate_error": None, "smooth": 10, "smooth_method": "laplacian", "smooth_max_inward": 0.35,
+"subdivide": 0, "normal_smoothing": 3}``."""
+
+Preset = Literal["still", "steady", "paper"]
 
 class FormatError(ValueError):
     """A particle, mesh or archive file whose content is malformed or whose format is not supported."""
@@ -165,6 +185,7 @@ def reconstruct(
     threads: int | None = None,
     radius_check: bool = True,
     radius_attribute: str | None = None,
+    preset: Preset | None = None,
     **options: Unpack[ReconstructOptions],
 ) -> Mesh:
     """Reconstructs the surface of the particles at ``positions``.
@@ -189,11 +210,15 @@ def reconstruct(
             particle is meshed with its own radius (influence radius, kernel, coverage
             ball, containment depth, isolated sphere), while the cell size and the other
             lengths stay multiples of ``r``.
+        preset: the defaults the ``**options`` start from: ``"still"`` (the best still
+            frame; the default), ``"steady"`` (for animation: shading that does not
+            flicker from frame to frame) or ``"paper"`` (Akinci et al. 2013 exactly).
         **options: the reconstruction settings (``ReconstructOptions``): influence_radius,
             cell_size, t_low, t_high, particle_coverage, iso_offset, kernel, kernel_radius,
             max_stretch, min_neighbours, centre_smoothing, isolated_spheres, decimate,
-            decimate_error, smooth, subdivide, defer_subdivision, keep_inside, tile_size,
-            memory_budget, temp_dir.
+            decimate_error, smooth, smooth_method, smooth_max_inward, subdivide,
+            defer_subdivision, keep_inside, normal_smoothing, tile_size, memory_budget,
+            temp_dir.
     """
 
 def estimate_radius(positions: npt.ArrayLike) -> float:
@@ -229,6 +254,7 @@ def reconstruct_file(
     meters_per_unit: float = 1.0,
     usd_droplets: str = "points",
     input_format: str | None = None,
+    preset: Preset | None = None,
     **options: Unpack[ReconstructOptions],
 ) -> list[dict[str, Any]]:
     """Reconstructs a particle file, or a frame sequence (a ``{}`` pattern or a ParaView
@@ -271,6 +297,8 @@ def reconstruct_file(
             draw as spheres and Blender blurs) or ``"instancer"`` (a point instancer of
             the sphere mesh).
         input_format: ``"xyz"``, ``"vtk"``, ``"ply"`` or ``"bgeo"``, instead of the extension.
+        preset: as for ``reconstruct``; default ``"steady"`` for a sequence (a ``{}``
+            pattern or a ``.pvd``, whatever frames are chosen), ``"still"`` for one file.
         **options: the reconstruction settings (``ReconstructOptions``).
 
     Returns:

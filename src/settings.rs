@@ -10,8 +10,105 @@ use crate::decimation::DecimateOptions;
 use crate::error::{Error, Result};
 use crate::field::Kernel;
 use crate::pipeline::{ReconstructOptions, DEFAULT_DECIMATION_ERROR};
+use crate::shading::ShadingOptions;
 use crate::smoothing::SmoothOptions;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+
+/// A named set of defaults, which the settings given beside it override.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Preset {
+    /// The best still frame ([`ReconstructOptions::new`]): decimated, Taubin-smoothed and
+    /// subdivided. The default for one particle file.
+    Still,
+    /// The surface for animation ([`ReconstructOptions::steady`]): marched finer, no
+    /// decimation, bounded Laplacian smoothing and smoothed shading normals, so that the
+    /// shading does not flicker from frame to frame. The default for a sequence.
+    Steady,
+    /// The pipeline of Akinci et al. 2013 exactly ([`ReconstructOptions::paper`]).
+    Paper,
+}
+
+impl Preset {
+    /// Every preset, in the order the front ends list them.
+    pub const ALL: [Preset; 3] = [Preset::Still, Preset::Steady, Preset::Paper];
+
+    /// The preset's settings for particles of radius `particle_radius` (world units).
+    pub fn settings(self, particle_radius: f32) -> ReconstructSettings {
+        match self {
+            Preset::Still => ReconstructSettings::new(particle_radius),
+            Preset::Steady => ReconstructSettings::steady(particle_radius),
+            Preset::Paper => ReconstructSettings::paper(particle_radius),
+        }
+    }
+
+    /// The preset a run on `input` takes when none is named: [`Preset::Steady`] for a
+    /// sequence (a pattern with `{}`, or a ParaView collection `.pvd`), whatever frames
+    /// of it are chosen, so that every task of a farm makes the same surface;
+    /// [`Preset::Still`] for one particle file.
+    pub fn for_input(input: &Path) -> Preset {
+        let is_collection = input
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("pvd"));
+        match input.to_string_lossy().contains("{}") || is_collection {
+            true => Preset::Steady,
+            false => Preset::Still,
+        }
+    }
+}
+
+impl std::str::FromStr for Preset {
+    type Err = String;
+
+    /// `still`, `steady` or `paper`.
+    fn from_str(text: &str) -> std::result::Result<Self, String> {
+        Preset::ALL
+            .into_iter()
+            .find(|p| p.to_string() == text)
+            .ok_or_else(|| format!("takes `still`, `steady` or `paper`, got {text:?}"))
+    }
+}
+
+impl std::fmt::Display for Preset {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Preset::Still => "still",
+            Preset::Steady => "steady",
+            Preset::Paper => "paper",
+        })
+    }
+}
+
+/// How the smoothing steps move each vertex.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SmoothMethod {
+    /// Taubin's λ|μ steps: little shrinkage, but the finest noise stays.
+    Taubin,
+    /// Plain Laplacian steps (each vertex to its neighbours' mean): removes the noise
+    /// and shrinks, which an inward bound (`smooth_max_inward`) holds back.
+    Laplacian,
+}
+
+impl std::str::FromStr for SmoothMethod {
+    type Err = String;
+
+    /// `taubin` or `laplacian`.
+    fn from_str(text: &str) -> std::result::Result<Self, String> {
+        match text {
+            "taubin" => Ok(SmoothMethod::Taubin),
+            "laplacian" => Ok(SmoothMethod::Laplacian),
+            other => Err(format!("takes `taubin` or `laplacian`, got {other:?}")),
+        }
+    }
+}
+
+impl std::fmt::Display for SmoothMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            SmoothMethod::Taubin => "taubin",
+            SmoothMethod::Laplacian => "laplacian",
+        })
+    }
+}
 
 /// How much quadric decimation removes.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -82,9 +179,12 @@ pub const SETTINGS: &[&str] = &[
     "decimate",
     "decimate_error",
     "smooth",
+    "smooth_method",
+    "smooth_max_inward",
     "subdivide",
     "defer_subdivision",
     "keep_inside",
+    "normal_smoothing",
     "tile_size",
     "memory_budget",
     "temp_dir",
@@ -140,9 +240,15 @@ pub struct ReconstructSettings {
     /// with a fraction, whichever is reached first stops it. `None`: no bound. Default
     /// [`DEFAULT_DECIMATION_ERROR`] (0.1).
     pub decimate_error: Option<f32>,
-    /// Taubin smoothing steps after decimation (0: none). Default 2
-    /// ([`crate::smoothing::SmoothOptions`]).
+    /// Smoothing steps after decimation (0: none). Default 2
+    /// ([`crate::smoothing::SmoothOptions`]); the steady preset's 10.
     pub smooth: u32,
+    /// How the smoothing steps move the vertices. Default [`SmoothMethod::Taubin`]; the
+    /// steady preset's [`SmoothMethod::Laplacian`].
+    pub smooth_method: SmoothMethod,
+    /// Farthest smoothing may move a vertex inwards, multiples of `r`, or `None` for no
+    /// bound. Default `None`; the steady preset's 0.35.
+    pub smooth_max_inward: Option<f32>,
     /// Loop subdivision steps after decimation. Default 1.
     pub subdivide: u32,
     /// Leave the Loop subdivision to whoever reads the surface (a `.mseq` archive's
@@ -153,6 +259,9 @@ pub struct ReconstructSettings {
     /// multiples of `r`, or `None` to leave the surface as decimation and subdivision made
     /// it. Default `Some(0.25)`.
     pub keep_inside: Option<f32>,
+    /// Smoothing steps of the written vertex normals (0: the area-weighted normals).
+    /// Default 0; the steady preset's 3 ([`ShadingOptions`]).
+    pub normal_smoothing: u32,
     /// Tile edge, marching-cubes cells. Default: from the memory budget.
     pub tile_size: Option<u32>,
     /// Memory the run may use, bytes. Default `None`: half the available memory
@@ -174,6 +283,14 @@ impl ReconstructSettings {
     /// smoothing, no containment; the other settings as [`Self::new`].
     pub fn paper(particle_radius: f32) -> Self {
         Self::of(&ReconstructOptions::paper(1.0), particle_radius)
+    }
+
+    /// The surface for animation ([`ReconstructOptions::steady`]): the field marched at
+    /// 0.71 r with the level 0.05 r further in, no decimation, 10 Laplacian steps that
+    /// move no vertex more than 0.35 r inwards, no subdivision, the normals smoothed by
+    /// 3 steps; the other settings as [`Self::new`].
+    pub fn steady(particle_radius: f32) -> Self {
+        Self::of(&ReconstructOptions::steady(1.0), particle_radius)
     }
 
     /// The settings of `unit`, options for particles of radius 1 (so that its lengths
@@ -203,9 +320,15 @@ impl ReconstructSettings {
             },
             decimate_error: unit.decimate.as_ref().and_then(|d| d.max_error),
             smooth: unit.smooth.as_ref().map_or(0, |s| s.steps),
+            smooth_method: match &unit.smooth {
+                Some(s) if s.mu == 0.0 => SmoothMethod::Laplacian,
+                _ => SmoothMethod::Taubin,
+            },
+            smooth_max_inward: unit.smooth.as_ref().and_then(|s| s.max_inward),
             subdivide: unit.subdivide.levels + unit.deferred_subdivision,
             defer_subdivision: unit.deferred_subdivision > 0,
             keep_inside: unit.containment.as_ref().map(|c| c.min_depth),
+            normal_smoothing: unit.shading.normal_smoothing,
             tile_size: unit.tiles.tile_size_cells,
             memory_budget: unit.tiles.memory_budget_bytes,
             temp_dir: unit.tiles.temp_dir.clone(),
@@ -245,10 +368,24 @@ impl ReconstructSettings {
             .memory_budget
             .or_else(crate::tiles::default_memory_budget);
         options.tiles.temp_dir = self.temp_dir.clone();
+        if let Some(d) = self.smooth_max_inward {
+            if !(d.is_finite() && d > 0.0) {
+                return Err(Error::InvalidOption {
+                    option: "smooth_max_inward",
+                    message: format!("must be > 0 (multiples of r), got {d}"),
+                });
+            }
+        }
         options.smooth = (self.smooth > 0).then(|| SmoothOptions {
-            steps: self.smooth,
-            ..Default::default()
+            max_inward: self.smooth_max_inward.map(|d| d * r),
+            ..match self.smooth_method {
+                SmoothMethod::Taubin => SmoothOptions::steps(self.smooth),
+                SmoothMethod::Laplacian => SmoothOptions::laplacian(self.smooth),
+            }
         });
+        options.shading = ShadingOptions {
+            normal_smoothing: self.normal_smoothing,
+        };
         options.subdivide.levels = self.subdivide;
         if self.defer_subdivision {
             options.deferred_subdivision = self.subdivide;
@@ -306,6 +443,12 @@ mod tests {
         let mut paper = ReconstructOptions::paper(0.012);
         paper.tiles.memory_budget_bytes = crate::tiles::default_memory_budget();
         assert_eq!(ReconstructSettings::paper(0.012).options().unwrap(), paper);
+        let mut steady = ReconstructOptions::steady(0.012);
+        steady.tiles.memory_budget_bytes = crate::tiles::default_memory_budget();
+        assert_eq!(
+            ReconstructSettings::steady(0.012).options().unwrap(),
+            steady
+        );
         assert_eq!(paper.field.kernel, Kernel::Isotropic);
         assert_eq!(expected.field.kernel, Kernel::Anisotropic);
     }
@@ -388,9 +531,12 @@ mod tests {
             decimate: Decimation::Fraction(0.5),
             decimate_error: Some(0.2),
             smooth: 1,
+            smooth_method: SmoothMethod::Laplacian,
+            smooth_max_inward: Some(0.3),
             subdivide: 2,
             defer_subdivision: true,
             keep_inside: Some(0.5),
+            normal_smoothing: 2,
             tile_size: Some(16),
             memory_budget: Some(1 << 30),
             temp_dir: Some("spill".into()),
@@ -416,8 +562,32 @@ mod tests {
         s.decimate = Decimation::Fraction(1.0);
         assert_eq!(name(s), "decimate");
         assert_eq!(name(ReconstructSettings::new(-1.0)), "particle_radius");
+        let mut s = ReconstructSettings::new(0.01);
+        s.smooth_max_inward = Some(-0.1);
+        assert_eq!(name(s), "smooth_max_inward");
         let e = parse_memory_budget("2g").unwrap_err();
         assert!(e.to_string().starts_with("invalid memory_budget: "), "{e}");
         assert_eq!(parse_memory_budget("2KiB").unwrap(), 2048);
+    }
+
+    #[test]
+    fn a_sequence_takes_the_steady_preset_and_one_file_the_still() {
+        for (input, preset) in [
+            ("frames/fluid_{}.bgeo", Preset::Steady),
+            ("run/collection.PVD", Preset::Steady),
+            ("frames/fluid_0040.bgeo", Preset::Still),
+            ("pvd/fluid.vtu", Preset::Still),
+        ] {
+            assert_eq!(Preset::for_input(Path::new(input)), preset, "{input}");
+        }
+        for preset in Preset::ALL {
+            assert_eq!(preset.to_string().parse(), Ok(preset));
+        }
+        let e = "smooth".parse::<Preset>().unwrap_err();
+        assert!(e.contains("steady") && e.contains("\"smooth\""), "{e}");
+        assert_eq!(
+            Preset::Steady.settings(0.5),
+            ReconstructSettings::steady(0.5)
+        );
     }
 }

@@ -1497,6 +1497,81 @@ fn the_paper_flag_is_the_papers_options() {
     );
 }
 
+/// A sequence (a `{}` pattern, whatever frames of it are chosen) takes the steady preset,
+/// one file the still one; `--preset steady` is its flags, and a flag given beside it
+/// wins.
+#[test]
+fn a_sequence_takes_the_steady_preset() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let pattern = dataset("dambreak_small/ParticleData_Fluid_{}.xyz");
+    let one = dataset("dambreak_small/ParticleData_Fluid_25.xyz");
+    let run_ok = |input: &std::path::Path, output: &str, flags: &[&str]| {
+        let mut args = vec![
+            "reconstruct",
+            input.to_str().unwrap(),
+            "-r",
+            "0.012",
+            "-o",
+            output,
+            "--quiet",
+        ];
+        args.extend_from_slice(flags);
+        let (ok, err) = run(&args);
+        assert!(ok, "{flags:?}: {err}");
+    };
+    run_ok(&pattern, &p("seq_{}.ply"), &["--frames", "25"]);
+    run_ok(&one, &p("steady.ply"), &["--preset", "steady"]);
+    run_ok(&one, &p("still.ply"), &[]);
+    run_ok(
+        &pattern,
+        &p("still_{}.ply"),
+        &["--frames", "25", "--preset", "still"],
+    );
+    let flags = [
+        "-c",
+        "0.71",
+        "--iso-offset",
+        "-0.05",
+        "--decimate",
+        "off",
+        "--smooth",
+        "10",
+        "--smooth-method",
+        "laplacian",
+        "--smooth-max-inward",
+        "0.35",
+        "--subdivide",
+        "0",
+        "--normal-smoothing",
+        "3",
+    ];
+    run_ok(&one, &p("flags.ply"), &flags);
+    run_ok(&one, &p("coarse.ply"), &["--preset", "steady", "-c", "1"]);
+    let read = |name: &str| std::fs::read(p(name)).unwrap();
+    let steady = read("steady.ply");
+    assert!(
+        read("seq_25.ply") == steady,
+        "a sequence's frame is the steady surface"
+    );
+    assert!(read("flags.ply") == steady, "--preset steady is its flags");
+    assert!(read("still.ply") != steady && read("still_25.ply") == read("still.ply"));
+    assert!(read("coarse.ply") != steady, "-c beside --preset wins");
+    // A preset that does not exist, and two presets at once: usage errors, nothing written.
+    for flags in [
+        &["--preset", "smooth"][..],
+        &["--preset", "steady", "--paper"],
+    ] {
+        let mut args = vec!["reconstruct", one.to_str().unwrap(), "-r", "0.012"];
+        let out = p("bad.ply");
+        args.extend_from_slice(&["-o", &out]);
+        args.extend_from_slice(flags);
+        let (code, _, stderr) = run_full(&args);
+        assert_eq!(code, Some(2), "{flags:?}: {stderr}");
+    }
+    assert!(!dir.path().join("bad.ply").exists());
+}
+
 /// Centres containment could not bring under the surface (unbounded decimation folds a
 /// violent splash's sheets) draw a warning, exactly when the statistics count some.
 #[test]

@@ -18,6 +18,7 @@ use meniscus::job::settings::{
 use meniscus::job::{plan_frames, run_frames, FrameReport, JobSettings};
 use meniscus::pipeline::{reconstruct_sized, ReconstructOptions};
 use meniscus::radius::{radii_of, read_radii};
+use meniscus::settings::Preset;
 use numpy::PyArray2;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -29,11 +30,12 @@ use std::sync::Mutex;
 fn reconstruct_options(
     py: Python<'_>,
     function: &'static str,
+    preset: Preset,
     particle_radius: f32,
     given: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<ReconstructOptions> {
     let keywords = Keywords::new(py, function, given)?;
-    let settings = options::settings(particle_radius, &keywords)?;
+    let settings = options::settings(preset.settings(particle_radius), &keywords)?;
     keywords.finish()?;
     settings.options().map_err(to_py)
 }
@@ -45,7 +47,7 @@ fn reconstruct_options(
 /// reconstruction settings ([`options::SETTINGS`]).
 #[pyfunction]
 #[pyo3(signature = (positions, particle_radius = None, *, attributes = None, threads = None,
-    radius_check = true, radius_attribute = None, **options))]
+    radius_check = true, radius_attribute = None, preset = None, **options))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn reconstruct(
     py: Python<'_>,
@@ -55,13 +57,20 @@ pub(crate) fn reconstruct(
     threads: Option<usize>,
     radius_check: bool,
     radius_attribute: Option<String>,
+    preset: Option<&str>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Mesh> {
     check_threads(threads).map_err(to_py)?;
-    let influence_radius =
-        reconstruct_options(py, "reconstruct", particle_radius.unwrap_or(1.0), options)?
-            .field
-            .influence_radius;
+    let preset = options::preset(preset)?.unwrap_or(Preset::Still);
+    let influence_radius = reconstruct_options(
+        py,
+        "reconstruct",
+        preset,
+        particle_radius.unwrap_or(1.0),
+        options,
+    )?
+    .field
+    .influence_radius;
     let which = self::radius_attribute(radius_attribute)?;
     let positions = positions_of(positions)?;
     let slice = positions.as_slice();
@@ -85,7 +94,7 @@ pub(crate) fn reconstruct(
         radii,
         || meniscus::radius::estimate_radius(slice),
     )?;
-    let options = reconstruct_options(py, "reconstruct", particle_radius, options)?;
+    let options = reconstruct_options(py, "reconstruct", preset, particle_radius, options)?;
     let source = ParticleSlices {
         positions: slice,
         attributes: &columns,
@@ -174,7 +183,7 @@ fn selection(attributes: Option<&Bound<'_, PyAny>>) -> PyResult<AttributeSelecti
     frames = None, shard = None, start = None, end = None, keep_going = false,
     progress = None, skip_existing = false, normals = true, error_bound = None,
     attribute_error_bound = meniscus::archive::DEFAULT_ATTRIBUTE_ERROR_BOUND, fps = DEFAULT_FPS,
-    up_axis = "Y", meters_per_unit = DEFAULT_METERS_PER_UNIT, usd_droplets = "points", input_format = None, **options))]
+    up_axis = "Y", meters_per_unit = DEFAULT_METERS_PER_UNIT, usd_droplets = "points", input_format = None, preset = None, **options))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn reconstruct_file<'py>(
     py: Python<'py>,
@@ -200,8 +209,11 @@ pub(crate) fn reconstruct_file<'py>(
     meters_per_unit: f64,
     usd_droplets: &str,
     input_format: Option<String>,
+    preset: Option<&str>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let preset =
+        options::preset(preset)?.unwrap_or_else(|| Preset::for_input(std::path::Path::new(&input)));
     let mut job = JobSettings {
         normals,
         skip_existing,
@@ -219,6 +231,7 @@ pub(crate) fn reconstruct_file<'py>(
     let influence_radius = reconstruct_options(
         py,
         "reconstruct_file",
+        preset,
         particle_radius.unwrap_or(1.0),
         options,
     )?
@@ -253,7 +266,7 @@ pub(crate) fn reconstruct_file<'py>(
         radii,
         || meniscus::radius::estimate_radius_of_file(&first, input_format),
     )?;
-    let options = reconstruct_options(py, "reconstruct_file", particle_radius, options)?;
+    let options = reconstruct_options(py, "reconstruct_file", preset, particle_radius, options)?;
     let progress = progress.filter(|p| !p.is_none()).map(Bound::unbind);
     // An exception of the progress callback: it stops the run and is raised.
     let raised: Mutex<Option<PyErr>> = Mutex::new(None);

@@ -17,6 +17,7 @@ mod options;
 mod radius;
 
 use errors::FormatError;
+use meniscus::settings::Preset;
 use pyo3::prelude::*;
 
 /// Surface reconstruction for particle-based fluids (Akinci et al. 2013 pipeline), in
@@ -33,7 +34,8 @@ fn meniscus_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(functions::reconstruct_file, m)?)?;
     m.add_class::<archive::Archive>()?;
     m.add_function(wrap_pyfunction!(archive::merge_archives, m)?)?;
-    m.add("PAPER", options::paper(m.py())?)?;
+    m.add("PAPER", options::preset_keywords(m.py(), Preset::Paper)?)?;
+    m.add("STEADY", options::preset_keywords(m.py(), Preset::Steady)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

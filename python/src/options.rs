@@ -5,7 +5,7 @@
 
 use meniscus::field::Kernel;
 use meniscus::sequence::{FrameChoice, FrameSelection, Shard};
-use meniscus::settings::{Decimation, ReconstructSettings};
+use meniscus::settings::{Decimation, Preset, ReconstructSettings};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -15,43 +15,86 @@ use std::path::PathBuf;
 /// library's one list of them.
 pub use meniscus::settings::SETTINGS;
 
-/// The keywords that turn the defaults into the pipeline of Akinci et al. 2013 exactly
-/// (`meniscus.PAPER`): where [`ReconstructSettings::paper`] differs from
-/// [`ReconstructSettings::new`].
-pub fn paper<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-    let (paper, defaults) = (
-        ReconstructSettings::paper(1.0),
-        ReconstructSettings::new(1.0),
-    );
+/// The preset a function's `preset` keyword names (`None`: the function's own choice).
+pub fn preset(name: Option<&str>) -> PyResult<Option<Preset>> {
+    name.map(|n| {
+        n.parse()
+            .map_err(|e| PyValueError::new_err(format!("invalid preset: {e}")))
+    })
+    .transpose()
+}
+
+/// The keywords that turn the defaults (the `still` preset's) into `preset`'s
+/// (`meniscus.PAPER`, `meniscus.STEADY`): the settings where
+/// [`Preset::settings`] differs from [`ReconstructSettings::new`].
+pub fn preset_keywords<'py>(py: Python<'py>, preset: Preset) -> PyResult<Bound<'py, PyDict>> {
+    let (to, from) = (preset.settings(1.0), ReconstructSettings::new(1.0));
     // As written (0.8, not 0.800000011920929): an f32 prints as its shortest decimal.
     let decimal = |x: f32| -> f64 { x.to_string().parse().expect("a float prints as one") };
     let keywords = PyDict::new_bound(py);
-    if paper.kernel != defaults.kernel {
-        let kernel = match paper.kernel {
-            Kernel::Isotropic => "isotropic",
-            Kernel::Anisotropic => "anisotropic",
-        };
-        keywords.set_item("kernel", kernel)?;
-    }
-    if paper.particle_coverage != defaults.particle_coverage {
-        keywords.set_item("particle_coverage", decimal(paper.particle_coverage))?;
-    }
-    if paper.decimate != defaults.decimate {
-        match paper.decimate {
-            Decimation::Fraction(f) => keywords.set_item("decimate", decimal(f))?,
-            Decimation::Adaptive => keywords.set_item("decimate", "adaptive")?,
-            Decimation::Off => keywords.set_item("decimate", py.None())?,
+    let set = |name: &str, differs: bool, value: PyObject| -> PyResult<()> {
+        match differs {
+            true => keywords.set_item(name, value),
+            false => Ok(()),
         }
-    }
-    if paper.decimate_error != defaults.decimate_error {
-        keywords.set_item("decimate_error", paper.decimate_error.map(decimal))?;
-    }
-    if paper.smooth != defaults.smooth {
-        keywords.set_item("smooth", paper.smooth)?;
-    }
-    if paper.keep_inside != defaults.keep_inside {
-        keywords.set_item("keep_inside", paper.keep_inside.map(decimal))?;
-    }
+    };
+    let kernel = match to.kernel {
+        Kernel::Isotropic => "isotropic",
+        Kernel::Anisotropic => "anisotropic",
+    };
+    set(
+        "cell_size",
+        to.cell_size != from.cell_size,
+        decimal(to.cell_size).into_py(py),
+    )?;
+    set(
+        "particle_coverage",
+        to.particle_coverage != from.particle_coverage,
+        decimal(to.particle_coverage).into_py(py),
+    )?;
+    set(
+        "iso_offset",
+        to.iso_offset != from.iso_offset,
+        decimal(to.iso_offset).into_py(py),
+    )?;
+    set("kernel", to.kernel != from.kernel, kernel.into_py(py))?;
+    let decimate = match to.decimate {
+        Decimation::Fraction(f) => decimal(f).into_py(py),
+        Decimation::Adaptive => "adaptive".into_py(py),
+        Decimation::Off => py.None(),
+    };
+    set("decimate", to.decimate != from.decimate, decimate)?;
+    set(
+        "decimate_error",
+        to.decimate_error != from.decimate_error,
+        to.decimate_error.map(decimal).into_py(py),
+    )?;
+    set("smooth", to.smooth != from.smooth, to.smooth.into_py(py))?;
+    set(
+        "smooth_method",
+        to.smooth_method != from.smooth_method,
+        to.smooth_method.to_string().into_py(py),
+    )?;
+    set(
+        "smooth_max_inward",
+        to.smooth_max_inward != from.smooth_max_inward,
+        to.smooth_max_inward.map(decimal).into_py(py),
+    )?;
+    set(
+        "subdivide",
+        to.subdivide != from.subdivide,
+        to.subdivide.into_py(py),
+    )?;
+    set(
+        "keep_inside",
+        to.keep_inside != from.keep_inside,
+        to.keep_inside.map(decimal).into_py(py),
+    )?;
+    set(
+        "normal_smoothing",
+        to.normal_smoothing != from.normal_smoothing,
+        to.normal_smoothing.into_py(py),
+    )?;
     Ok(keywords)
 }
 
@@ -122,9 +165,12 @@ fn extract<'py, T: FromPyObject<'py>>(value: &Bound<'py, PyAny>, name: &str) -> 
         .map_err(|e| PyTypeError::new_err(format!("invalid {name}: {e}")))
 }
 
-/// The reconstruction settings of `keywords` (the others are left for the caller).
-pub fn settings(particle_radius: f32, keywords: &Keywords<'_>) -> PyResult<ReconstructSettings> {
-    let mut s = ReconstructSettings::new(particle_radius);
+/// `base` (a preset's settings) with the reconstruction settings of `keywords` (the
+/// others are left for the caller).
+pub fn settings(
+    mut s: ReconstructSettings,
+    keywords: &Keywords<'_>,
+) -> PyResult<ReconstructSettings> {
     for (name, field) in [
         ("influence_radius", &mut s.influence_radius),
         ("cell_size", &mut s.cell_size),
@@ -180,8 +226,19 @@ pub fn settings(particle_radius: f32, keywords: &Keywords<'_>) -> PyResult<Recon
     if let Some(v) = keywords.value("smooth")? {
         s.smooth = v;
     }
+    if let Some(method) = keywords.value::<String>("smooth_method")? {
+        s.smooth_method = method
+            .parse()
+            .map_err(|e| PyValueError::new_err(format!("invalid smooth_method: {e}")))?;
+    }
+    if let Some(v) = keywords.nullable("smooth_max_inward")? {
+        s.smooth_max_inward = v;
+    }
     if let Some(v) = keywords.value("subdivide")? {
         s.subdivide = v;
+    }
+    if let Some(v) = keywords.value("normal_smoothing")? {
+        s.normal_smoothing = v;
     }
     s.tile_size = keywords.value("tile_size")?;
     s.memory_budget = match keywords.take("memory_budget")? {

@@ -133,3 +133,19 @@ def test_a_pvd_collection_is_a_sequence_like_its_pattern(tmp_path):
     assert (tmp_path / "pvd.mseq").read_bytes() == (tmp_path / "pattern.mseq").read_bytes()
     with pytest.raises(OSError, match="no dataset for 1 of the 1 selected frames: 3"):
         meniscus.reconstruct_file(str(pvd / "run.pvd"), str(tmp_path / "o.mseq"), 0.025, frames="3")
+
+
+def test_a_sequence_takes_the_steady_preset_and_one_file_the_still(tmp_path):
+    one = str(DATA / "ParticleData_Fluid_25.xyz")
+    meniscus.reconstruct_file(PATTERN, str(tmp_path / "seq_{}.ply"), RADIUS, frames=[25])
+    meniscus.reconstruct_file(one, str(tmp_path / "steady.ply"), RADIUS, preset="steady")
+    meniscus.reconstruct_file(one, str(tmp_path / "one.ply"), RADIUS)
+    meniscus.reconstruct_file(PATTERN, str(tmp_path / "still_{}.ply"), RADIUS, frames=[25], preset="still")
+    sequence = (tmp_path / "seq_25.ply").read_bytes()
+    # One frame chosen of a pattern is still a sequence's frame (a farm task's).
+    assert sequence == (tmp_path / "steady.ply").read_bytes()
+    assert sequence != (tmp_path / "one.ply").read_bytes()
+    assert (tmp_path / "still_25.ply").read_bytes() == (tmp_path / "one.ply").read_bytes()
+    with pytest.raises(ValueError, match='invalid preset: .*"smooth"'):
+        meniscus.reconstruct_file(PATTERN, str(tmp_path / "x_{}.ply"), RADIUS, preset="smooth")
+    assert not list(tmp_path.glob("x_*"))

@@ -5,7 +5,7 @@
 use crate::cli::{FarmArgs, StageArgs};
 use clap::Args;
 use meniscus::io::particles::ParticleFormat;
-use meniscus::settings::ReconstructSettings;
+use meniscus::settings::{Preset, ReconstructSettings, SmoothMethod};
 use std::path::PathBuf;
 
 #[derive(Args)]
@@ -36,14 +36,8 @@ pub(crate) struct ReconstructArgs {
     /// Influence radius R, multiples of r.
     #[arg(allow_negative_numbers = true, long, default_value_t = defaults().influence_radius)]
     pub(crate) influence_radius: f32,
-    /// Marching-cubes cell size h, multiples of r.
-    #[arg(
-        allow_negative_numbers = true,
-        short = 'c',
-        long,
-        default_value_t = defaults().cell_size
-    )]
-    pub(crate) cell_size: f32,
+    #[arg(allow_negative_numbers = true, short = 'c', long, help = with_defaults(CELL_SIZE_HELP, |s| s.cell_size))]
+    pub(crate) cell_size: Option<f32>,
     /// Lower eigenvalue threshold t_low of the Solenthaler concavity factor (isotropic
     /// kernel).
     #[arg(long, default_value_t = defaults().t_low)]
@@ -62,23 +56,31 @@ pub(crate) struct ReconstructArgs {
     pub(crate) decimate_error: Option<String>,
     #[arg(long, help = with_defaults(SMOOTH_HELP, |s| s.smooth))]
     pub(crate) smooth: Option<u32>,
-    /// Loop subdivision steps after decimation (0 = off).
-    #[arg(long, default_value_t = defaults().subdivide)]
-    pub(crate) subdivide: u32,
+    #[arg(long, help = with_defaults(SMOOTH_METHOD_HELP, |s| s.smooth_method))]
+    pub(crate) smooth_method: Option<SmoothMethod>,
+    #[arg(long, allow_hyphen_values = true, help = with_defaults(SMOOTH_MAX_INWARD_HELP, |s| off_or(s.smooth_max_inward)))]
+    pub(crate) smooth_max_inward: Option<String>,
+    #[arg(long, help = with_defaults(SUBDIVIDE_HELP, |s| s.subdivide))]
+    pub(crate) subdivide: Option<u32>,
     #[arg(long, help = with_defaults(KEEP_INSIDE_HELP, |s| off_or(s.keep_inside)))]
     pub(crate) keep_inside: Option<String>,
+    #[arg(long, help = with_defaults(NORMAL_SMOOTHING_HELP, |s| s.normal_smoothing))]
+    pub(crate) normal_smoothing: Option<u32>,
     #[arg(allow_negative_numbers = true, long, help = with_defaults(COVERAGE_HELP, |s| s.particle_coverage))]
     pub(crate) particle_coverage: Option<f32>,
-    /// Iso-surface offset, multiples of r: extract where phi = offset·r, moving the surface
-    /// outwards by about that much (0 = the paper's surface; 0.133 removes its inward
-    /// bias on the shipped frames, at some flat-region smoothness).
-    #[arg(long, default_value_t = defaults().iso_offset, allow_negative_numbers = true)]
-    pub(crate) iso_offset: f32,
+    #[arg(long, allow_negative_numbers = true, help = with_defaults(ISO_OFFSET_HELP, |s| s.iso_offset))]
+    pub(crate) iso_offset: Option<f32>,
     #[arg(long, value_enum, help = with_defaults(KERNEL_HELP, |s| kernel_name(s.kernel)))]
     pub(crate) kernel: Option<KernelArg>,
-    /// The pipeline of Akinci et al. 2013 exactly: `--kernel isotropic
-    /// --particle-coverage 0 --decimate 0.8 --decimate-error off --smooth 0 --keep-inside off`
-    /// (any of those given beside it wins).
+    /// The defaults the other flags start from (any flag given beside it wins): `still`
+    /// (the best still frame), `steady` (for animation: shading that does not flicker
+    /// from frame to frame) or `paper` (Akinci et al. 2013 exactly). Default: `steady`
+    /// for a sequence (a `{}` pattern or a `.pvd`), `still` for one file.
+    #[arg(long, value_name = "PRESET", conflicts_with = "paper")]
+    pub(crate) preset: Option<Preset>,
+    /// `--preset paper`: the pipeline of Akinci et al. 2013 exactly (`--kernel isotropic
+    /// --particle-coverage 0 --decimate 0.8 --decimate-error off --smooth 0 --keep-inside
+    /// off`).
     #[arg(long)]
     pub(crate) paper: bool,
     /// Anisotropic kernels: radius h_a of an unstretched kernel, multiples of r.
@@ -174,23 +176,34 @@ fn kernel_name(kernel: meniscus::field::Kernel) -> &'static str {
     }
 }
 
-/// A flag's help with its default and, where `--paper` changes it, the paper's value.
+/// A flag's help with its default (the `still` preset's) and each other preset's value
+/// where it differs.
 fn with_defaults<T: std::fmt::Display>(
     help: &str,
     value: impl Fn(&ReconstructSettings) -> T,
 ) -> String {
-    let (default, paper) = (value(&defaults()), value(&ReconstructSettings::paper(1.0)));
-    let paper = paper.to_string();
-    if paper == default.to_string() {
-        format!("{help} [default: {default}]")
-    } else {
-        format!("{help} [default: {default}; --paper: {paper}]")
+    let default = value(&defaults()).to_string();
+    let mut text = format!("{help} [default: {default}");
+    for preset in [Preset::Steady, Preset::Paper] {
+        let other = value(&preset.settings(1.0)).to_string();
+        if other != default {
+            text.push_str(&format!("; {preset}: {other}"));
+        }
     }
+    text + "]"
 }
 
 const DECIMATE_HELP: &str = "Quadric decimation: fraction of triangles to remove (0.8 = the paper's), `adaptive` (stop on the error bound only: flat regions simplify, curved ones keep their triangles), or `off`; the default holds the anisotropic surface to the paper's triangle count";
 const DECIMATE_ERROR_HELP: &str = "Error bound of decimation, multiples of r (RMS distance of a collapse to the original planes), or `off`; with a fraction, whichever is reached first stops it";
-const SMOOTH_HELP: &str = "Taubin smoothing steps after decimation (0 = off): removes the field's small bumps without shrinking the surface";
+const CELL_SIZE_HELP: &str = "Marching-cubes cell size h, multiples of r";
+const ISO_OFFSET_HELP: &str = "Iso-surface offset, multiples of r: extract where phi = offset·r, moving the surface outwards by about that much (0 = the paper's surface)";
+const SMOOTH_HELP: &str =
+    "Smoothing steps after decimation (0 = off): remove the field's small bumps";
+const SMOOTH_METHOD_HELP: &str = "How the smoothing steps move the vertices: `taubin` (little shrinkage, the finest noise stays) or `laplacian` (each vertex to its neighbours' mean: removes the noise, shrinks unless bounded by --smooth-max-inward)";
+const SMOOTH_MAX_INWARD_HELP: &str =
+    "Farthest smoothing may move a vertex inwards, multiples of r, or `off`";
+const SUBDIVIDE_HELP: &str = "Loop subdivision steps after decimation (0 = off)";
+const NORMAL_SMOOTHING_HELP: &str = "Smoothing steps of the written vertex normals (0 = the area-weighted normals): steadier shading from frame to frame";
 const KEEP_INSIDE_HELP: &str = "Least depth of every non-isolated particle centre under the final surface, multiples of r (0 to 1): where decimation or subdivision left one shallower or outside, the surface over it is pushed out; `off` leaves the surface as they made it";
 const COVERAGE_HELP: &str = "Coverage radius c, multiples of r: particles the paper's surface would leave outside are enclosed in a ball of c·r (0 = off, the pure Solenthaler field)";
 const KERNEL_HELP: &str = "Particle kernel: `anisotropic` (Yu & Turk 2013 kernels stretched along the local surface: smoother, and on the particles instead of inside them) or `isotropic` (the paper's Solenthaler field)";

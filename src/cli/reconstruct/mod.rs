@@ -14,7 +14,7 @@ use args::KernelArg;
 use clap::ArgMatches;
 use meniscus::job::{check_outputs, plan_frames, JobSettings};
 use meniscus::pipeline::ReconstructOptions;
-use meniscus::settings::ReconstructSettings;
+use meniscus::settings::{Preset, ReconstructSettings};
 use progress::{check_failed, run_with_progress, summarize, write_stats};
 use radius::resolve_radius;
 use std::time::Instant;
@@ -105,20 +105,27 @@ fn parse_or_off<T: std::str::FromStr>(
     }
 }
 
+/// The preset the flags start from: `--preset`, `--paper`, or the input's
+/// ([`Preset::for_input`]: steady for a sequence).
+pub(crate) fn preset(args: &ReconstructArgs) -> Preset {
+    match (args.preset, args.paper) {
+        (Some(preset), _) => preset,
+        (None, true) => Preset::Paper,
+        (None, false) => Preset::for_input(std::path::Path::new(&args.input)),
+    }
+}
+
 fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, Failure> {
     let r = args.radius;
-    let base = match args.paper {
-        true => ReconstructSettings::paper(r),
-        false => ReconstructSettings::new(r),
-    };
+    let base = preset(args).settings(r);
     let settings = ReconstructSettings {
         particle_radius: r,
         influence_radius: args.influence_radius,
-        cell_size: args.cell_size,
+        cell_size: args.cell_size.unwrap_or(base.cell_size),
         t_low: args.t_low,
         t_high: args.t_high,
         particle_coverage: args.particle_coverage.unwrap_or(base.particle_coverage),
-        iso_offset: args.iso_offset,
+        iso_offset: args.iso_offset.unwrap_or(base.iso_offset),
         kernel: match args.kernel {
             None => base.kernel,
             Some(KernelArg::Isotropic) => meniscus::field::Kernel::Isotropic,
@@ -142,13 +149,19 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, Failure> {
             Some(v) => parse_or_off(v, "--decimate-error", "a bound (multiples of r)")?,
         },
         smooth: args.smooth.unwrap_or(base.smooth),
-        subdivide: args.subdivide,
+        smooth_method: args.smooth_method.unwrap_or(base.smooth_method),
+        smooth_max_inward: match &args.smooth_max_inward {
+            None => base.smooth_max_inward,
+            Some(v) => parse_or_off(v, "--smooth-max-inward", "a distance (multiples of r)")?,
+        },
+        subdivide: args.subdivide.unwrap_or(base.subdivide),
         // A `.mseq` output defers it by itself (see `job`).
         defer_subdivision: false,
         keep_inside: match &args.keep_inside {
             None => base.keep_inside,
             Some(v) => parse_or_off(v, "--keep-inside", "a depth (multiples of r)")?,
         },
+        normal_smoothing: args.normal_smoothing.unwrap_or(base.normal_smoothing),
         tile_size: args.tile_size,
         memory_budget: args
             .memory_budget

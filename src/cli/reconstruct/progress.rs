@@ -67,8 +67,8 @@ pub(super) fn run_with_progress(
                 bar.suspend(|| {
                     eprintln!(
                         "warning: {}: {left} particle centres stay less than the keep-inside \
-                         depth under the surface (decimation folded it where containment \
-                         could not tell its side)",
+                         depth under the surface (where it is folded or thinner than \
+                         containment can tell its side)",
                         report.input.display()
                     )
                 });
