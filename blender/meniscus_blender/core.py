@@ -8,13 +8,16 @@ import threading
 import time
 import xml.etree.ElementTree as ElementTree
 
-# The reconstruction settings of each preset (keywords of meniscus.reconstruct_file).
-# "default" is the library's defaults; "preview" trades detail for time (a cell twice
-# as large, no subdivision, no decimation); "paper" is Akinci et al. 2013 (meniscus.PAPER).
+# The reconstruction settings of each preset (keywords of meniscus.reconstruct_file):
+# the library's presets by name ("steady", its default for a sequence: shading that does
+# not flicker from frame to frame; "still", the best still frame; "paper", Akinci et al.
+# 2013), and "preview", which trades detail for time (the still preset with a cell twice
+# as large, no subdivision, no decimation, one smoothing step).
 PRESETS = {
-    "PREVIEW": {"cell_size": 2.0, "subdivide": 0, "decimate": None, "smooth": 1},
-    "DEFAULT": {},
-    "PAPER": None,  # meniscus.PAPER, looked up when the module is there
+    "STEADY": {"preset": "steady"},
+    "STILL": {"preset": "still"},
+    "PREVIEW": {"preset": "still", "cell_size": 2.0, "subdivide": 0, "decimate": None, "smooth": 1},
+    "PAPER": {"preset": "paper"},
 }
 
 PARTICLE_EXTENSIONS = (".xyz", ".vtk", ".vtu", ".vtp", ".ply", ".bgeo")
@@ -22,10 +25,6 @@ PARTICLE_EXTENSIONS = (".xyz", ".vtk", ".vtu", ".vtp", ".ply", ".bgeo")
 
 def preset_options(name):
     """The keywords of preset ``name`` (a copy)."""
-    if name == "PAPER":
-        import meniscus
-
-        return dict(meniscus.PAPER)
     return dict(PRESETS[name])
 
 
@@ -130,7 +129,7 @@ class BakeJob:
     Blender's main thread (the UI) runs on. Read ``done``, ``total``, ``error``,
     ``finished``, ``cancelled`` from the main thread."""
 
-    def __init__(self, sequence, output, radius=None, preset="DEFAULT", radius_check=True, usd=False):
+    def __init__(self, sequence, output, radius=None, preset="STEADY", radius_check=True, usd=False):
         self.sequence, self.output = sequence, output
         self.radius = radius if radius and radius > 0 else None
         self.options = preset_options(preset)

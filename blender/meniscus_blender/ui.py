@@ -38,9 +38,10 @@ class MeniscusSettings(bpy.types.PropertyGroup):
         name="Force radius", default=False,
         description="Run with the given radius even where the library refuses it (radius_check=False)")
     preset: EnumProperty(
-        name="Preset", default="DEFAULT",
-        items=[("PREVIEW", "Preview", "Fast: a coarser grid, no subdivision or decimation"),
-               ("DEFAULT", "Default", "The library's defaults"),
+        name="Preset", default="STEADY",
+        items=[("STEADY", "Steady", "For animation: shading that does not flicker from frame to frame"),
+               ("STILL", "Still", "The best still frame: decimated, smoothed and subdivided"),
+               ("PREVIEW", "Preview", "Fast: a coarser grid, no subdivision or decimation"),
                ("PAPER", "Paper", "Akinci et al. 2013's pipeline")])
     output: StringProperty(
         name="Cache", subtype="FILE_PATH", default="//meniscus.mseq",
