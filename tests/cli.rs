@@ -400,6 +400,7 @@ fn new_user_errors_name_the_real_cause() {
     let anim = path("anim.glb");
     let fresh = path("fresh.mseq");
     let fresh2 = path("fresh2.mseq");
+    let fresh3 = path("fresh3.mseq");
     let r = ["-r", "0.025"];
     let cases: Vec<Case> = vec![
         // Files and their content: exit 1, naming the file.
@@ -793,6 +794,27 @@ fn new_user_errors_name_the_real_cause() {
             vec!["reconstruct", sphere, "-q", "--no-normals", "-o", &fresh],
             0,
             vec!["warning: --no-normals has no effect", "fresh.mseq"],
+            vec!["error:"],
+        ),
+        (
+            vec![
+                "reconstruct",
+                sphere,
+                "-q",
+                "--normal-smoothing",
+                "2",
+                "--paper",
+                "--smooth-method",
+                "laplacian",
+                "-o",
+                &fresh3,
+            ],
+            0,
+            vec![
+                "warning: --normal-smoothing has no effect",
+                "fresh3.mseq",
+                "warning: --smooth-method has no effect: smoothing is off",
+            ],
             vec!["error:"],
         ),
         (

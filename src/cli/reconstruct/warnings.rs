@@ -110,6 +110,28 @@ pub(crate) fn ineffective_options(
             "--keep-going has no effect: a single file has no other frames to go on with".into(),
         );
     }
+    if given("normal_smoothing") {
+        if !profile.normals {
+            warnings.push(format!(
+                "--normal-smoothing has no effect: {output:?} stores no normals (they are computed when frames are extracted)"
+            ));
+        } else if args.no_normals {
+            warnings.push("--normal-smoothing has no effect: --no-normals writes none".into());
+        }
+    }
+    let smooth = args
+        .smooth
+        .unwrap_or_else(|| super::preset(args).settings(1.0).smooth);
+    for (id, option) in [
+        ("smooth_method", "--smooth-method"),
+        ("smooth_max_inward", "--smooth-max-inward"),
+    ] {
+        if given(id) && smooth == 0 {
+            warnings.push(format!(
+                "{option} has no effect: smoothing is off (0 steps)"
+            ));
+        }
+    }
     if let (true, Some(decimate)) = (given("decimate_error"), &args.decimate) {
         if decimate.parse() == Ok(Decimation::Off) {
             warnings.push(format!(
