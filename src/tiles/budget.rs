@@ -367,7 +367,7 @@ pub(super) fn choose_tile_blocks(
             return Err(Error::MemoryBudget {
                 budget_mib: mib(budget),
                 message: format!(
-                    "the process and the surface of {particles} particles (≈ {:.1} M triangles before decimation) need ≈ {} MiB after the tiles (post-processing): a larger budget or {} would fit",
+                    "the process and the surface of {particles} particles (≈ {:.1} M triangles from marching cubes) need ≈ {} MiB after the tiles (post-processing): a larger budget would fit; {} would lower it",
                     triangles / 1e6,
                     mib(model.output),
                     input.output_cost.advice
