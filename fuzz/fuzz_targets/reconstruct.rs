@@ -2,7 +2,8 @@
 //! set: up to 48 particles on a lattice of half-radius steps, each with its own radius
 //! (2^-3 to 2^3 times the reference, so some frames break the plausible spread and must
 //! be refused), up to two attributes of 1 or 3 components, and the pipeline's options
-//! picked by the input (kernel, decimation, smoothing, containment, subdivision, tiles),
+//! picked by the input (the still or the steady preset; kernel, decimation, smoothing,
+//! containment, subdivision, tiles),
 //! under a memory budget. The run must return a surface whose every coordinate and
 //! attribute value is finite and whose triangles index its vertices, or a typed error;
 //! never a panic (caught as `Error::Internal`), an abort, a hang or memory past the RSS
@@ -53,7 +54,13 @@ fuzz_target!(|data: &[u8]| {
             values,
         });
     }
-    let mut options = ReconstructOptions::new(R);
+    // The top bit starts from the steady surface (a sequence's default: finer cell, plain
+    // Laplacian steps with an inward bound, smoothed shading normals), the others change
+    // either preset.
+    let mut options = match bits & 128 != 0 {
+        true => ReconstructOptions::steady(R),
+        false => ReconstructOptions::new(R),
+    };
     if bits & 1 != 0 {
         options.field.kernel = Kernel::Anisotropic;
     }
@@ -90,6 +97,10 @@ fuzz_target!(|data: &[u8]| {
             assert!(
                 fluid.triangles.iter().flatten().all(|&v| v < n),
                 "a triangle index is out of range"
+            );
+            assert!(
+                fluid.normals.iter().all(|v| v.is_finite()),
+                "a normal is not finite"
             );
             for a in fluid.attributes.iter().chain(&surface.spheres.attributes) {
                 assert!(
