@@ -28,74 +28,80 @@ pub fn preset(name: Option<&str>) -> PyResult<Option<Preset>> {
 /// (`meniscus.PAPER`, `meniscus.STEADY`): the settings where
 /// [`Preset::settings`] differs from [`ReconstructSettings::new`].
 pub fn preset_keywords<'py>(py: Python<'py>, preset: Preset) -> PyResult<Bound<'py, PyDict>> {
-    let (to, from) = (preset.settings(1.0), ReconstructSettings::new(1.0));
+    let defaults = keyword_values(py, &ReconstructSettings::new(1.0));
+    let keywords = PyDict::new_bound(py);
+    for ((name, value), (_, default)) in keyword_values(py, &preset.settings(1.0))
+        .into_iter()
+        .zip(defaults)
+    {
+        if !value.bind(py).eq(default.bind(py))? {
+            keywords.set_item(name, value)?;
+        }
+    }
+    Ok(keywords)
+}
+
+/// Every reconstruction setting of `s` as its keyword takes it, in the order of
+/// [`SETTINGS`] (what [`settings`] reads back).
+fn keyword_values(py: Python<'_>, s: &ReconstructSettings) -> Vec<(&'static str, PyObject)> {
     // As written (0.8, not 0.800000011920929): an f32 prints as its shortest decimal.
     let decimal = |x: f32| -> f64 { x.to_string().parse().expect("a float prints as one") };
-    let keywords = PyDict::new_bound(py);
-    let set = |name: &str, differs: bool, value: PyObject| -> PyResult<()> {
-        match differs {
-            true => keywords.set_item(name, value),
-            false => Ok(()),
-        }
-    };
-    let kernel = match to.kernel {
+    let kernel = match s.kernel {
         Kernel::Isotropic => "isotropic",
         Kernel::Anisotropic => "anisotropic",
     };
-    set(
-        "cell_size",
-        to.cell_size != from.cell_size,
-        decimal(to.cell_size).into_py(py),
-    )?;
-    set(
-        "particle_coverage",
-        to.particle_coverage != from.particle_coverage,
-        decimal(to.particle_coverage).into_py(py),
-    )?;
-    set(
-        "iso_offset",
-        to.iso_offset != from.iso_offset,
-        decimal(to.iso_offset).into_py(py),
-    )?;
-    set("kernel", to.kernel != from.kernel, kernel.into_py(py))?;
-    let decimate = match to.decimate {
+    let decimate = match s.decimate {
         Decimation::Fraction(f) => decimal(f).into_py(py),
         Decimation::Adaptive => "adaptive".into_py(py),
         Decimation::Off => py.None(),
     };
-    set("decimate", to.decimate != from.decimate, decimate)?;
-    set(
-        "decimate_error",
-        to.decimate_error != from.decimate_error,
-        to.decimate_error.map(decimal).into_py(py),
-    )?;
-    set("smooth", to.smooth != from.smooth, to.smooth.into_py(py))?;
-    set(
-        "smooth_method",
-        to.smooth_method != from.smooth_method,
-        to.smooth_method.to_string().into_py(py),
-    )?;
-    set(
-        "smooth_max_inward",
-        to.smooth_max_inward != from.smooth_max_inward,
-        to.smooth_max_inward.map(decimal).into_py(py),
-    )?;
-    set(
-        "subdivide",
-        to.subdivide != from.subdivide,
-        to.subdivide.into_py(py),
-    )?;
-    set(
-        "keep_inside",
-        to.keep_inside != from.keep_inside,
-        to.keep_inside.map(decimal).into_py(py),
-    )?;
-    set(
-        "normal_smoothing",
-        to.normal_smoothing != from.normal_smoothing,
-        to.normal_smoothing.into_py(py),
-    )?;
-    Ok(keywords)
+    let values = vec![
+        ("influence_radius", decimal(s.influence_radius).into_py(py)),
+        ("cell_size", decimal(s.cell_size).into_py(py)),
+        ("t_low", decimal(s.t_low).into_py(py)),
+        ("t_high", decimal(s.t_high).into_py(py)),
+        (
+            "particle_coverage",
+            decimal(s.particle_coverage).into_py(py),
+        ),
+        ("iso_offset", decimal(s.iso_offset).into_py(py)),
+        ("kernel", kernel.into_py(py)),
+        ("kernel_radius", decimal(s.kernel_radius).into_py(py)),
+        ("max_stretch", decimal(s.max_stretch).into_py(py)),
+        ("min_neighbours", s.min_neighbours.into_py(py)),
+        ("centre_smoothing", decimal(s.centre_smoothing).into_py(py)),
+        ("isolated_spheres", s.isolated_spheres.into_py(py)),
+        ("decimate", decimate),
+        ("decimate_error", s.decimate_error.map(decimal).into_py(py)),
+        ("smooth", s.smooth.into_py(py)),
+        ("smooth_method", s.smooth_method.to_string().into_py(py)),
+        (
+            "smooth_max_inward",
+            s.smooth_max_inward.map(decimal).into_py(py),
+        ),
+        ("subdivide", s.subdivide.into_py(py)),
+        ("defer_subdivision", s.defer_subdivision.into_py(py)),
+        ("keep_inside", s.keep_inside.map(decimal).into_py(py)),
+        ("normal_smoothing", s.normal_smoothing.into_py(py)),
+        ("tile_size", s.tile_size.into_py(py)),
+        ("memory_budget", s.memory_budget.into_py(py)),
+        (
+            "temp_dir",
+            s.temp_dir
+                .as_ref()
+                .map(|d| d.to_string_lossy().into_owned())
+                .into_py(py),
+        ),
+    ];
+    // A setting added to the library's list and not here fails at import.
+    assert!(
+        values
+            .iter()
+            .map(|(name, _)| *name)
+            .eq(SETTINGS.iter().copied()),
+        "keyword_values lists every setting of SETTINGS, in order"
+    );
+    values
 }
 
 /// A function's `**options`, taken one by one; what is left at the end is an unexpected
