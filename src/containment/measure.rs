@@ -3,9 +3,9 @@
 //! control triangles around it, and the side by pseudo-normal (see the module docs of
 //! [`super`]).
 
-#[cfg(test)]
-use super::surface::Slots;
 use super::surface::{LoopSurface, Owner};
+#[cfg(test)]
+use super::surface::{Slots, Step};
 use crate::mesh::{TriMesh, VertexTriangles};
 use glam::{DVec3, Vec3};
 use hashbrown::{HashMap, HashSet};
@@ -309,11 +309,7 @@ impl SurfaceIndex<'_> {
     /// The box of the one-step points of control triangle `t` (its children's corners).
     fn child_box(&self, t: u32) -> (DVec3, DVec3) {
         let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
-        for i in self.control.triangles[t as usize]
-            .map(|v| self.surface.vertex(v))
-            .into_iter()
-            .chain([0, 1, 2].map(|k| self.surface.edge(t, k)))
-        {
+        for i in self.surface.points_of(self.control, t) {
             let q = self.surface.points[i as usize].as_dvec3();
             lo = lo.min(q);
             hi = hi.max(q);
@@ -344,7 +340,7 @@ impl SurfaceIndex<'_> {
     fn nearest_among(&self, p: DVec3, controls: &[u32]) -> Option<Probe> {
         let mut nearest = (f64::INFINITY, u32::MAX, DVec3::ZERO, Feature::Face);
         for &c in controls {
-            let children = 4 * c..4 * c + 4;
+            let children = self.surface.children(c);
             // Skip a control triangle whose surface lies in a box farther than the best.
             let (lo, hi) = self.child_box(c);
             let gap = (lo - p).max(p - hi).max(DVec3::ZERO);
@@ -374,7 +370,7 @@ impl SurfaceIndex<'_> {
             xs.iter().all(|x| uc.contains(x))
         };
         let around = self.fan(s >> 2);
-        let measured = || around.iter().flat_map(|&c| 4 * c..4 * c + 4);
+        let measured = || around.iter().flat_map(|&c| self.surface.children(c));
         let normal = match feature {
             Feature::Face => self.face_normal(s),
             Feature::Edge(k) => {
@@ -491,11 +487,23 @@ pub(super) fn with_index<T>(
     fast: bool,
     f: impl FnOnce(&SurfaceIndex) -> T,
 ) -> T {
+    with_index_of(mesh, r, fast, Step::Flat { split: 0.0 }, f)
+}
+
+#[cfg(test)]
+/// [`with_index`] with the surface made as `step` says.
+pub(super) fn with_index_of<T>(
+    mesh: &TriMesh,
+    r: f64,
+    fast: bool,
+    step: Step,
+    f: impl FnOnce(&SurfaceIndex) -> T,
+) -> T {
     let mut control = mesh.clone();
     control.compute_normals();
     let tris = VertexTriangles::new(mesh);
     let all = (0..mesh.triangles.len() as u32).collect();
-    let surface = LoopSurface::new(mesh, &tris, all, false, Slots::new(mesh));
+    let surface = LoopSurface::new(mesh, &tris, all, step, Slots::new(mesh));
     let cells = CellIndex::new(&surface.points, 2.0 * r);
     let index = SurfaceIndex {
         cells: &cells,
@@ -583,6 +591,60 @@ mod tests {
             );
             assert!((probe.normal - DVec3::Z).length() < 1e-9);
         });
+    }
+
+    /// The control mesh measured whole where its edges are short (its corners the only
+    /// points) gives the centres the same nearest points, sides and distances as the
+    /// same mesh cut into four at every edge midpoint: the same surface, a seventh of the
+    /// points.
+    #[test]
+    fn whole_triangles_measure_as_the_cut_ones() {
+        let sphere = icosphere(4, 1.0);
+        let longest = sphere
+            .triangles
+            .iter()
+            .flat_map(|t| {
+                let [a, b, c] = t.map(|v| sphere.positions[v as usize]);
+                [a.distance(b), b.distance(c), c.distance(a)]
+            })
+            .fold(0.0f32, f32::max);
+        let probes = |step: Step| {
+            with_index_of(&sphere, 0.2, false, step, |index| {
+                let mut out = Vec::new();
+                for i in 0..400 {
+                    let u = (i as f64 * 0.618034).fract() * 2.0 - 1.0;
+                    let phi = i as f64 * 2.399963;
+                    let s = (1.0 - u * u).sqrt();
+                    let dir = DVec3::new(s * phi.cos(), u, s * phi.sin());
+                    let p = dir * (0.9 + 0.2 * (i as f64 * 0.37).fract());
+                    out.push(index.probe(p).map(|probe| {
+                        let mut probes = vec![(p, probe)];
+                        index.confirm(&mut probes);
+                        (probes[0].1.signed_distance, probes[0].1.control_triangle)
+                    }));
+                }
+                (out, index.surface.points.len())
+            })
+        };
+        let (cut, cut_points) = probes(Step::Flat { split: 0.0 });
+        let (whole, whole_points) = probes(Step::Flat { split: longest });
+        let (half, _) = probes(Step::Flat {
+            split: 0.99 * longest,
+        });
+        assert!(3 * whole_points < cut_points, "{whole_points} {cut_points}");
+        let measured = cut.iter().filter(|p| p.is_some()).count();
+        assert!(measured > 300, "{measured} of 400 near the surface");
+        for (k, ((a, b), c)) in cut.iter().zip(&whole).zip(&half).enumerate() {
+            let (a, b, c) = (a.expect("near"), b.expect("near"), c.expect("near"));
+            for x in [b, c] {
+                assert!(
+                    (a.0 - x.0).abs() < 1e-6,
+                    "centre {k}: {} against {}",
+                    a.0,
+                    x.0
+                );
+            }
+        }
     }
 
     /// Signed distances to a fine sphere match the analytic ones, inside and outside,

@@ -31,7 +31,14 @@
 //! **Measure.** The one-step surface is never built as a mesh: its points (Loop's vertex
 //! point of every control vertex, the edge points of every control triangle's sides) are
 //! computed from the control mesh, and its triangles are the four children of each
-//! control triangle. It is not even computed for the whole mesh at once: the centres are
+//! control triangle. When nothing subdivides (the steady surface) the surface is the
+//! control mesh itself: a triangle is cut at its edge midpoints only where a side is
+//! long enough that a centre near it could be far from all its corners, the others are
+//! measured whole, their corners their only points (on the steady surface's fine mesh
+//! that is a seventh of the points and a quarter of the triangles: containment took
+//! 40 ms instead of 85 on dam break frame 25 and 19 s instead of 32 on the 4M splash,
+//! the output the same to 1e-5 r). It is not even computed for the whole mesh at once:
+//! the centres are
 //! measured in slabs across the scene, each against the one-step surface of the control
 //! triangles it can reach (`slabs`; [`ContainmentOptions::chunk_triangles`] per slab),
 //! so the stage's memory beyond the control mesh follows the slab and stays far under

@@ -6,7 +6,7 @@
 use super::centres::{bits, measure_centres, settle, Found, Need, Shallow, Watched};
 use super::measure::{CellIndex, SurfaceIndex};
 use super::slabs::Slabs;
-use super::surface::{LoopSurface, Slots};
+use super::surface::{LoopSurface, Slots, Step};
 use super::{Centres, ContainmentInput, ContainmentOptions, ContainmentStats};
 use crate::cancel::CancelToken;
 use crate::error::Result;
@@ -108,6 +108,23 @@ pub(crate) fn contain_centres<C: Centres + ?Sized>(
     Ok(stats)
 }
 
+/// What the surface measured is made of: one Loop step when the pipeline subdivides,
+/// else the control mesh itself with its triangles cut at their edge midpoints where a
+/// side is longer than `√3 (r − depth)` ([`Step::Flat`]). A centre is measured when a
+/// point of the surface lies within `r` of it (its 2 × 2 × 2 cells of `2r`); any point of
+/// a triangle with sides of at most `L` lies within `L/√3` of a corner, so every centre
+/// less than `depth` under the surface is still measured with the corners of the
+/// triangles not cut as their only points.
+fn surface_step(levels: u32, r: f64, depth: f64) -> Step {
+    if levels > 0 {
+        Step::Loop
+    } else {
+        Step::Flat {
+            split: (3f64.sqrt() * (r - depth)).max(0.0) as f32,
+        }
+    }
+}
+
 /// The state of containment's rounds.
 struct Rounds {
     /// Least depth, world units (of the largest particle).
@@ -127,6 +144,8 @@ struct Rounds {
     slabs: Slabs,
     /// Scratch of the one-step surface, reused from slab to slab.
     slots: Slots,
+    /// What the surface measured is made of ([`surface_step`]).
+    step: Step,
     /// Centres within r of being too shallow in the last full round.
     watch: Vec<Watched>,
     /// Control vertices whose one-ring holds a moved vertex (Loop's masks reach that far).
@@ -164,6 +183,7 @@ impl Rounds {
         stats.slabs = slabs.count() as u32;
         stats.surface_seconds += clock.elapsed().as_secs_f64();
         Rounds {
+            step: surface_step(input.levels, r, depth),
             depth,
             r,
             gain: if input.levels == 0 { 1.0 } else { 1.4 },
@@ -231,7 +251,7 @@ impl Rounds {
             let clock = Instant::now();
             let ids = self.slabs.triangles(control, slab, near_again.as_deref());
             let slots_here = std::mem::take(&mut self.slots);
-            let surface = LoopSurface::new(control, &self.tris, ids, input.levels > 0, slots_here);
+            let surface = LoopSurface::new(control, &self.tris, ids, self.step, slots_here);
             let cells = CellIndex::new(&surface.points, 2.0 * self.r);
             stats.surface_seconds += clock.elapsed().as_secs_f64();
             let index = SurfaceIndex {

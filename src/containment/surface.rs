@@ -14,13 +14,16 @@ use rayon::prelude::*;
 /// side), so that ties between equally near points break the same way in any part.
 pub(super) struct LoopSurface {
     /// Vertex points (one per control vertex of [`Self::vertex_ids`]), then edge points
-    /// (three per control triangle of [`Self::triangle_ids`], side `k` from corner `k` to
+    /// (three per control triangle of [`Self::cut_ids`], side `k` from corner `k` to
     /// `k + 1`).
     pub(super) points: Vec<Vec3>,
     /// Control vertices with a vertex point, ascending.
     pub(super) vertex_ids: Vec<u32>,
-    /// Control triangles with edge points, ascending.
+    /// Control triangles of the part, ascending.
     pub(super) triangle_ids: Vec<u32>,
+    /// Those of them cut into four children, with edge points, ascending (all of them
+    /// with [`Step::Loop`]).
+    cut_ids: Vec<u32>,
     slots: Slots,
 }
 
@@ -42,23 +45,61 @@ impl Slots {
     }
 }
 
+/// The surface measured, from the control mesh.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum Step {
+    /// One Loop step: vertex and edge points by Loop's masks, four children per control
+    /// triangle.
+    Loop,
+    /// The control mesh itself (nothing subdivides it): a triangle with a side longer
+    /// than `split` (world units) cut into four children at its edge midpoints, so that
+    /// the surface has points between its far-apart vertices; the others whole (surface
+    /// triangle `4t` is control triangle `t`), their corners their only points. On a fine
+    /// mesh (the steady surface's) a quarter of the triangles and a seventh of the points
+    /// of cutting every triangle, the same surface. `split` 0 cuts every triangle.
+    Flat { split: f32 },
+}
+
 /// Slot of a vertex or triangle not in the part.
 const ABSENT: u32 = u32::MAX;
+/// Slot of a triangle of the part measured whole ([`Step::Flat`]).
+const WHOLE: u32 = u32::MAX - 1;
 
 impl LoopSurface {
-    /// The one-step surface over control triangles `triangle_ids` (ascending), with
-    /// Loop's masks when `smooth`, else the control mesh itself (vertex points in place,
-    /// edge points at the midpoints). The masks read the whole control mesh: a point is
-    /// the same in every part that holds it. `slots` come from [`Slots::new`] or
+    /// The one-step surface over control triangles `triangle_ids` (ascending), made as
+    /// `step` says. Loop's masks read the whole control mesh: a point is the same in
+    /// every part that holds it. `slots` come from [`Slots::new`] or
     /// [`Self::into_slots`].
     pub(super) fn new(
         control: &TriMesh,
         tris: &VertexTriangles,
         triangle_ids: Vec<u32>,
-        smooth: bool,
+        step: Step,
         mut slots: Slots,
     ) -> Self {
-        for (k, &t) in triangle_ids.iter().enumerate() {
+        let smooth = step == Step::Loop;
+        let cut_ids: Vec<u32> = match step {
+            Step::Loop => triangle_ids.clone(),
+            Step::Flat { split } => {
+                let split2 = split * split;
+                let long = |t: u32| {
+                    let [a, b, c] =
+                        control.triangles[t as usize].map(|v| control.positions[v as usize]);
+                    a.distance_squared(b) > split2
+                        || b.distance_squared(c) > split2
+                        || c.distance_squared(a) > split2
+                };
+                triangle_ids
+                    .par_iter()
+                    .copied()
+                    .filter(|&t| long(t))
+                    .collect()
+            }
+        };
+        for &t in &triangle_ids {
+            slots.triangle[t as usize] = WHOLE;
+        }
+        for (k, &t) in cut_ids.iter().enumerate() {
             slots.triangle[t as usize] = k as u32;
         }
         // The corners, ascending: sorted when the part is small, else marked and read off
@@ -85,7 +126,7 @@ impl LoopSurface {
             slots.vertex[v as usize] = k as u32;
         }
         let betas = crate::subdivision::loop_betas(&[64]);
-        let mut points = vec![Vec3::ZERO; vertex_ids.len() + 3 * triangle_ids.len()];
+        let mut points = vec![Vec3::ZERO; vertex_ids.len() + 3 * cut_ids.len()];
         let (vertex_points, edge_points) = points.split_at_mut(vertex_ids.len());
         vertex_points
             .par_iter_mut()
@@ -93,7 +134,7 @@ impl LoopSurface {
             .for_each(|(out, &v)| *out = vertex_point(control, tris, v, smooth, &betas));
         edge_points
             .par_chunks_mut(3)
-            .zip(&triangle_ids)
+            .zip(&cut_ids)
             .for_each(|(out, &t)| {
                 for (k, e) in out.iter_mut().enumerate() {
                     *e = edge_point(control, tris, t, k, smooth);
@@ -103,6 +144,7 @@ impl LoopSurface {
             points,
             vertex_ids,
             triangle_ids,
+            cut_ids,
             slots,
         }
     }
@@ -132,6 +174,7 @@ impl LoopSurface {
     pub(super) fn edge(&self, t: u32, k: usize) -> u32 {
         let slot = self.slots.triangle[t as usize];
         debug_assert!(slot != ABSENT, "control triangle {t} outside the part");
+        debug_assert!(slot != WHOLE, "control triangle {t} is not cut");
         (self.vertex_ids.len() + 3 * slot as usize + k) as u32
     }
 
@@ -139,8 +182,37 @@ impl LoopSurface {
     pub(super) fn triangle(&self, control: &TriMesh, s: u32) -> [u32; 3] {
         let t = s >> 2;
         let tri = control.triangles[t as usize].map(|v| self.vertex(v));
+        if self.whole(t) {
+            debug_assert_eq!(s & 3, 0, "control triangle {t} is measured whole");
+            return tri;
+        }
         let m = [0, 1, 2].map(|k| self.edge(t, k));
         crate::subdivision::children(tri, m)[(s & 3) as usize]
+    }
+
+    /// Whether control triangle `t` (of the part) is measured whole, not cut.
+    fn whole(&self, t: u32) -> bool {
+        self.slots.triangle[t as usize] == WHOLE
+    }
+
+    /// Surface triangles over control triangle `t` (of the part): its four children, or
+    /// itself when measured whole.
+    pub(super) fn children(&self, t: u32) -> std::ops::Range<u32> {
+        if self.whole(t) {
+            4 * t..4 * t + 1
+        } else {
+            4 * t..4 * t + 4
+        }
+    }
+
+    /// Points of control triangle `t`'s surface: its corners' vertex points and, when it
+    /// is cut, its edge points.
+    pub(super) fn points_of(&self, control: &TriMesh, t: u32) -> impl Iterator<Item = u32> + '_ {
+        let corners = control.triangles[t as usize].map(|v| self.vertex(v));
+        let sides = if self.whole(t) { 0 } else { 3 };
+        corners
+            .into_iter()
+            .chain((0..sides).map(move |k| self.edge(t, k)))
     }
 
     /// The control vertex of vertex point `i`, or the control triangle and side of edge
@@ -151,7 +223,7 @@ impl LoopSurface {
             Owner::Vertex(self.vertex_ids[i as usize])
         } else {
             let e = i - nv;
-            Owner::Edge(self.triangle_ids[(e / 3) as usize], (e % 3) as usize)
+            Owner::Edge(self.cut_ids[(e / 3) as usize], (e % 3) as usize)
         }
     }
 }
@@ -238,7 +310,13 @@ mod tests {
         }
         let tris = VertexTriangles::new(&control);
         let all = |control: &TriMesh| (0..control.triangles.len() as u32).collect();
-        let surface = LoopSurface::new(&control, &tris, all(&control), true, Slots::new(&control));
+        let surface = LoopSurface::new(
+            &control,
+            &tris,
+            all(&control),
+            Step::Loop,
+            Slots::new(&control),
+        );
         let check = |control: &TriMesh, surface: &LoopSurface| {
             let mut expected = control.clone();
             crate::subdivision::subdivide(
@@ -259,12 +337,30 @@ mod tests {
         control.positions[3] += Vec3::splat(0.05);
         check(
             &control,
-            &LoopSurface::new(&control, &tris, all(&control), true, Slots::new(&control)),
+            &LoopSurface::new(
+                &control,
+                &tris,
+                all(&control),
+                Step::Loop,
+                Slots::new(&control),
+            ),
         );
         // A part holds the same points as the whole.
         let part: Vec<u32> = (0..control.triangles.len() as u32).step_by(3).collect();
-        let whole = LoopSurface::new(&control, &tris, all(&control), true, Slots::new(&control));
-        let some = LoopSurface::new(&control, &tris, part.clone(), true, Slots::new(&control));
+        let whole = LoopSurface::new(
+            &control,
+            &tris,
+            all(&control),
+            Step::Loop,
+            Slots::new(&control),
+        );
+        let some = LoopSurface::new(
+            &control,
+            &tris,
+            part.clone(),
+            Step::Loop,
+            Slots::new(&control),
+        );
         for &t in &part {
             for s in 4 * t..4 * t + 4 {
                 let [a, b] =
