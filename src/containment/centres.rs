@@ -19,6 +19,8 @@ pub(super) struct Found {
     pub(super) watched: Vec<Watched>,
     /// Centres whose probe found them too shallow, to be confirmed ([`settle`]).
     pub(super) pending: Vec<(u32, Vec3, Probe)>,
+    /// Centres measured outside farther than [`Need::farthest_outside`]: not pushed.
+    pub(super) folded: Vec<u32>,
 }
 
 impl Found {
@@ -27,6 +29,7 @@ impl Found {
         self.shallow.extend(other.shallow);
         self.watched.extend(other.watched);
         self.pending.extend(other.pending);
+        self.folded.extend(other.folded);
     }
 
     /// Watches centre `i` at `p` if its `probe` lies within `margin` of being too shallow
@@ -51,6 +54,9 @@ pub(super) struct Need<'a> {
     pub(super) r: f64,
     pub(super) margin: f64,
     pub(super) ratios: Option<&'a [f32]>,
+    /// Farthest a centre can really be outside, world units (infinite: no bound); one
+    /// measured farther out was read through a fold ([`Found::folded`]).
+    pub(super) farthest_outside: f64,
 }
 
 impl Need<'_> {
@@ -128,11 +134,14 @@ pub(super) fn settle(index: &SurfaceIndex, found: &mut Found, need: &Need<'_>) {
     for ((i, p, _), (_, probe)) in pending.into_iter().zip(probes) {
         let (depth, r) = need.of(i);
         found.watch(i, p, &probe, depth, need.margin);
-        if shallow(&probe, depth, r) {
+        if probe.signed_distance > need.farthest_outside {
+            found.folded.push(i);
+        } else if shallow(&probe, depth, r) {
             let aim = depth + AIM_BEYOND * r;
             found.shallow.push(Shallow {
                 particle: i,
                 push: probe.normal * (probe.signed_distance + aim),
+                signed_distance: probe.signed_distance,
                 outside: probe.signed_distance > 0.0,
                 control_triangle: probe.control_triangle,
             });
@@ -159,6 +168,8 @@ pub(super) struct Shallow {
     pub(super) particle: u32,
     /// How its nearest surface point has to move, world units.
     pub(super) push: DVec3,
+    /// Its signed distance to the surface, world units (positive outside).
+    pub(super) signed_distance: f64,
     pub(super) outside: bool,
     /// Control triangle under its nearest surface point.
     pub(super) control_triangle: u32,

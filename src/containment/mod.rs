@@ -174,8 +174,14 @@ pub struct ContainmentStats {
     /// Centres measured again after the first round, summed over the rounds (a full
     /// round counts every centre it visits).
     pub remeasured: usize,
-    /// Centres still less than the depth under the surface after the last round.
+    /// Centres still less than the depth under the surface after the last round (the
+    /// folded ones not included).
     pub remaining: usize,
+    /// Centres measured outside by more than the surface can have moved off them (see
+    /// `farthest_outside` of the pipeline's input), or measured outside again, no
+    /// closer, after a push: their side was read through a fold of the surface (they
+    /// are inside it), and a push would raise a spike over them. Not pushed.
+    pub folded: usize,
     /// Seconds spent computing the one-step surface it measures (points and cells).
     pub surface_seconds: f64,
     /// Slabs the surface was measured in, in the first round (see
@@ -221,6 +227,7 @@ pub fn contain(
 ) -> ContainmentStats {
     let input = ContainmentInput {
         sizes: None,
+        farthest_outside: None,
         levels,
         centres,
         isolated: &[],
@@ -240,6 +247,13 @@ pub(crate) struct ContainmentInput<'a, C: Centres + ?Sized> {
     pub centres: &'a C,
     /// Centres skipped: the isolated particles, which have spheres of their own.
     pub isolated: &'a [Vec3],
+    /// How far outside the surface a centre can really be, world units, when the
+    /// surface is one that enclosed every centre moved off them by at most that much
+    /// (the marching-cubes surface, whose coverage balls enclose every centre, after
+    /// smoothing: its inward bound, or its largest vertex move without one): a centre
+    /// measured farther outside was read through a fold. `None`: no such bound
+    /// (decimation moved the surface).
+    pub farthest_outside: Option<f32>,
     /// Particle radius `r`, world units.
     pub particle_radius: f32,
     /// The particles' own radii by input index, when they have several sizes: each

@@ -153,9 +153,19 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
     // 5. Smoothing. Its vertex rings serve the shading normals too when no stage
     // between changes the triangles (containment only moves vertices).
     let mut rings = None;
+    // How far the surface moved from the marching-cubes one, which encloses every centre
+    // with coverage balls: not bounded once decimation has moved it.
+    let encloses = options.decimate.is_none() && options.field.particle_coverage > 0.0;
+    let mut moved_from_marched = encloses.then_some(0.0f32);
     if let Some(smooth_options) = &options.smooth {
         run.stage("smoothing", &mut fluid, |fluid, stats| {
             let (smoothed, built) = smooth_keeping_rings(fluid, smooth_options);
+            if let Some(moved) = &mut moved_from_marched {
+                // With an inward bound, what moved the surface off the centres: the moves
+                // along it (the rest of the largest shift) slide the surface over itself.
+                let shift = smoothed.max_shift as f32;
+                *moved = smooth_options.max_inward.map_or(shift, |b| b.min(shift));
+            }
             stats.smoothing = Some(smoothed);
             rings = built.filter(|_| options.keeps_rings());
             Ok(())
@@ -165,6 +175,7 @@ fn reconstruct_source_unguarded<S: ParticleSource>(
     if let (Some(containment), Some(store)) = (&options.containment, &store) {
         run.stage("containment", &mut fluid, |fluid, stats| {
             let input = ContainmentInput {
+                farthest_outside: moved_from_marched,
                 levels: options.subdivide.levels + options.deferred_subdivision,
                 centres: store,
                 isolated: &isolated.centres,
