@@ -178,9 +178,10 @@ pub struct ContainmentStats {
     /// folded ones not included).
     pub remaining: usize,
     /// Centres measured outside by more than the surface can have moved off them (see
-    /// `farthest_outside` of the pipeline's input), or measured outside again, no
-    /// closer, after a push: their side was read through a fold of the surface (they
-    /// are inside it), and a push would raise a spike over them. Not pushed.
+    /// `farthest_outside` of the pipeline's input), or, where that bound holds, measured
+    /// outside again, no closer, after a push: their side was read through a fold of the
+    /// surface (they are inside it), and a push would raise a spike over them. Not
+    /// pushed. Always 0 on a decimated surface (no bound).
     pub folded: usize,
     /// Seconds spent computing the one-step surface it measures (points and cells).
     pub surface_seconds: f64,

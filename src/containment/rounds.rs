@@ -58,11 +58,14 @@ pub(crate) fn contain_centres<C: Centres + ?Sized>(
             ..
         } = rounds.measure(control, input, &need, cancel, &mut stats)?;
         folded.extend(folded_here);
-        // A centre pushed before and measured outside no closer now was read through a
-        // fold: the push moved the surface away from it (it is inside), and pushing it
-        // again would raise the spike further.
+        // Where the surface can only have moved so far off the centres (the bound is
+        // finite), a centre pushed before and measured outside no closer now was read
+        // through a fold: the push moved the surface away from it (it is inside), and
+        // pushing it again would raise the spike further.
+        let bounded = need.farthest_outside.is_finite();
         shallow.retain(|s| {
-            let stuck = s.outside
+            let stuck = bounded
+                && s.outside
                 && pushed_from
                     .get(&s.particle)
                     .is_some_and(|&before| s.signed_distance > 0.5 * before);
@@ -573,9 +576,9 @@ mod tests {
     }
 
     /// A centre measured outside farther than the surface can have moved from one that
-    /// enclosed it is not pushed (its side was read through a fold), and counts as
-    /// remaining; a centre a little outside is pushed under as always. Without the bound
-    /// both are pushed.
+    /// enclosed it is not pushed (its side was read through a fold) and counts as folded,
+    /// not remaining; a centre a little outside is pushed under as always. Without the
+    /// bound both are pushed.
     #[test]
     fn centres_farther_outside_than_the_surface_moved_are_not_pushed() {
         let r = 0.2f32;
