@@ -5,7 +5,7 @@
 
 use super::measure::{Probe, SurfaceIndex};
 use glam::{DVec3, Vec3};
-use hashbrown::HashSet;
+use hashbrown::{HashMap, HashSet};
 use rayon::prelude::*;
 
 /// What measuring some centres found.
@@ -142,7 +142,6 @@ pub(super) fn settle(index: &SurfaceIndex, found: &mut Found, need: &Need<'_>) {
                 particle: i,
                 push: probe.normal * (probe.signed_distance + aim),
                 signed_distance: probe.signed_distance,
-                outside: probe.signed_distance > 0.0,
                 control_triangle: probe.control_triangle,
             });
         }
@@ -170,9 +169,60 @@ pub(super) struct Shallow {
     pub(super) push: DVec3,
     /// Its signed distance to the surface, world units (positive outside).
     pub(super) signed_distance: f64,
-    pub(super) outside: bool,
     /// Control triangle under its nearest surface point.
     pub(super) control_triangle: u32,
+}
+
+impl Shallow {
+    pub(super) fn outside(&self) -> bool {
+        self.signed_distance > 0.0
+    }
+}
+
+/// The centres counted as folded over the rounds (`ContainmentStats::folded`): their
+/// side was read through a fold of the surface, and they are not pushed.
+#[derive(Default)]
+pub(super) struct Folds {
+    folded: HashSet<u32>,
+    /// Centres pushed while outside, and how far outside they were (where
+    /// [`Need::farthest_outside`] is finite).
+    pushed_from: HashMap<u32, f64>,
+}
+
+impl Folds {
+    /// Takes a round's findings: the centres measured beyond the bound (`folded`), and,
+    /// where the surface can only have moved so far off the centres, the shallow ones
+    /// pushed before while outside and measured outside now no closer (taken out of
+    /// `shallow`): the push moved the surface away from such a centre (it is inside), and
+    /// pushing it again would raise the spike further.
+    pub(super) fn take(&mut self, folded: Vec<u32>, shallow: &mut Vec<Shallow>, need: &Need<'_>) {
+        self.folded.extend(folded);
+        if !need.farthest_outside.is_finite() {
+            return;
+        }
+        shallow.retain(|s| {
+            let stuck = s.outside()
+                && self
+                    .pushed_from
+                    .get(&s.particle)
+                    .is_some_and(|&before| s.signed_distance > 0.5 * before);
+            if stuck {
+                self.folded.insert(s.particle);
+            }
+            !stuck
+        });
+        for s in shallow.iter().filter(|s| s.outside()) {
+            self.pushed_from.insert(s.particle, s.signed_distance);
+        }
+    }
+
+    /// How many centres are folded, those still `shallow` at the end not counted.
+    pub(super) fn count(&mut self, shallow: &[Shallow]) -> usize {
+        for s in shallow {
+            self.folded.remove(&s.particle);
+        }
+        self.folded.len()
+    }
 }
 
 /// A centre that a push could bring too close to the surface.

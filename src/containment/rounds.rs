@@ -3,7 +3,7 @@
 //! again those the pushes may have brought too close, until none is shallow or the
 //! rounds run out.
 
-use super::centres::{bits, measure_centres, settle, Found, Need, Shallow, Watched};
+use super::centres::{bits, measure_centres, settle, Folds, Found, Need, Shallow, Watched};
 use super::measure::{CellIndex, SurfaceIndex};
 use super::slabs::Slabs;
 use super::surface::{LoopSurface, Slots, Step};
@@ -44,9 +44,7 @@ pub(crate) fn contain_centres<C: Centres + ?Sized>(
             .farthest_outside
             .map_or(f64::INFINITY, |f| f as f64 + FOLD_TOLERANCE * r),
     };
-    let mut folded: HashSet<u32> = HashSet::new();
-    // Centres pushed while outside, and how far outside they were.
-    let mut pushed_from: HashMap<u32, f64> = HashMap::new();
+    let mut folds = Folds::default();
     let mut rounds = Rounds::new(control, input, depth, &mut stats);
     loop {
         stats.rounds += 1;
@@ -57,28 +55,7 @@ pub(crate) fn contain_centres<C: Centres + ?Sized>(
             folded: folded_here,
             ..
         } = rounds.measure(control, input, &need, cancel, &mut stats)?;
-        folded.extend(folded_here);
-        // Where the surface can only have moved so far off the centres (the bound is
-        // finite), a centre pushed before and measured outside no closer now was read
-        // through a fold: the push moved the surface away from it (it is inside), and
-        // pushing it again would raise the spike further.
-        let bounded = need.farthest_outside.is_finite();
-        shallow.retain(|s| {
-            let stuck = bounded
-                && s.outside
-                && pushed_from
-                    .get(&s.particle)
-                    .is_some_and(|&before| s.signed_distance > 0.5 * before);
-            if stuck {
-                folded.insert(s.particle);
-            }
-            !stuck
-        });
-        for s in &shallow {
-            if s.outside {
-                pushed_from.insert(s.particle, s.signed_distance);
-            }
-        }
+        folds.take(folded_here, &mut shallow, &need);
         if stats.rounds > 1 {
             stats.remeasured += if rounds.full_round {
                 near
@@ -101,13 +78,10 @@ pub(crate) fn contain_centres<C: Centres + ?Sized>(
         if stats.rounds == 1 {
             stats.near_centres = near;
             stats.too_shallow = shallow.len();
-            stats.outside = shallow.iter().filter(|s| s.outside).count();
+            stats.outside = shallow.iter().filter(|s| s.outside()).count();
         }
         if shallow.is_empty() || stats.rounds > options.max_rounds {
-            for s in &shallow {
-                folded.remove(&s.particle);
-            }
-            stats.folded = folded.len();
+            stats.folded = folds.count(&shallow);
             stats.remaining = shallow.len();
             break;
         }
