@@ -310,13 +310,10 @@ mod tests {
         }
         let tris = VertexTriangles::new(&control);
         let all = |control: &TriMesh| (0..control.triangles.len() as u32).collect();
-        let surface = LoopSurface::new(
-            &control,
-            &tris,
-            all(&control),
-            Step::Loop,
-            Slots::new(&control),
-        );
+        let one_step = |control: &TriMesh, ids: Vec<u32>| {
+            LoopSurface::new(control, &tris, ids, Step::Loop, Slots::new(control))
+        };
+        let surface = one_step(&control, all(&control));
         let check = |control: &TriMesh, surface: &LoopSurface| {
             let mut expected = control.clone();
             crate::subdivision::subdivide(
@@ -335,32 +332,11 @@ mod tests {
         };
         check(&control, &surface);
         control.positions[3] += Vec3::splat(0.05);
-        check(
-            &control,
-            &LoopSurface::new(
-                &control,
-                &tris,
-                all(&control),
-                Step::Loop,
-                Slots::new(&control),
-            ),
-        );
+        check(&control, &one_step(&control, all(&control)));
         // A part holds the same points as the whole.
         let part: Vec<u32> = (0..control.triangles.len() as u32).step_by(3).collect();
-        let whole = LoopSurface::new(
-            &control,
-            &tris,
-            all(&control),
-            Step::Loop,
-            Slots::new(&control),
-        );
-        let some = LoopSurface::new(
-            &control,
-            &tris,
-            part.clone(),
-            Step::Loop,
-            Slots::new(&control),
-        );
+        let whole = one_step(&control, all(&control));
+        let some = one_step(&control, part.clone());
         for &t in &part {
             for s in 4 * t..4 * t + 4 {
                 let [a, b] =
