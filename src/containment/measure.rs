@@ -12,7 +12,7 @@ use hashbrown::{HashMap, HashSet};
 use rayon::prelude::*;
 
 /// Cells per coarse cell edge in [`SurfaceIndex::confirm`].
-const COARSE: f64 = 8.0;
+const COARSE: f64 = 2.0;
 
 /// Nearest vertices whose parent triangles' neighbourhoods a measure covers.
 const PROBE_VERTICES: usize = 3;
@@ -168,6 +168,9 @@ pub(super) struct SurfaceIndex<'a> {
     pub(super) control_tris: &'a VertexTriangles,
     /// Depth under the nearest point's tangent plane that is deep enough.
     pub(super) fast_depth: f64,
+    /// How far from its first corner any point of a control triangle's surface lies at
+    /// most ([`super::surface::Step::spread`]), world units.
+    pub(super) spread: f64,
 }
 
 impl SurfaceIndex<'_> {
@@ -252,7 +255,11 @@ impl SurfaceIndex<'_> {
         let key = |q: DVec3| floor(q / cell);
         let coarse_key = |q: DVec3| floor(q / (COARSE * cell));
         // The centres by the cells their distance spheres' boxes meet, and the coarse
-        // cells those lie in (most triangles are in none: one look-up rejects them).
+        // cells within `spread` more of those boxes: a triangle whose box lies within a
+        // centre's distance has every point, its first corner too, within `spread` of
+        // that corner, so the corner lies within distance + spread of the centre (per
+        // axis). Most corners lie in none of those coarse cells: one look-up per corner
+        // rejects all of their triangles.
         let reach = |probe: &Probe| probe.signed_distance.abs() * (1.0 + 1e-9) + 1e-12;
         let mut grid: HashMap<[i32; 3], Vec<u32>> = HashMap::new();
         let mut coarse: HashSet<[i32; 3]> = HashSet::new();
@@ -261,8 +268,18 @@ impl SurfaceIndex<'_> {
             for c in cells_between(key(*p - rad), key(*p + rad)) {
                 grid.entry(c).or_default().push(k as u32);
             }
-            coarse.extend(cells_between(coarse_key(*p - rad), coarse_key(*p + rad)));
+            let far = rad + DVec3::splat(self.spread);
+            coarse.extend(cells_between(coarse_key(*p - far), coarse_key(*p + far)));
         }
+        let near: Vec<bool> = self
+            .surface
+            .vertex_ids
+            .par_iter()
+            .map(|&v| {
+                let x = self.control.positions[v as usize].as_dvec3();
+                coarse.contains(&coarse_key(x).to_array())
+            })
+            .collect();
         // (centre, control triangle) wherever the triangle's box is within reach.
         let mut pairs: Vec<(u32, u32)> = self
             .surface
@@ -271,11 +288,11 @@ impl SurfaceIndex<'_> {
             .flat_map_iter(|chunk| {
                 let mut out = Vec::new();
                 for &t in chunk {
-                    let (lo, hi) = self.child_box(t);
-                    let (a, b) = (coarse_key(lo), coarse_key(hi));
-                    if a == b && !coarse.contains(&a.to_array()) {
+                    let first = self.control.triangles[t as usize][0];
+                    if !near[self.surface.vertex(first) as usize] {
                         continue;
                     }
+                    let (lo, hi) = self.child_box(t);
                     for c in cells_between(key(lo), key(hi)) {
                         for &k in grid.get(&c).map_or(&[][..], Vec::as_slice) {
                             let (p, probe) = &probes[k as usize];
@@ -491,6 +508,16 @@ pub(super) fn with_index<T>(
 }
 
 #[cfg(test)]
+/// The longest edge of `mesh`.
+fn longest_edge(mesh: &TriMesh) -> f32 {
+    mesh.triangles
+        .iter()
+        .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
+        .map(|(a, b)| mesh.positions[a as usize].distance(mesh.positions[b as usize]))
+        .fold(0.0, f32::max)
+}
+
+#[cfg(test)]
 /// [`with_index`] with the surface made as `step` says.
 pub(super) fn with_index_of<T>(
     mesh: &TriMesh,
@@ -515,6 +542,7 @@ pub(super) fn with_index_of<T>(
         } else {
             f64::INFINITY
         },
+        spread: step.spread(longest_edge(mesh) as f64),
     };
     f(&index)
 }

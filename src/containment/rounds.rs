@@ -156,6 +156,9 @@ struct Rounds {
     tris: VertexTriangles,
     /// The control mesh cut into slabs.
     slabs: Slabs,
+    /// No edge of the control mesh is longer, world units: taken with the slabs, raised
+    /// by the edges at every pushed vertex (only those change).
+    longest_edge: f64,
     /// Scratch of the one-step surface, reused from slab to slab.
     slots: Slots,
     /// What the surface measured is made of ([`surface_step`]).
@@ -203,6 +206,7 @@ impl Rounds {
             gain: if input.levels == 0 { 1.0 } else { 1.4 },
             isolated: input.isolated.iter().map(|p| bits(*p)).collect(),
             slots: Slots::new(control),
+            longest_edge: slabs.edge_bound() as f64,
             tris,
             slabs,
             watch: Vec::new(),
@@ -280,6 +284,7 @@ impl Rounds {
                 } else {
                     f64::INFINITY
                 },
+                spread: self.step.spread(self.longest_edge),
             };
             let isolated = &self.isolated;
             let mut gather = |ps: &[Vec3], is: &[u32]| {
@@ -348,6 +353,10 @@ impl Rounds {
         let mut push: Vec<(u32, DVec3)> = push.into_iter().map(|(v, (_, _, d))| (v, d)).collect();
         push.sort_unstable_by_key(|&(v, _)| v);
         apply_pushes(control, &self.tris, &mut push);
+        for &(v, _) in &push {
+            let longest = super::slabs::longest_edge(control, &self.tris, v) as f64;
+            self.longest_edge = self.longest_edge.max(longest);
+        }
         self.reached.fill(false);
         for &(v, _) in &push {
             for &t in self.tris.of(v) {

@@ -119,6 +119,13 @@ impl Slabs {
         }
     }
 
+    /// The longest edge of the control mesh as the reaches were last taken, world units:
+    /// at least that of every edge then (see [`Self::new`]).
+    pub(super) fn edge_bound(&self) -> f32 {
+        let reach = self.reach.par_iter().copied().reduce(|| 0.0, f32::max);
+        (reach - 8.0 * self.particle_radius).max(0.0) / 2.0
+    }
+
     /// The axis and the extent along it of slab `k` (from `lo`, to under `hi`).
     pub(super) fn range(&self, k: usize) -> (usize, f32, f32) {
         let lo = if k == 0 {
@@ -230,7 +237,7 @@ fn fan_max(
 }
 
 /// The longest edge at control vertex `v` (0 without triangles).
-fn longest_edge(control: &TriMesh, tris: &VertexTriangles, v: u32) -> f32 {
+pub(super) fn longest_edge(control: &TriMesh, tris: &VertexTriangles, v: u32) -> f32 {
     let x = |w: u32| control.positions[w as usize];
     fan_max(control, tris, v, &|w| (x(w) - x(v)).length())
 }

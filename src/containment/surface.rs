@@ -60,6 +60,22 @@ pub(super) enum Step {
     Flat { split: f32 },
 }
 
+impl Step {
+    /// How far from its first corner (the control position) any point of a control
+    /// triangle's surface lies at most, when no edge of the control mesh is longer than
+    /// `longest_edge`: cut or whole, its corners and edge midpoints lie within the longest
+    /// edge at that corner; a Loop vertex point lies in the hull of its vertex's one-ring
+    /// and an edge point in the hull of the edge's two triangles, so within two edges.
+    /// A hair more, against rounding.
+    pub(super) fn spread(self, longest_edge: f64) -> f64 {
+        let edges = match self {
+            Step::Loop => 2.0,
+            Step::Flat { .. } => 1.0,
+        };
+        edges * longest_edge * (1.0 + 1e-4)
+    }
+}
+
 /// Slot of a vertex or triangle not in the part.
 const ABSENT: u32 = u32::MAX;
 /// Slot of a triangle of the part measured whole ([`Step::Flat`]).
@@ -343,6 +359,45 @@ mod tests {
                     [&whole, &some].map(|x| x.triangle(&control, s).map(|i| x.points[i as usize]));
                 assert_eq!(a, b, "surface triangle {s}");
             }
+        }
+    }
+
+    /// Every point of a control triangle's surface lies within [`Step::spread`] of its
+    /// first corner, for Loop's step and the flat one, on a mesh with vertices moved far
+    /// apart (what [`super::super::measure`]'s confirmation relies on to skip triangles
+    /// by their first corner).
+    #[test]
+    fn every_point_of_a_triangle_lies_within_the_spread_of_its_first_corner() {
+        let mut control = icosphere(2, 1.0);
+        for (i, p) in control.positions.iter_mut().enumerate() {
+            *p *= 1.0 + 0.8 * ((i * 7 % 5) as f32 / 5.0);
+        }
+        let tris = VertexTriangles::new(&control);
+        let longest = control
+            .triangles
+            .iter()
+            .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
+            .map(|(a, b)| control.positions[a as usize].distance(control.positions[b as usize]))
+            .fold(0.0f32, f32::max) as f64;
+        for step in [
+            Step::Loop,
+            Step::Flat { split: 0.0 },
+            Step::Flat { split: 0.3 },
+        ] {
+            let all = (0..control.triangles.len() as u32).collect();
+            let surface = LoopSurface::new(&control, &tris, all, step, Slots::new(&control));
+            let spread = step.spread(longest);
+            let mut farthest = 0.0f64;
+            for t in 0..control.triangles.len() as u32 {
+                let corner = control.positions[control.triangles[t as usize][0] as usize];
+                for i in surface.points_of(&control, t) {
+                    let d = surface.points[i as usize].distance(corner) as f64;
+                    assert!(d <= spread, "{step:?}: triangle {t}, {d} > {spread}");
+                    farthest = farthest.max(d);
+                }
+            }
+            // The bound is not loose by more than the edges it counts.
+            assert!(farthest > 0.4 * spread, "{step:?}: {farthest} of {spread}");
         }
     }
 }
