@@ -141,8 +141,6 @@ def droplets_of(fluid):
 def show_frame(scene, fluid, frame=None):
     """Swaps the archive's frame for scene frame ``frame`` (default: the current one)
     into ``fluid`` and its droplets. Returns the archive frame shown."""
-    import time
-
     path = bpy.path.abspath(fluid[ARCHIVE_KEY])
     p = player(path)
     n = p.held(scene.frame_current if frame is None else frame)
@@ -294,20 +292,15 @@ def start_live(context, source, radius=0.0, force=False, up_axis="Y"):
     library's message) and leaves the scene as it was. Returns the fluid."""
     scene = context.scene
     absolute = bpy.path.abspath(source)
-    key = (absolute, float(radius), bool(force))
-    _meshers.pop(key, None)  # picked anew: the files are looked for again
-    sequence = core.resolve_sequence(absolute)
-    m = _meshers[key] = core.LiveMesher(sequence, radius, radius_check=not force,
-                                        cache_bytes=int(scene.meniscus.live_cache_mib) << 20)
+    sequence = core.resolve_sequence(absolute)  # picked anew: the files are looked for again
+    m = core.LiveMesher(sequence, radius, radius_check=not force,
+                        cache_bytes=int(scene.meniscus.live_cache_mib) << 20)
     n = scene.frame_current
     if n not in sequence.frames and sequence.files is not None:
         n = sequence.frames[0]
-    try:
-        m.frame(n, live_preset(scene, False))  # the radius checked before anything changes
-    except Exception:
-        _meshers.pop(key, None)
-        raise
+    m.frame(n, live_preset(scene, False))  # the radius checked before anything changes
     stop_live(scene)
+    _meshers[(absolute, float(radius), bool(force))] = m
     name = os.path.splitext(os.path.basename(sequence.source))[0].replace("{}", "").strip(" _-.") or "Fluid"
     fluid = _new_objects(context, f"{name} live", up_axis)
     fluid[LIVE_KEY] = source

@@ -274,6 +274,8 @@ def live(work, dambreak, frames):
           f"live: Live makes one fluid object ({[o.name for o in fluids]})")
     fluid = fluids[0]
     (mesher,) = scene_mod._meshers.values()
+    check(mesher.stats["meshed"] == 1 and mesher.stats["hits"] == 1,
+          f"live: the first frame is meshed once (the radius check) and shown from the cache ({mesher.stats})")
     check(mesher.radius == np.float32(settings.estimated_radius),
           f"live: the radius {mesher.radius:.6f} is the panel's estimate {settings.estimated_radius:.6f}")
     check((scene.frame_start, scene.frame_end) == (frames[0], frames[-1]),
@@ -409,4 +411,4 @@ if __name__ == "__main__":
     if failures:
         print(f"{len(failures)} check(s) failed")
         sys.exit(1)
-    print("the Blender extension bakes, plays back and blurs")
+    print("the Blender extension bakes, plays back, meshes live and blurs")
