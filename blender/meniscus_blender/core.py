@@ -1,7 +1,10 @@
 """The extension's work that does not touch Blender: finding a sequence's frames, the
-presets, the bake job (a thread running ``meniscus.reconstruct_file``) and the archive
-player (a frame decoded on demand). Blender's side is in ``ui.py`` and ``scene.py``."""
+presets, the bake job (a thread running ``meniscus.reconstruct_file``), the archive
+player (a frame decoded on demand) and the live mesher (a frame's particle file meshed
+by ``meniscus.reconstruct``, recent frames kept). Blender's side is in ``ui.py`` and
+``scene.py``."""
 
+import collections
 import os
 import re
 import threading
@@ -30,18 +33,29 @@ def preset_options(name):
 
 class Sequence:
     """A particle sequence as the user picked it: ``source`` (what reconstruct_file takes:
-    a ``{}`` pattern or a ``.pvd``), ``frames`` (numbers, sorted) and ``first`` (the
-    file of the first frame)."""
+    a ``{}`` pattern or a ``.pvd``), ``frames`` (numbers, sorted), ``first`` (the
+    file of the first frame) and ``files`` (frame number -> file; None for one
+    unnumbered file, which stands for every frame)."""
 
-    def __init__(self, source, frames, first):
-        self.source, self.frames, self.first = source, frames, first
+    def __init__(self, source, frames, first, files=None):
+        self.source, self.frames, self.first, self.files = source, frames, first, files
+
+    def file(self, n):
+        """The particle file of frame ``n``; ValueError when the sequence has none."""
+        if self.files is None:
+            return self.first
+        path = self.files.get(n)
+        if path is None:
+            raise ValueError(f"no particle file (the sequence has {len(self.frames)} frame(s), "
+                             f"{self.frames[0]}–{self.frames[-1]})")
+        return path
 
     def __repr__(self):
         return f"Sequence({self.source!r}, {len(self.frames)} frames)"
 
 
-def _pattern_frames(pattern):
-    """Frame numbers of the files a ``{}`` pattern matches, and the first file."""
+def _pattern_files(pattern):
+    """The files a ``{}`` pattern matches, by frame number."""
     directory, name = os.path.split(pattern)
     head, _, tail = name.partition("{}")
     regex = re.compile(re.escape(head) + r"(-?\d+)" + re.escape(tail) + "$")
@@ -50,8 +64,7 @@ def _pattern_frames(pattern):
         m = regex.match(entry)
         if m:
             found.setdefault(int(m.group(1)), os.path.join(directory, entry))
-    numbers = sorted(found)
-    return numbers, (found[numbers[0]] if numbers else None)
+    return found
 
 
 def _folder_pattern(folder):
@@ -80,10 +93,11 @@ def resolve_sequence(path):
     if os.path.isdir(path):
         path = _folder_pattern(path)
     if "{}" in path:
-        numbers, first = _pattern_frames(path)
-        if not numbers:
+        files = _pattern_files(path)
+        if not files:
             raise ValueError(f"{path}: no file matches the pattern")
-        return Sequence(path, numbers, first)
+        numbers = sorted(files)
+        return Sequence(path, numbers, files[numbers[0]], files)
     if not os.path.isfile(path):
         raise ValueError(f"{path}: no such file")
     if path.lower().endswith(".pvd"):
@@ -91,15 +105,16 @@ def resolve_sequence(path):
         files = [d.get("file") for d in root.iter("DataSet")]
         if not files:
             raise ValueError(f"{path}: the collection lists no dataset")
-        first = os.path.join(os.path.dirname(path), files[0])
-        return Sequence(path, list(range(len(files))), first)
+        files = {k: os.path.join(os.path.dirname(path), f) for k, f in enumerate(files)}
+        return Sequence(path, sorted(files), files[0], files)
     m = re.match(r"^(.*?)(\d+)(\.[^.]+)$", os.path.basename(path))
     if m:
         # One numbered file stands for its sequence when it has siblings.
         pattern = os.path.join(os.path.dirname(path), m.group(1) + "{}" + m.group(3))
-        numbers, first = _pattern_frames(pattern)
-        if len(numbers) > 1:
-            return Sequence(pattern, numbers, first)
+        files = _pattern_files(pattern)
+        if len(files) > 1:
+            numbers = sorted(files)
+            return Sequence(pattern, numbers, files[numbers[0]], files)
     return Sequence(path, [0], path)
 
 
@@ -115,6 +130,19 @@ def estimate_radius(sequence):
 # check box that does the same.
 FORCE_KEYWORD = "radius_check=False"
 FORCE_BOX = "tick Force radius"
+# How the library's messages name particles given as arrays.
+IN_MEMORY = "particles in memory"
+
+
+def library_error(e, radius_given, radius_check):
+    """``(message, refused_radius)`` of the library's exception ``e``: its message as it
+    is, except that a refused radius's way to force it (the keyword radius_check=False)
+    is worded as the panel's check box."""
+    message = str(e)
+    refused = bool(radius_check and radius_given and isinstance(e, ValueError) and FORCE_KEYWORD in message)
+    if refused:
+        message = message.replace(FORCE_KEYWORD, FORCE_BOX)
+    return message, refused
 
 
 class BakeCancelled(Exception):
@@ -174,13 +202,7 @@ class BakeJob:
         except BakeCancelled:
             self.cancelled = True
         except Exception as e:  # shown to the user as it is: the library's message
-            self.error = str(e)
-            # A refused radius: the library's message, its way to force it (the keyword
-            # radius_check=False) worded as the panel's check box.
-            self.refused_radius = self.radius_check and self.radius is not None and isinstance(e, ValueError) \
-                and FORCE_KEYWORD in self.error
-            if self.refused_radius:
-                self.error = self.error.replace(FORCE_KEYWORD, FORCE_BOX)
+            self.error, self.refused_radius = library_error(e, self.radius is not None, self.radius_check)
         finally:
             self.finished = True
 
@@ -225,10 +247,114 @@ class ArchivePlayer:
         return best
 
     def decode(self, frame):
-        """``(fluid, droplets)`` of archive frame ``frame``: fluid = (vertices, triangles,
-        attributes, (edges, corner_edges)), droplets = (centres, radii, attributes)."""
-        mesh = self.archive[frame]
-        vertices, triangles, _normals, attributes = mesh.fluid()
-        edges = mesh.fluid_edges()
-        radii = mesh.sphere_scales * mesh.sphere_radius
-        return (vertices, triangles, attributes, edges), (mesh.sphere_centers, radii, mesh.sphere_attributes)
+        """``(fluid, droplets)`` of archive frame ``frame`` (see ``mesh_parts``)."""
+        return mesh_parts(self.archive[frame])
+
+
+def mesh_parts(mesh):
+    """``(fluid, droplets)`` of a ``meniscus.Mesh`` as the scene swaps them in: fluid =
+    (vertices, triangles, attributes, (edges, corner_edges)), droplets = (centres, radii,
+    attributes)."""
+    vertices, triangles, _normals, attributes = mesh.fluid()
+    edges = mesh.fluid_edges()
+    radii = mesh.sphere_scales * mesh.sphere_radius
+    return (vertices, triangles, attributes, edges), (mesh.sphere_centers, radii, mesh.sphere_attributes)
+
+
+def _nbytes(value):
+    """Bytes of the arrays in a nest of tuples and dicts."""
+    if isinstance(value, (tuple, list)):
+        return sum(_nbytes(v) for v in value)
+    if isinstance(value, dict):
+        return sum(_nbytes(v) for v in value.values())
+    return int(getattr(value, "nbytes", 0))
+
+
+def live_attributes(attributes):
+    """The particle attributes a live frame passes to ``meniscus.reconstruct``, those a
+    bake takes by default: the velocity (the first attribute named ``v``, ``vel`` or
+    ``velocity``, in any case), and Houdini's per-particle radius ``pscale`` when
+    present (the library meshes each particle with its own radius, as in a bake)."""
+    chosen = {}
+    velocity = next((k for k in attributes if k.lower() in ("velocity", "vel", "v")), None)
+    if velocity is not None:
+        chosen[velocity] = attributes[velocity]
+    if "pscale" in attributes:
+        chosen["pscale"] = attributes["pscale"]
+    return chosen
+
+
+class LiveMesher:
+    """Meshes a sequence's frames on demand, for live mode: ``frame(n, preset)`` reads
+    frame ``n``'s particle file (``meniscus.read_particles``) and meshes it
+    (``meniscus.reconstruct``) with the preset's keywords at one radius for the whole
+    sequence (``radius``, or the first frame's estimate, as a bake takes it; a given
+    radius is checked by the library on the first frame meshed, as a bake checks it on
+    its first frame), and
+    returns its ``mesh_parts``. The results of recent frames are kept per preset, the
+    least recently used dropped first beyond ``cache_bytes``; a file changed on disk
+    (its size or time) is meshed again. ``stats``: ``meshed`` and ``hits`` (calls
+    answered by meshing and from the cache), ``seconds`` (the last meshing's, by
+    preset), ``cached_frames``, ``cached_bytes``. Errors are the library's (a refused
+    radius worded as the panel's, see ``library_error``), as ValueError/OSError."""
+
+    def __init__(self, sequence, radius=None, radius_check=True, cache_bytes=512 << 20):
+        self.sequence = sequence
+        self.given = bool(radius and radius > 0)
+        self.radius = float(radius) if self.given else estimate_radius(sequence)
+        self.radius_check = radius_check
+        self._checked = False
+        self.cache_bytes = int(cache_bytes)
+        self._cache = collections.OrderedDict()  # key -> (parts, bytes)
+        self._lock = threading.Lock()
+        self.stats = {"meshed": 0, "hits": 0, "seconds": {}, "cached_frames": 0, "cached_bytes": 0}
+
+    def _key(self, n, preset):
+        path = self.sequence.file(n)
+        st = os.stat(path)
+        return (n, preset, path, st.st_mtime_ns, st.st_size)
+
+    def _mesh(self, path, preset):
+        import meniscus
+
+        positions, attributes = meniscus.read_particles(path)
+        try:
+            check = self.radius_check and self.given and not self._checked
+            mesh = meniscus.reconstruct(positions, self.radius, attributes=live_attributes(attributes),
+                                        radius_check=check, **preset_options(preset))
+            self._checked = True
+        except ValueError as e:
+            message, refused = library_error(e, self.given, self.radius_check)
+            if refused:
+                # The library names the arrays it was given; the user knows the file.
+                raise ValueError(message.replace(IN_MEMORY, path, 1)) from e
+            raise
+        return mesh_parts(mesh)
+
+    def frame(self, n, preset):
+        """``(fluid, droplets)`` of frame ``n`` with preset ``preset`` (a key of PRESETS)."""
+        with self._lock:
+            key = self._key(n, preset)
+            cached = self._cache.get(key)
+            if cached is not None:
+                self._cache.move_to_end(key)
+                self.stats["hits"] += 1
+                return cached[0]
+            start = time.perf_counter()
+            parts = self._mesh(key[2], preset)
+            self.stats["seconds"][preset] = time.perf_counter() - start
+            self.stats["meshed"] += 1
+            size = _nbytes(parts)
+            if size <= self.cache_bytes:
+                self._cache[key] = (parts, size)
+                total = sum(s for _, s in self._cache.values())
+                while total > self.cache_bytes:
+                    total -= self._cache.popitem(last=False)[1][1]
+            self.stats["cached_frames"] = len(self._cache)
+            self.stats["cached_bytes"] = sum(s for _, s in self._cache.values())
+            return parts
+
+    def clear(self):
+        with self._lock:
+            self._cache.clear()
+            self.stats["cached_frames"] = self.stats["cached_bytes"] = 0

@@ -1,19 +1,29 @@
-"""Blender's side of playback: an object ``Fluid`` (a mesh) and its child ``Droplets`` (a
-mesh of loose vertices that a Geometry Nodes modifier turns into a point cloud with each
-droplet's radius), whose geometry is swapped for the archive's frame whenever the scene's
-frame changes. Both carry a ``velocity`` point attribute in the object's space, which
-Cycles uses for motion blur. The simulation's +Y is turned to Blender's +Z by the
-objects' rotation."""
+"""Blender's side of playback and live meshing: an object ``Fluid`` (a mesh) and its
+child ``Droplets`` (a mesh of loose vertices that a Geometry Nodes modifier turns into a
+point cloud with each droplet's radius), whose geometry is swapped whenever the scene's
+frame changes: for the archive's frame (playback) or for the current frame's particle
+file meshed by the library (live). Both carry a ``velocity`` point attribute in the
+object's space, which Cycles uses for motion blur. The simulation's +Y is turned to
+Blender's +Z by the objects' rotation."""
 
 import math
+import os
+import threading
+import time
 
 import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
+from . import core
 from .core import ArchivePlayer
 
 ARCHIVE_KEY = "meniscus_archive"
+# On a live fluid: the particle sequence as picked; beside it its radius (0: the
+# estimate) and whether the radius is forced.
+LIVE_KEY = "meniscus_live"
+LIVE_RADIUS = "meniscus_live_radius"
+LIVE_FORCE = "meniscus_live_force"
 DROPLETS_GROUP = "meniscus droplets"
 
 # Open archives, by path (a handler runs on every frame change).
@@ -123,11 +133,14 @@ def droplets_group():
     return group
 
 
+def droplets_of(fluid):
+    """The droplets child of a playback or live fluid, or None."""
+    return next((c for c in fluid.children if c.get(ARCHIVE_KEY) == "droplets"), None)
+
+
 def show_frame(scene, fluid, frame=None):
     """Swaps the archive's frame for scene frame ``frame`` (default: the current one)
     into ``fluid`` and its droplets. Returns the archive frame shown."""
-    import time
-
     path = bpy.path.abspath(fluid[ARCHIVE_KEY])
     p = player(path)
     n = p.held(scene.frame_current if frame is None else frame)
@@ -136,12 +149,30 @@ def show_frame(scene, fluid, frame=None):
     start = time.perf_counter()
     (vertices, triangles, attributes, edges), (centres, radii, drops) = p.decode(n)
     set_fluid(fluid.data, vertices, triangles, attributes, edges)
-    droplets = next((c for c in fluid.children if c.get(ARCHIVE_KEY) == "droplets"), None)
+    droplets = droplets_of(fluid)
     if droplets is not None:
         set_droplets(droplets.data, centres, radii, drops)
     fluid["meniscus_frame"] = n
     last_swap["seconds"], last_swap["frame"] = time.perf_counter() - start, n
     return n
+
+
+def _new_objects(context, name, up_axis):
+    """A fluid object ``name`` and its droplets child (the point-cloud modifier on it),
+    linked into the context's collection; the droplets marked as such."""
+    fluid = bpy.data.objects.new(name, bpy.data.meshes.new(name))
+    drops = bpy.data.objects.new(f"{name} droplets", bpy.data.meshes.new(f"{name} droplets"))
+    drops[ARCHIVE_KEY] = "droplets"
+    modifier = drops.modifiers.new("Points", "NODES")
+    modifier.node_group = droplets_group()
+    context.collection.objects.link(fluid)
+    context.collection.objects.link(drops)
+    drops.parent = fluid
+    if up_axis == "Y":
+        fluid.rotation_euler = (math.pi / 2, 0.0, 0.0)
+    # Geometry is swapped on frame change: renders must not read it meanwhile.
+    context.scene.render.use_lock_interface = True
+    return fluid
 
 
 def load_archive(context, path, up_axis="Y"):
@@ -152,26 +183,153 @@ def load_archive(context, path, up_axis="Y"):
     forget(absolute)
     p = player(absolute)
     name = bpy.path.display_name_from_filepath(absolute) or "Fluid"
-    fluid = bpy.data.objects.new(name, bpy.data.meshes.new(name))
+    fluid = _new_objects(context, name, up_axis)
     fluid[ARCHIVE_KEY] = path
-    drops = bpy.data.objects.new(f"{name} droplets", bpy.data.meshes.new(f"{name} droplets"))
-    drops[ARCHIVE_KEY] = "droplets"
-    modifier = drops.modifiers.new("Points", "NODES")
-    modifier.node_group = droplets_group()
-    context.collection.objects.link(fluid)
-    context.collection.objects.link(drops)
-    drops.parent = fluid
-    if up_axis == "Y":
-        fluid.rotation_euler = (math.pi / 2, 0.0, 0.0)
     scene.frame_start, scene.frame_end = p.frames[0], p.frames[-1]
-    # Geometry is swapped on frame change: renders must not read it meanwhile.
-    scene.render.use_lock_interface = True
     show_frame(scene, fluid)
     return fluid
 
 
 def playback_objects(scene):
     return [o for o in scene.objects if o.get(ARCHIVE_KEY) and o[ARCHIVE_KEY] != "droplets"]
+
+
+# Live meshing. The meshers (a sequence, its radius, the cache of recent frames), by
+# (source, radius, forced); whether a render is under way (set by the render_init
+# handler, cleared by render_complete/render_cancel: a frame change in between is the
+# render's, and takes the render preset); and the last live frame's report (the panel
+# shows it).
+_meshers = {}
+_render = {"running": False}
+live_report = {"frame": None, "preset": None, "error": None, "cached": False, "seconds": 0.0,
+               "mesh_seconds": 0.0, "triangles": 0, "droplets": 0}
+_report_lock = threading.Lock()
+
+
+def live_objects(scene):
+    return [o for o in scene.objects if o.get(LIVE_KEY)]
+
+
+def mesher(scene, fluid):
+    """The live mesher of ``fluid`` (made on first use: the sequence resolved, the
+    radius estimated when not given), its cache bounded by the scene's setting."""
+    key = (bpy.path.abspath(fluid[LIVE_KEY]), float(fluid.get(LIVE_RADIUS, 0.0)), bool(fluid.get(LIVE_FORCE, False)))
+    m = _meshers.get(key)
+    if m is None:
+        sequence = core.resolve_sequence(key[0])
+        m = _meshers[key] = core.LiveMesher(sequence, key[1], radius_check=not key[2])
+    m.cache_bytes = int(scene.meniscus.live_cache_mib) << 20
+    return m
+
+
+def rendering():
+    """Whether a render is under way (between render_init and render_complete/cancel)."""
+    return _render["running"]
+
+
+def live_preset(scene, render=None):
+    """The preset live meshing uses now: the render preset under a render, else the
+    viewport preset."""
+    settings = scene.meniscus
+    return settings.live_render_preset if (rendering() if render is None else render) else settings.live_viewport_preset
+
+
+def _clear(fluid):
+    fluid.data.clear_geometry()
+    fluid.data.update()
+    droplets = droplets_of(fluid)
+    if droplets is not None:
+        droplets.data.clear_geometry()
+        droplets.data.update()
+
+
+def show_live(scene, fluid, frame=None, render=None):
+    """Meshes scene frame ``frame`` (default: the current one) of the live fluid's
+    sequence with the preset of the moment (``live_preset``), or takes it from the
+    cache, and swaps it into ``fluid`` and its droplets. A frame with no particle file,
+    or whose meshing fails, clears them; the error goes to ``live_report`` (the panel)
+    and the console, and is not raised. Returns the error or None."""
+    n = scene.frame_current if frame is None else frame
+    preset = live_preset(scene, render)
+    shown = f"{n} {preset}"
+    if fluid.get("meniscus_live_shown") == shown:
+        return None
+    start = time.perf_counter()
+    report = {"frame": n, "preset": preset, "error": None, "cached": False, "mesh_seconds": 0.0,
+              "triangles": 0, "droplets": 0}
+    try:
+        m = mesher(scene, fluid)
+        hits = m.stats["hits"]
+        (vertices, triangles, attributes, edges), (centres, radii, drops) = m.frame(n, preset)
+        report["cached"] = m.stats["hits"] > hits
+        report["mesh_seconds"] = 0.0 if report["cached"] else m.stats["seconds"][preset]
+        set_fluid(fluid.data, vertices, triangles, attributes, edges)
+        droplets = droplets_of(fluid)
+        if droplets is not None:
+            set_droplets(droplets.data, centres, radii, drops)
+        report["triangles"], report["droplets"] = len(triangles), len(centres)
+        fluid["meniscus_live_shown"] = shown
+    except Exception as e:  # reported, never raised out of a handler
+        report["error"] = f"frame {n}: {e}"
+        print(f"meniscus: {fluid.name}: {report['error']}")
+        try:
+            _clear(fluid)
+            if "meniscus_live_shown" in fluid:
+                del fluid["meniscus_live_shown"]
+        except Exception as e2:
+            print(f"meniscus: {fluid.name}: clearing: {e2}")
+    report["seconds"] = time.perf_counter() - start
+    with _report_lock:
+        live_report.update(report)
+    return report["error"]
+
+
+def start_live(context, source, radius=0.0, force=False, up_axis="Y"):
+    """Live mode on the particle sequence ``source``: one fluid object (and its
+    droplets) meshed from the current frame's particle file on every frame change. The
+    live objects before it are removed; the scene's range becomes the sequence's. The
+    first frame meshed checks a given radius: a refused one raises ValueError (the
+    library's message) and leaves the scene as it was. Returns the fluid."""
+    scene = context.scene
+    absolute = bpy.path.abspath(source)
+    sequence = core.resolve_sequence(absolute)  # picked anew: the files are looked for again
+    m = core.LiveMesher(sequence, radius, radius_check=not force,
+                        cache_bytes=int(scene.meniscus.live_cache_mib) << 20)
+    n = scene.frame_current
+    if n not in sequence.frames and sequence.files is not None:
+        n = sequence.frames[0]
+    m.frame(n, live_preset(scene, False))  # the radius checked before anything changes
+    stop_live(scene)
+    _meshers[(absolute, float(radius), bool(force))] = m
+    name = os.path.splitext(os.path.basename(sequence.source))[0].replace("{}", "").strip(" _-.") or "Fluid"
+    fluid = _new_objects(context, f"{name} live", up_axis)
+    fluid[LIVE_KEY] = source
+    fluid[LIVE_RADIUS] = float(radius)
+    fluid[LIVE_FORCE] = bool(force)
+    if sequence.files is not None:
+        scene.frame_start, scene.frame_end = sequence.frames[0], sequence.frames[-1]
+    if scene.frame_current != n:
+        scene.frame_set(n)  # the handler shows it
+    show_live(scene, fluid)
+    if live_report["frame"] == n and not live_report["error"]:
+        # Meshed above (the radius check), shown here from the cache: report the meshing.
+        live_report.update(cached=False, mesh_seconds=m.stats["seconds"][live_report["preset"]])
+    return fluid
+
+
+def stop_live(scene):
+    """Leaves live mode: the live objects (and their meshes) are removed and the cached
+    frames dropped; frame changes mesh nothing any more."""
+    for fluid in live_objects(scene):
+        for o in [fluid, *fluid.children]:
+            mesh = o.data
+            bpy.data.objects.remove(o)
+            if mesh is not None and mesh.users == 0:
+                bpy.data.meshes.remove(mesh)
+    _meshers.clear()
+    with _report_lock:
+        live_report.update(frame=None, preset=None, error=None, cached=False, seconds=0.0, mesh_seconds=0.0,
+                           triangles=0, droplets=0)
 
 
 @persistent
@@ -181,23 +339,44 @@ def on_frame_change(scene, depsgraph=None):
             show_frame(scene, fluid)
         except Exception as e:  # a missing archive must not break playback of the rest
             print(f"meniscus: {fluid.name}: {e}")
+    for fluid in live_objects(scene):
+        show_live(scene, fluid)
+
+
+@persistent
+def on_render_init(scene, _=None):
+    _render["running"] = True
+
+
+@persistent
+def on_render_end(scene, _=None):
+    # Blender changes to the current frame again after a render (frame_change_pre):
+    # the live fluid then goes back to the viewport preset (cached).
+    _render["running"] = False
 
 
 @persistent
 def on_load(_):
     forget()
+    _meshers.clear()
+    _render["running"] = False
+
+
+HANDLERS = (("frame_change_pre", on_frame_change), ("load_post", on_load), ("render_init", on_render_init),
+            ("render_complete", on_render_end), ("render_cancel", on_render_end))
 
 
 def register():
-    if on_frame_change not in bpy.app.handlers.frame_change_pre:
-        bpy.app.handlers.frame_change_pre.append(on_frame_change)
-    if on_load not in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.append(on_load)
+    for name, fn in HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        if fn not in handlers:
+            handlers.append(fn)
 
 
 def unregister():
-    for handlers, fn in ((bpy.app.handlers.frame_change_pre, on_frame_change),
-                         (bpy.app.handlers.load_post, on_load)):
+    for name, fn in HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
         if fn in handlers:
             handlers.remove(fn)
     forget()
+    _meshers.clear()

@@ -1,11 +1,12 @@
 """The panel (View3D ▸ Sidebar ▸ meniscus), its settings and operators: pick a particle
 sequence, see its estimated radius, choose a preset, bake to a ``.mseq`` (or a USD
-stage) with a progress bar and a cancel button, and play an archive back."""
+stage) with a progress bar and a cancel button, play an archive back, or mesh the
+sequence live on frame change (a viewport and a render preset)."""
 
 import os
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, PointerProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 from . import core, scene
 
@@ -25,6 +26,20 @@ def _on_source(self, context):
         self.source_info = str(e)
 
 
+PRESET_ITEMS = [
+    ("STEADY", "Steady", "For animation: shading that does not flicker from frame to frame"),
+    ("STILL", "Still", "The best still frame: decimated, smoothed and subdivided"),
+    ("PREVIEW", "Preview", "Fast: a coarser grid, no subdivision or decimation"),
+    ("PAPER", "Paper", "Akinci et al. 2013's pipeline"),
+]
+
+
+def _on_live_preset(self, context):
+    """A preset changed: the live fluid is shown again with the preset of the moment."""
+    for fluid in scene.live_objects(context.scene):
+        scene.show_live(context.scene, fluid)
+
+
 class MeniscusSettings(bpy.types.PropertyGroup):
     source: StringProperty(
         name="Particles", subtype="FILE_PATH", update=_on_source,
@@ -37,18 +52,23 @@ class MeniscusSettings(bpy.types.PropertyGroup):
     force_radius: BoolProperty(
         name="Force radius", default=False,
         description="Run with the given radius even where the library refuses it (radius_check=False)")
-    preset: EnumProperty(
-        name="Preset", default="STEADY",
-        items=[("STEADY", "Steady", "For animation: shading that does not flicker from frame to frame"),
-               ("STILL", "Still", "The best still frame: decimated, smoothed and subdivided"),
-               ("PREVIEW", "Preview", "Fast: a coarser grid, no subdivision or decimation"),
-               ("PAPER", "Paper", "Akinci et al. 2013's pipeline")])
+    preset: EnumProperty(name="Preset", default="STEADY", items=PRESET_ITEMS)
     output: StringProperty(
         name="Cache", subtype="FILE_PATH", default="//meniscus.mseq",
         description="The cache: a .mseq archive (played back here) or a USD stage (.usdc, imported after the bake)")
     progress: FloatProperty(name="Progress", subtype="PERCENTAGE", min=0.0, max=100.0, default=0.0)
     status: StringProperty(name="Status")
     archive: StringProperty(name="Archive", subtype="FILE_PATH", description="A .mseq archive to play back")
+    live_viewport_preset: EnumProperty(
+        name="Viewport", default="PREVIEW", items=PRESET_ITEMS, update=_on_live_preset,
+        description="The preset live meshing uses in the viewport (Preview: several times faster than Steady)")
+    live_render_preset: EnumProperty(
+        name="Render", default="STEADY", items=PRESET_ITEMS, update=_on_live_preset,
+        description="The preset live meshing uses while a render runs (Steady: no flicker from frame to frame)")
+    live_cache_mib: IntProperty(
+        name="Cache MiB", default=512, min=16, soft_max=8192,
+        description="Memory kept for recently meshed frames (per preset), the least recently used dropped first")
+    live_status: StringProperty(name="Live status")
 
 
 def _bake_job(settings):
@@ -168,6 +188,65 @@ class MENISCUS_OT_load(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class MENISCUS_OT_live_start(bpy.types.Operator):
+    """Mesh the particle sequence live: each frame change meshes the current frame's particle file (viewport preset; the render preset under a render)"""
+
+    bl_idname = "meniscus.live_start"
+    bl_label = "Live"
+
+    def execute(self, context):
+        settings = context.scene.meniscus
+        try:
+            scene.start_live(context, settings.source, settings.radius, settings.force_radius)
+        except Exception as e:
+            settings.live_status = str(e)
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        settings.live_status = ""
+        return {"FINISHED"}
+
+
+class MENISCUS_OT_live_stop(bpy.types.Operator):
+    """Leave live mode: the live objects are removed and the cached frames dropped"""
+
+    bl_idname = "meniscus.live_stop"
+    bl_label = "Stop Live"
+
+    def execute(self, context):
+        scene.stop_live(context.scene)
+        context.scene.meniscus.live_status = ""
+        return {"FINISHED"}
+
+
+def _draw_live(layout, context, settings):
+    box = layout.box()
+    box.label(text="Live")
+    row = box.row()
+    row.prop(settings, "live_viewport_preset")
+    row.prop(settings, "live_render_preset")
+    box.prop(settings, "live_cache_mib")
+    live = scene.live_objects(context.scene)
+    if not live:
+        box.operator("meniscus.live_start", icon="PLAY")
+        if settings.live_status:
+            box.label(text=settings.live_status, icon="ERROR")
+        return
+    box.operator("meniscus.live_stop", icon="PAUSE")
+    report = scene.live_report
+    if report["error"]:
+        row = box.row()
+        row.alert = True
+        row.label(text=report["error"], icon="ERROR")
+    elif report["frame"] is not None:
+        how = "from the cache" if report["cached"] else f"meshed in {report['mesh_seconds']:.2f} s"
+        box.label(text=f"frame {report['frame']} ({report['preset'].title()}): {report['triangles']} triangles, "
+                       f"{report['droplets']} droplets, {how}")
+    for m in scene._meshers.values():
+        stats = m.stats
+        box.label(text=f"cache: {stats['cached_frames']} frame(s), {stats['cached_bytes'] / 2**20:.0f} MiB, "
+                       f"{stats['hits']} hit(s); radius {m.radius:.5g}")
+
+
 class MENISCUS_PT_panel(bpy.types.Panel):
     bl_label = "meniscus"
     bl_idname = "MENISCUS_PT_panel"
@@ -179,7 +258,7 @@ class MENISCUS_PT_panel(bpy.types.Panel):
         settings = context.scene.meniscus
         layout = self.layout
         box = layout.box()
-        box.label(text="Bake")
+        box.label(text="Particles")
         box.prop(settings, "source")
         if settings.source_info:
             box.label(text=settings.source_info)
@@ -188,6 +267,8 @@ class MENISCUS_PT_panel(bpy.types.Panel):
         row = box.row()
         row.prop(settings, "radius")
         row.prop(settings, "force_radius", text="Force")
+        box = layout.box()
+        box.label(text="Bake")
         box.prop(settings, "preset")
         box.prop(settings, "output")
         if _job["job"] is not None:
@@ -197,6 +278,7 @@ class MENISCUS_PT_panel(bpy.types.Panel):
             box.operator("meniscus.bake", icon="RENDER_ANIMATION")
             if settings.status:
                 box.label(text=settings.status)
+        _draw_live(layout, context, settings)
         box = layout.box()
         box.label(text="Playback")
         box.prop(settings, "archive")
@@ -205,7 +287,8 @@ class MENISCUS_PT_panel(bpy.types.Panel):
             box.label(text=f"frame {scene.last_swap['frame']}: {1000 * scene.last_swap['seconds']:.0f} ms")
 
 
-classes = (MeniscusSettings, MENISCUS_OT_bake, MENISCUS_OT_cancel, MENISCUS_OT_load, MENISCUS_PT_panel)
+classes = (MeniscusSettings, MENISCUS_OT_bake, MENISCUS_OT_cancel, MENISCUS_OT_load, MENISCUS_OT_live_start,
+           MENISCUS_OT_live_stop, MENISCUS_PT_panel)
 
 
 def register():

@@ -13,6 +13,16 @@
   scene's range is the archive's;
 * a bake on its own thread leaves the main thread free (it runs on while the bake
   works) and stops when cancelled, the archive keeping the frames done;
+* live mode on the same frames (plus a broken frame file and the gaps between frames):
+  a wrong radius is refused as the bake refuses it; at each frame the live fluid's faces
+  plus the droplets' sphere faces equal the CLI's PLY of that frame with the viewport
+  preset (``WORK/cli_preview_{}.ply``), the radius is the estimate; a frame without a
+  file and a frame whose file fails to read clear the fluid and are reported, nothing
+  raised; going back to a meshed frame is a cache hit (no meshing); a small Cycles
+  render meshes with the render preset (the render's evaluated fluid has the faces of
+  the CLI's steady PLY, ``WORK/cli_{}.ply``) and the viewport preset is back after it;
+  the handler runs on after the blend file is saved and opened again; Stop Live removes
+  the live objects and frame changes mesh nothing more;
 * the velocity sequence baked and played: ``velocity`` on the fluid and on the droplets'
   point cloud, and a small Cycles render of the droplets with motion blur differs from
   the same render without it on the droplets' pixels.
@@ -24,6 +34,7 @@ import os
 import sys
 import tempfile
 import time
+import types
 from pathlib import Path
 
 import bpy
@@ -141,6 +152,11 @@ def main(zip_path, work, dambreak, velocity_pattern):
     held = len(meniscus.Archive(str(work / "cancel.mseq")).frames)
     check(1 <= held < len(seq.frames), f"the cancelled cache keeps its {held} finished frame(s) of {len(seq.frames)}")
 
+    live(work, dambreak, frames)
+    scene = bpy.context.scene
+    settings = scene.meniscus
+    scene_mod = sys.modules[next(m for m in sys.modules if m.endswith(".meniscus.scene"))]
+
     # Velocity and motion blur, on a sequence with velocity.
     for o in list(scene.objects):
         bpy.data.objects.remove(o)
@@ -166,8 +182,194 @@ def main(zip_path, work, dambreak, velocity_pattern):
     points, velocity, world = droplet_points(fluid)
     check(len(points) > 0, f"frame {best_frame}: {len(points)} droplets as a point cloud")
     check(velocity is not None and np.abs(velocity).max() > 0, "a non-zero 'velocity' on the droplets")
+
+    # Live on the same sequence: velocity on its fluid and droplets, as in playback.
+    bpy.ops.meniscus.live_start()
+    (live_fluid,) = scene_mod.live_objects(scene)
+    attr = live_fluid.data.attributes.get("velocity")
+    live_points, live_velocity, _ = droplet_points(live_fluid)
+    check(attr is not None and attr.data_type == "FLOAT_VECTOR" and attr.domain == "POINT" and len(live_points) > 0
+          and live_velocity is not None and np.abs(live_velocity).max() > 0,
+          f"live frame {scene.frame_current}: 'velocity' on the live fluid and on its {len(live_points)} droplets")
+    bpy.ops.meniscus.live_stop()
+
     if len(points) and world is not None:
         render_blur(scene, fluid, points, world)
+
+
+class Layout:
+    """Stands for the panel's layout: records the labels and operators drawn."""
+
+    def __init__(self, texts):
+        self.texts, self.alert = texts, False
+
+    def box(self):
+        return self
+
+    def row(self):
+        return self
+
+    def label(self, text="", icon="NONE"):
+        self.texts.append(text)
+
+    def operator(self, idname, **_):
+        self.texts.append(idname)
+
+    def prop(self, *_, **__):
+        pass
+
+    def progress(self, **_):
+        pass
+
+
+def panel_texts():
+    """What the panel's draw shows (labels and operators), drawn into a ``Layout``."""
+    ui = sys.modules[next(m for m in sys.modules if m.endswith(".meniscus.ui"))]
+    texts = []
+    ui.MENISCUS_PT_panel.draw(types.SimpleNamespace(layout=Layout(texts)), bpy.context)
+    return texts
+
+
+def live_faces(fluid):
+    points, _, _ = droplet_points(fluid)
+    return len(fluid.data.polygons) + 320 * len(points), len(fluid.data.polygons), len(points)
+
+
+def live(work, dambreak, frames):
+    """Live mode over the dam-break frames (see the module's docstring)."""
+    scene_mod = sys.modules[next(m for m in sys.modules if m.endswith(".meniscus.scene"))]
+    scene = bpy.context.scene
+    settings = scene.meniscus
+    for o in list(scene.objects):
+        bpy.data.objects.remove(o)
+    # The same frames in a folder of their own, with a frame whose file is broken.
+    folder = work / "live"
+    folder.mkdir()
+    for f in frames:
+        (folder / f"f_{f}.xyz").write_bytes(Path(dambreak.replace("{}", str(f))).read_bytes())
+    broken = frames[0] + 2
+    (folder / f"f_{broken}.xyz").write_bytes(b"not particles")
+    settings.source = str(folder / "f_{}.xyz")
+    settings.live_viewport_preset, settings.live_render_preset = "PREVIEW", "STEADY"
+    report = scene_mod.live_report
+
+    settings.radius = settings.estimated_radius / 30
+    scene.frame_set(frames[0])
+    try:
+        bpy.ops.meniscus.live_start()
+        check(False, "live: a radius 30x too small fails the Live operator")
+    except RuntimeError:
+        pass
+    check("is refused" in settings.live_status and "tick Force radius" in settings.live_status
+          and settings.live_status.startswith(str(folder / f"f_{frames[0]}.xyz")),
+          f"live: a radius 30x too small is refused as the bake refuses it: {settings.live_status!r}")
+    check(not scene_mod.live_objects(scene), "live: and no live object is made")
+    check(settings.live_status in panel_texts() and "meniscus.live_start" in panel_texts(),
+          "live: the panel shows the refusal under its Live button")
+    settings.radius = 0.0
+
+    bpy.ops.meniscus.live_start()
+    fluids = scene_mod.live_objects(scene)
+    check(len(fluids) == 1 and fluids[0].type == "MESH" and settings.live_status == "",
+          f"live: Live makes one fluid object ({[o.name for o in fluids]})")
+    fluid = fluids[0]
+    (mesher,) = scene_mod._meshers.values()
+    check(mesher.stats["meshed"] == 1 and mesher.stats["hits"] == 1,
+          f"live: the first frame is meshed once (the radius check) and shown from the cache ({mesher.stats})")
+    check(mesher.radius == np.float32(settings.estimated_radius),
+          f"live: the radius {mesher.radius:.6f} is the panel's estimate {settings.estimated_radius:.6f}")
+    check((scene.frame_start, scene.frame_end) == (frames[0], frames[-1]),
+          f"live: the scene range {scene.frame_start}-{scene.frame_end} is the sequence's")
+    for f in frames:
+        scene.frame_set(f)
+        faces, fl, drops = live_faces(fluid)
+        want = ply_faces(str(work / f"cli_preview_{f}.ply"))
+        check(faces == want and report["frame"] == f and report["preset"] == "PREVIEW" and report["error"] is None,
+              f"live frame {f} (viewport preset {report['preset']}): {fl} faces + {drops} droplets = {faces}, "
+              f"the CLI's PLY with that preset {want}")
+        if f == frames[1]:
+            check(len(fluid.data.edges) > 0 and not fluid.data.copy().validate(),
+                  f"live frame {f}: the swapped-in mesh (with the library's edges) is valid as it is")
+
+    # Frames that fail: no file, a broken file. Reported, the fluid cleared, nothing raised.
+    for f, words in ((frames[0] + 1, "no particle file"), (broken, "")):
+        try:
+            scene.frame_set(f)
+            raised = None
+        except Exception as e:  # the handler must not let it out
+            raised = e
+        faces, fl, drops = live_faces(fluid)
+        error = report["error"] or ""
+        check(raised is None and error.startswith(f"frame {f}:") and words in error and faces == 0
+              and error in panel_texts(),
+              f"live frame {f}: reported in the panel ({error!r}), the fluid cleared ({fl} faces, "
+              f"{drops} droplets), nothing raised ({raised!r})")
+
+    # Back to a meshed frame: from the cache.
+    meshed, hits = mesher.stats["meshed"], mesher.stats["hits"]
+    scene.frame_set(frames[0])
+    faces, _, _ = live_faces(fluid)
+    check(mesher.stats["hits"] == hits + 1 and mesher.stats["meshed"] == meshed and report["cached"]
+          and faces == ply_faces(str(work / f"cli_preview_{frames[0]}.ply")),
+          f"live: back to frame {frames[0]}, a cache hit ({mesher.stats['hits'] - hits} hit, "
+          f"{mesher.stats['meshed'] - meshed} meshed; {mesher.stats['cached_frames']} frames, "
+          f"{mesher.stats['cached_bytes'] / 2**20:.1f} MiB cached), {faces} faces")
+
+    # A render meshes with the render preset; the viewport preset comes back after it.
+    f = frames[1]
+    scene.frame_set(f)
+    seen = []
+
+    def on_post(scene_, depsgraph):  # the render's evaluated fluid
+        if depsgraph is not None and depsgraph.mode == "RENDER":
+            evaluated = fluid.evaluated_get(depsgraph)
+            points = [i for i in depsgraph.object_instances if i.object.type == "POINTCLOUD"]
+            seen.append((len(evaluated.data.polygons), sum(len(i.object.data.points) for i in points),
+                         report["preset"]))
+
+    bpy.app.handlers.frame_change_post.append(on_post)
+    camera = bpy.data.objects.new("Live camera", bpy.data.cameras.new("Live camera"))
+    scene.collection.objects.link(camera)
+    camera.location, camera.rotation_euler = (0.3, -3.0, 0.3), (1.5707963, 0.0, 0.0)
+    scene.camera = camera
+    scene.render.engine = "CYCLES"
+    scene.cycles.samples, scene.cycles.device = 1, "CPU"
+    scene.render.resolution_x, scene.render.resolution_y = 16, 16
+    with tempfile.TemporaryDirectory() as out:
+        scene.render.filepath = os.path.join(out, "live.png")
+        bpy.ops.render.render(write_still=True)
+    bpy.app.handlers.frame_change_post.remove(on_post)
+    want = ply_faces(str(work / f"cli_{f}.ply"))
+    rendered = [fl + 320 * drops for fl, drops, _ in seen]
+    check(bool(seen) and all(r == want and p == "STEADY" for r, (_, _, p) in zip(rendered, seen)),
+          f"live: the render of frame {f} meshed with the render preset: its evaluated fluid {seen} "
+          f"makes {rendered} faces, the CLI's steady PLY {want}")
+    faces, _, _ = live_faces(fluid)
+    check(not scene_mod.rendering() and report["preset"] == "PREVIEW" and report["cached"]
+          and faces == ply_faces(str(work / f"cli_preview_{f}.ply")),
+          f"live: after the render the viewport preset is back, from the cache ({faces} faces)")
+    scene.camera = None
+    bpy.data.objects.remove(camera)
+
+    # The handler survives saving and opening the file again.
+    blend = str(work / "live.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=blend)
+    bpy.ops.wm.open_mainfile(filepath=blend)
+    scene = bpy.context.scene
+    fluid = scene_mod.live_objects(scene)[0]
+    f = frames[2]
+    scene.frame_set(f)
+    faces, _, _ = live_faces(fluid)
+    check(report["frame"] == f and faces == ply_faces(str(work / f"cli_preview_{f}.ply")),
+          f"live: after the file is opened again, frame {f} is meshed ({faces} faces)")
+
+    # Stop Live: the objects go, frame changes mesh nothing.
+    check("meniscus.live_stop" in panel_texts(), "live: the panel offers Stop Live while live")
+    bpy.ops.meniscus.live_stop()
+    scene.frame_set(frames[0])
+    check(not scene_mod.live_objects(scene) and not scene_mod._meshers and report["frame"] is None
+          and not any(o.name.endswith("live") for o in bpy.data.objects),
+          "live: Stop Live removes the live objects; a frame change meshes nothing")
 
 
 def render_blur(scene, fluid, points, world):
@@ -209,4 +411,4 @@ if __name__ == "__main__":
     if failures:
         print(f"{len(failures)} check(s) failed")
         sys.exit(1)
-    print("the Blender extension bakes, plays back and blurs")
+    print("the Blender extension bakes, plays back, meshes live and blurs")
