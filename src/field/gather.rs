@@ -60,18 +60,28 @@ impl Source<'_> {
     /// Gathers into `out` the particles of the half-blocks within `reach` of `c` (per
     /// axis), in (z, y, x, index) order.
     pub(super) fn gather(&self, c: BlockKey, reach: i32, out: &mut Gathered) {
+        self.gather_box(c.map(|k| k - reach), c.map(|k| k + reach), out);
+    }
+
+    /// Gathers into `out` the particles of the half-blocks from `lo` to `hi` (both
+    /// included, per axis), in (z, y, x, index) order. The box is widest along x.
+    pub(super) fn gather_box(&self, lo: BlockKey, hi: BlockKey, out: &mut Gathered) {
         out.candidates.clear();
         out.ratios.clear();
         out.cells.clear();
-        let width = 2 * reach as usize + 1;
-        for dz in -reach..=reach {
-            for dy in -reach..=reach {
-                let Some(&(a, b)) = self.rows.get(&[c[1] + dy, c[2] + dz]) else {
-                    continue;
+        out.keys.clear();
+        out.rows.clear();
+        out.rows.push(0);
+        let width = (hi[0] - lo[0] + 1) as usize;
+        debug_assert!((0..3).all(|k| hi[k] - lo[k] < width as i32));
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                let row = match self.rows.get(&[y, z]) {
+                    Some(&(a, b)) => &self.runs[a as usize..b as usize],
+                    None => &[][..],
                 };
-                let row = &self.runs[a as usize..b as usize];
-                let first = row.partition_point(|r| r.0[0] < c[0] - reach);
-                let last = row.partition_point(|r| r.0[0] <= c[0] + reach);
+                let first = row.partition_point(|r| r.0[0] < lo[0]);
+                let last = row.partition_point(|r| r.0[0] <= hi[0]);
                 for &(key, a, b) in &row[first..last] {
                     let base = out.candidates.len() as u32;
                     out.candidates
@@ -80,13 +90,16 @@ impl Source<'_> {
                         out.ratios
                             .extend_from_slice(&ratios[a as usize..b as usize]);
                     }
-                    let offset = |k: usize| (key[k] - c[k] + reach) as usize + k * width;
+                    let offset = |k: usize| (key[k] - lo[k]) as usize + k * width;
                     out.cells
                         .push(([offset(0), offset(1), offset(2)], base, base + (b - a)));
+                    out.keys.push(key);
                 }
+                out.rows.push(out.cells.len() as u32);
             }
         }
-        out.low = c.map(|k| k - reach);
+        out.low = lo;
+        out.rows_y = (hi[1] - lo[1] + 1) as usize;
         out.width = width;
     }
 }
@@ -100,6 +113,12 @@ pub(super) struct Gathered {
     pub(super) ratios: Vec<f32>,
     /// The half-blocks of `candidates`: [`Around::cells`].
     pub(super) cells: Vec<([usize; 3], u32, u32)>,
+    /// Their keys.
+    pub(super) keys: Vec<BlockKey>,
+    /// Where each (y, z) row of the box starts in `cells` (y fastest, one more at the end).
+    rows: Vec<u32>,
+    /// Rows along y in the box.
+    rows_y: usize,
     /// Key of the first half-block along each axis.
     pub(super) low: BlockKey,
     /// Half-blocks per axis.
@@ -116,10 +135,50 @@ impl Gathered {
             edge,
         }
     }
+
+    /// Of a gather over a box that holds the half-blocks within `reach` of `c`, those
+    /// half-blocks (in `cells`, scratch): what [`Source::gather`] of `c` and `reach` would
+    /// give, the candidates read from this gather. The same half-blocks in the same order,
+    /// so the same neighbours in the same order.
+    pub(super) fn around_of<'a>(
+        &'a self,
+        c: BlockKey,
+        reach: i32,
+        edge: f64,
+        cells: &'a mut Vec<([usize; 3], u32, u32)>,
+    ) -> Around<'a> {
+        let width = 2 * reach as usize + 1;
+        cells.clear();
+        for z in c[2] - reach..=c[2] + reach {
+            for y in c[1] - reach..=c[1] + reach {
+                let row = (z - self.low[2]) as usize * self.rows_y + (y - self.low[1]) as usize;
+                let (s, e) = (self.rows[row] as usize, self.rows[row + 1] as usize);
+                let keys = &self.keys[s..e];
+                let first = s + keys.partition_point(|key| key[0] < c[0] - reach);
+                let last = s + keys.partition_point(|key| key[0] <= c[0] + reach);
+                cells.extend(
+                    self.keys[first..last]
+                        .iter()
+                        .zip(&self.cells[first..last])
+                        .map(|(key, &(_, a, b))| {
+                            let offset = |k: usize| (key[k] - c[k] + reach) as usize + k * width;
+                            ([offset(0), offset(1), offset(2)], a, b)
+                        }),
+                );
+            }
+        }
+        Around {
+            cells,
+            low: c.map(|k| k - reach),
+            width,
+            edge,
+        }
+    }
 }
 
 /// The half-blocks around the one of the current particles, `width` = 2·reach + 1 per
 /// axis, from key `low` up.
+#[derive(Clone, Copy)]
 pub(super) struct Around<'a> {
     /// Per populated half-block, its offset from `low` along axis k plus `k·width`
     /// (where its slab's distance is in the gap table), and its range of candidates.
