@@ -112,6 +112,11 @@ the CLI's ``--preset steady``): ``{"cell_size": 0.71, "iso_offset": -0.05, "deci
 "decimate_error": None, "smooth": 10, "smooth_method": "laplacian", "smooth_max_inward": 0.35,
 "subdivide": 0, "normal_smoothing": 3}``."""
 
+VELOCITY_NAMES: tuple[str, ...]
+"""The attribute names a file's default attribute selection (``reconstruct_file``'s
+``attributes=None``) takes as the velocity, compared ignoring case: ``("v", "vel",
+"velocity")``."""
+
 Preset = Literal["still", "steady", "paper"]
 
 class FormatError(ValueError):

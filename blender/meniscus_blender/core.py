@@ -272,11 +272,13 @@ def _nbytes(value):
 
 def live_attributes(attributes):
     """The particle attributes a live frame passes to ``meniscus.reconstruct``, those a
-    bake takes by default: the velocity (the first attribute named ``v``, ``vel`` or
-    ``velocity``, in any case), and Houdini's per-particle radius ``pscale`` when
+    bake takes by default: the velocity (the first attribute named as one of the
+    library's ``VELOCITY_NAMES``, in any case), and Houdini's per-particle radius ``pscale`` when
     present (the library meshes each particle with its own radius, as in a bake)."""
+    import meniscus
+
     chosen = {}
-    velocity = next((k for k in attributes if k.lower() in ("velocity", "vel", "v")), None)
+    velocity = next((k for k in attributes if k.lower() in meniscus.VELOCITY_NAMES), None)
     if velocity is not None:
         chosen[velocity] = attributes[velocity]
     if "pscale" in attributes:

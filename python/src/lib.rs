@@ -36,6 +36,10 @@ fn meniscus_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(archive::merge_archives, m)?)?;
     m.add("PAPER", options::preset_keywords(m.py(), Preset::Paper)?)?;
     m.add("STEADY", options::preset_keywords(m.py(), Preset::Steady)?)?;
+    m.add(
+        "VELOCITY_NAMES",
+        pyo3::types::PyTuple::new_bound(m.py(), meniscus::attributes::VELOCITY_NAMES),
+    )?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }
