@@ -78,7 +78,7 @@ class ReconstructOptions(TypedDict, total=False):
     (``"steady"``: ``"laplacian"``)."""
     smooth_max_inward: float | None
     """Farthest smoothing may move a vertex inwards, multiples of r; None: no bound.
-    Default None (``"steady"``: 0.35)."""
+    Default None (``"steady"``: 0.2)."""
     subdivide: int
     """Loop subdivision steps after decimation (0: off). Default 1 (``"steady"``: 0)."""
     defer_subdivision: bool
@@ -109,7 +109,7 @@ PAPER: ReconstructOptions
 STEADY: ReconstructOptions
 """The keywords that make the defaults the steady surface for animation (``preset="steady"``,
 the CLI's ``--preset steady``): ``{"cell_size": 0.71, "iso_offset": -0.05, "decimate": None,
-"decimate_error": None, "smooth": 10, "smooth_method": "laplacian", "smooth_max_inward": 0.35,
+"decimate_error": None, "smooth": 10, "smooth_method": "laplacian", "smooth_max_inward": 0.2,
 "subdivide": 0, "normal_smoothing": 3}``."""
 
 VELOCITY_NAMES: tuple[str, ...]

@@ -247,7 +247,7 @@ pub struct ReconstructSettings {
     /// steady preset's [`SmoothMethod::Laplacian`].
     pub smooth_method: SmoothMethod,
     /// Farthest smoothing may move a vertex inwards, multiples of `r`, or `None` for no
-    /// bound. Default `None`; the steady preset's 0.35.
+    /// bound. Default `None`; the steady preset's 0.2.
     pub smooth_max_inward: Option<f32>,
     /// Loop subdivision steps after decimation. Default 1.
     pub subdivide: u32,
@@ -287,7 +287,7 @@ impl ReconstructSettings {
 
     /// The surface for animation ([`ReconstructOptions::steady`]): the field marched at
     /// 0.71 r with the level 0.05 r further in, no decimation, 10 Laplacian steps that
-    /// move no vertex more than 0.35 r inwards, no subdivision, the normals smoothed by
+    /// move no vertex more than 0.2 r inwards, no subdivision, the normals smoothed by
     /// 3 steps; the other settings as [`Self::new`].
     pub fn steady(particle_radius: f32) -> Self {
         Self::of(&ReconstructOptions::steady(1.0), particle_radius)

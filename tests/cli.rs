@@ -1562,7 +1562,7 @@ fn a_sequence_takes_the_steady_preset() {
         "--smooth-method",
         "laplacian",
         "--smooth-max-inward",
-        "0.35",
+        "0.2",
         "--subdivide",
         "0",
         "--normal-smoothing",

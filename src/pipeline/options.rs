@@ -44,8 +44,11 @@ pub const STEADY_SMOOTHING_STEPS: u32 = 10;
 /// Farthest the steady surface's smoothing moves a vertex inwards, multiples of `r`:
 /// the marching-cubes surface holds every centre about a coverage radius (0.9 r) deep,
 /// so the containment depth (0.25 r) is kept where the steps would shrink a tip, a thin
-/// sheet or a small drop further.
-pub const STEADY_MAX_INWARD: f32 = 0.35;
+/// sheet or a small drop further. 0.2 (0.35 until 2026-12-02): the blocks' edges and the
+/// crests stay nearer the particles (|d − r| within 0.9× splashsurf smoothed's on 9
+/// of the 11 shipped frames instead of 4) while the sphere's lattice bumps still go
+/// (normal error 5.3°; a tighter bound leaves them: `docs/quality.md`).
+pub const STEADY_MAX_INWARD: f32 = 0.2;
 
 /// Iso-surface offset of the steady surface, multiples of `r`: the smoothed surface sits
 /// about 0.04 r further out than the particles' shell (it flattens the crests between
