@@ -196,7 +196,7 @@ impl Rounds {
         let tris = VertexTriangles::new(control);
         // The tangent-plane shortcut reads the control mesh's normals.
         control.compute_normals();
-        let slabs = Slabs::new(control, input.slab_triangles, r);
+        let slabs = Slabs::new(control, &tris, input.slab_triangles, r);
         stats.slabs = slabs.count() as u32;
         stats.surface_seconds += clock.elapsed().as_secs_f64();
         Rounds {

@@ -47,9 +47,14 @@ impl Slabs {
     /// `σ_c` the longest edge at `c` or at a neighbour of `c`; the reach takes `8r + 2σ_c`.
     /// A slab's surface holds every control triangle with a corner whose reach meets
     /// the slab.
-    pub(super) fn new(control: &TriMesh, chunk_triangles: usize, particle_radius: f64) -> Self {
+    pub(super) fn new(
+        control: &TriMesh,
+        tris: &VertexTriangles,
+        chunk_triangles: usize,
+        particle_radius: f64,
+    ) -> Self {
         let r = particle_radius as f32;
-        let reach = reaches(control, r);
+        let reach = reaches(control, tris, r);
         let (lo, hi) = control
             .positions
             .par_iter()
@@ -238,40 +243,16 @@ pub(super) fn longest_edge(control: &TriMesh, tris: &VertexTriangles, v: u32) ->
 }
 
 /// The reach of every control vertex: `8r` plus twice the longest edge at it or at a
-/// neighbour (see [`Slabs::new`]). Both maxima are taken triangle by triangle, each
-/// written to its corners (an edge's length is the same from either end, bit for bit):
-/// what [`longest_edge`] and [`fan_max`] give per vertex, in two passes over the
-/// triangles instead of two over every vertex's fan (on the 4M splash's steady surface,
-/// 32 M triangles, 0.3 s instead of 1.1 s).
-fn reaches(control: &TriMesh, r: f32) -> Vec<f32> {
-    use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
-    // Lengths are never negative: their bits order as the lengths do.
-    let scatter = |value: &(dyn Fn(&[u32; 3]) -> [f32; 3] + Sync)| {
-        let out: Vec<AtomicU32> = (0..control.positions.len())
-            .into_par_iter()
-            .map(|_| AtomicU32::new(0))
-            .collect();
-        control.triangles.par_iter().for_each(|t| {
-            for (&v, x) in t.iter().zip(value(t)) {
-                out[v as usize].fetch_max(x.to_bits(), Relaxed);
-            }
-        });
-        out
-    };
-    let x = |v: u32| control.positions[v as usize];
-    let longest = scatter(&|&[a, b, c]| {
-        let (ab, bc, ca) = (
-            (x(b) - x(a)).length(),
-            (x(c) - x(b)).length(),
-            (x(a) - x(c)).length(),
-        );
-        [ab.max(ca), ab.max(bc), bc.max(ca)]
-    });
-    let longest = |v: u32| f32::from_bits(longest[v as usize].load(Relaxed));
-    let around = scatter(&|&[a, b, c]| [longest(a).max(longest(b)).max(longest(c)); 3]);
-    around
+/// neighbour (see [`Slabs::new`]).
+fn reaches(control: &TriMesh, tris: &VertexTriangles, r: f32) -> Vec<f32> {
+    let n = control.positions.len() as u32;
+    let longest: Vec<f32> = (0..n)
         .into_par_iter()
-        .map(|m| 8.0 * r + 2.0 * f32::from_bits(m.into_inner()))
+        .map(|v| longest_edge(control, tris, v))
+        .collect();
+    (0..n)
+        .into_par_iter()
+        .map(|v| 8.0 * r + 2.0 * fan_max(control, tris, v, &|w| longest[w as usize]))
         .collect()
 }
 
@@ -410,7 +391,7 @@ mod tests {
         let mut control = crate::isolated::icosphere(4, 1.0);
         let r = 0.02;
         let tris = VertexTriangles::new(&control);
-        let mut slabs = Slabs::new(&control, 700, r);
+        let mut slabs = Slabs::new(&control, &tris, 700, r);
         assert!(slabs.count() > 3, "{} slabs", slabs.count());
         let mut rng = crate::test_rng::TestRng::new(3);
         let mut moved = Vec::new();
@@ -423,7 +404,7 @@ mod tests {
         moved.push(moved[0]);
         let before = slabs.reach.clone();
         slabs.update(&control, &tris, &moved);
-        let fresh = reaches(&control, r as f32);
+        let fresh = reaches(&control, &tris, r as f32);
         assert!(fresh != before, "the moves change some reaches");
         assert!(
             fresh
