@@ -559,7 +559,7 @@ pub(super) fn with_index<T>(
 
 #[cfg(test)]
 /// The longest edge of `mesh`.
-fn longest_edge(mesh: &TriMesh) -> f32 {
+pub(super) fn longest_edge(mesh: &TriMesh) -> f32 {
     mesh.triangles
         .iter()
         .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))

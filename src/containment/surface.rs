@@ -373,12 +373,7 @@ mod tests {
             *p *= 1.0 + 0.8 * ((i * 7 % 5) as f32 / 5.0);
         }
         let tris = VertexTriangles::new(&control);
-        let longest = control
-            .triangles
-            .iter()
-            .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
-            .map(|(a, b)| control.positions[a as usize].distance(control.positions[b as usize]))
-            .fold(0.0f32, f32::max) as f64;
+        let longest = super::super::measure::longest_edge(&control) as f64;
         for step in [
             Step::Loop,
             Step::Flat { split: 0.0 },
