@@ -138,6 +138,16 @@ def droplets_of(fluid):
     return next((c for c in fluid.children if c.get(ARCHIVE_KEY) == "droplets"), None)
 
 
+def swap(fluid, parts):
+    """Swaps ``parts`` (``core.mesh_parts``: the fluid's arrays and the droplets') into
+    ``fluid`` and its droplets child."""
+    (vertices, triangles, attributes, edges), (centres, radii, drops) = parts
+    set_fluid(fluid.data, vertices, triangles, attributes, edges)
+    droplets = droplets_of(fluid)
+    if droplets is not None:
+        set_droplets(droplets.data, centres, radii, drops)
+
+
 def show_frame(scene, fluid, frame=None):
     """Swaps the archive's frame for scene frame ``frame`` (default: the current one)
     into ``fluid`` and its droplets. Returns the archive frame shown."""
@@ -147,11 +157,7 @@ def show_frame(scene, fluid, frame=None):
     if fluid.get("meniscus_frame") == n and fluid.data.vertices:
         return n
     start = time.perf_counter()
-    (vertices, triangles, attributes, edges), (centres, radii, drops) = p.decode(n)
-    set_fluid(fluid.data, vertices, triangles, attributes, edges)
-    droplets = droplets_of(fluid)
-    if droplets is not None:
-        set_droplets(droplets.data, centres, radii, drops)
+    swap(fluid, p.decode(n))
     fluid["meniscus_frame"] = n
     last_swap["seconds"], last_swap["frame"] = time.perf_counter() - start, n
     return n
@@ -201,8 +207,9 @@ def playback_objects(scene):
 # shows it).
 _meshers = {}
 _render = {"running": False}
-live_report = {"frame": None, "preset": None, "error": None, "cached": False, "seconds": 0.0,
-               "mesh_seconds": 0.0, "triangles": 0, "droplets": 0}
+_NO_REPORT = {"frame": None, "preset": None, "error": None, "cached": False, "seconds": 0.0,
+              "mesh_seconds": 0.0, "triangles": 0, "droplets": 0}
+live_report = dict(_NO_REPORT)
 _report_lock = threading.Lock()
 
 
@@ -255,19 +262,15 @@ def show_live(scene, fluid, frame=None, render=None):
     if fluid.get("meniscus_live_shown") == shown:
         return None
     start = time.perf_counter()
-    report = {"frame": n, "preset": preset, "error": None, "cached": False, "mesh_seconds": 0.0,
-              "triangles": 0, "droplets": 0}
+    report = dict(_NO_REPORT, frame=n, preset=preset)
     try:
         m = mesher(scene, fluid)
         hits = m.stats["hits"]
-        (vertices, triangles, attributes, edges), (centres, radii, drops) = m.frame(n, preset)
+        parts = m.frame(n, preset)
         report["cached"] = m.stats["hits"] > hits
         report["mesh_seconds"] = 0.0 if report["cached"] else m.stats["seconds"][preset]
-        set_fluid(fluid.data, vertices, triangles, attributes, edges)
-        droplets = droplets_of(fluid)
-        if droplets is not None:
-            set_droplets(droplets.data, centres, radii, drops)
-        report["triangles"], report["droplets"] = len(triangles), len(centres)
+        swap(fluid, parts)
+        report["triangles"], report["droplets"] = len(parts[0][1]), len(parts[1][0])
         fluid["meniscus_live_shown"] = shown
     except Exception as e:  # reported, never raised out of a handler
         report["error"] = f"frame {n}: {e}"
@@ -328,8 +331,7 @@ def stop_live(scene):
                 bpy.data.meshes.remove(mesh)
     _meshers.clear()
     with _report_lock:
-        live_report.update(frame=None, preset=None, error=None, cached=False, seconds=0.0, mesh_seconds=0.0,
-                           triangles=0, droplets=0)
+        live_report.update(_NO_REPORT)
 
 
 @persistent
