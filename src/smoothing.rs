@@ -15,6 +15,12 @@
 //! * `v ← v + λ (mean(n_i) − v)` (shrinks),
 //! * `v ← v + μ (mean(n_i) − v)`, `μ < −λ` (inflates back; skipped when `μ = 0`).
 //!
+//! Positions are stepped in f32, the mesh's own precision (a step's rounding, about
+//! 1e-7 of the coordinates, is far below any move that matters): on the steady surface
+//! of a 4M-particle splash (32 M triangles, ten steps) the passes read half the memory
+//! they read in f64, 4.8–3.9 s instead of 6.6–6.9 s on a loaded 2-core machine, and the
+//! run's peak fell by 360 MiB.
+//!
 //! Low frequencies pass (below `k_PB = 1/λ + 1/μ` in Taubin's terms), high ones are damped
 //! by `(1 − λk)(1 − μk)` per step. A vertex on a boundary edge or on an edge of more than
 //! two triangles keeps its position.
@@ -26,14 +32,14 @@
 //! on every frame for a slightly larger distance to the particles.
 
 use crate::mesh::{TriMesh, VertexTriangles};
-use glam::DVec3;
+use glam::Vec3;
 use rayon::prelude::*;
 
 /// Peak of Taubin smoothing per control-mesh triangle: the mesh (24 B), the vertices'
 /// neighbour lists (≈ 14 B, and ≈ 14 B of vertex → triangle lists while they are built)
-/// and two f64 copies of the positions (≈ 24 B), bytes. The inward bound adds the start
+/// and two f32 copies of the positions (≈ 12 B), bytes. The inward bound adds the start
 /// positions and normals (≈ 12 B), below the lists' building.
-pub(crate) const BYTES_PER_INPUT_TRIANGLE: f64 = 72.0;
+pub(crate) const BYTES_PER_INPUT_TRIANGLE: f64 = 60.0;
 
 /// The vertices' neighbour lists ([`Rings`]) per triangle, bytes: what the pipeline
 /// holds between smoothing and the shading normals when it hands them over.
@@ -148,19 +154,19 @@ pub(crate) fn smooth_keeping_rings(
         return (stats, None);
     }
     let rings = Rings::new(mesh);
-    let mut current: Vec<DVec3> = mesh.positions.iter().map(|p| p.as_dvec3()).collect();
-    let mut next = vec![DVec3::ZERO; current.len()];
-    let passes: &[f64] = if options.mu == 0.0 {
-        &[options.lambda as f64]
+    let mut current: Vec<Vec3> = mesh.positions.clone();
+    let mut next = vec![Vec3::ZERO; current.len()];
+    let passes: &[f32] = if options.mu == 0.0 {
+        &[options.lambda]
     } else {
-        &[options.lambda as f64, options.mu as f64]
+        &[options.lambda, options.mu]
     };
     // The bound's reference: each vertex's start (the f32 positions, which `current`
     // holds exactly) and its outward normal there.
     let start = options.max_inward.map(|bound| {
         mesh.compute_normals();
         (
-            bound as f64,
+            bound,
             mesh.positions.clone(),
             std::mem::take(&mut mesh.normals),
         )
@@ -172,15 +178,15 @@ pub(crate) fn smooth_keeping_rings(
             next.par_iter_mut().enumerate().for_each(|(v, out)| {
                 let mut p = match rings.of(v) {
                     Some(ring) => {
-                        let mean = ring.iter().map(|&n| current[n as usize]).sum::<DVec3>()
-                            / ring.len() as f64;
+                        let mean = ring.iter().map(|&n| current[n as usize]).sum::<Vec3>()
+                            / ring.len() as f32;
                         current[v] + weight * (mean - current[v])
                     }
                     None => current[v],
                 };
                 if let Some((bound, start, normals)) = bound {
-                    let n = normals[v].as_dvec3();
-                    let inward = -(p - start[v].as_dvec3()).dot(n);
+                    let n = normals[v];
+                    let inward = -(p - start[v]).dot(n);
                     if inward > *bound {
                         p += (inward - bound) * n;
                     }
@@ -193,8 +199,8 @@ pub(crate) fn smooth_keeping_rings(
     drop(start);
     drop(next);
     for (p, &new) in mesh.positions.iter_mut().zip(&current) {
-        let shift = (new - p.as_dvec3()).length();
-        *p = new.as_vec3();
+        let shift = (new - *p).as_dvec3().length();
+        *p = new;
         stats.mean_shift += shift;
         stats.max_shift = stats.max_shift.max(shift);
     }
@@ -374,10 +380,10 @@ pub(crate) mod tests {
         let mut mesh = uv_sphere(1.0, 24, 48);
         let (before, _) = radii(&mesh);
         let rings = Rings::new(&mesh);
-        let current: Vec<DVec3> = mesh.positions.iter().map(|p| p.as_dvec3()).collect();
+        let current: Vec<glam::DVec3> = mesh.positions.iter().map(|p| p.as_dvec3()).collect();
         for (v, p) in mesh.positions.iter_mut().enumerate() {
             let ring = rings.of(v).unwrap();
-            let mean = ring.iter().map(|&n| current[n as usize]).sum::<DVec3>() / ring.len() as f64;
+            let mean = ring.iter().map(|&n| current[n as usize]).sum::<glam::DVec3>() / ring.len() as f64;
             *p = (current[v] + 0.3 * (mean - current[v])).as_vec3();
         }
         let (after, _) = radii(&mesh);
