@@ -31,25 +31,49 @@ pub(crate) struct VertexTriangles {
 
 impl VertexTriangles {
     /// The lists of `mesh`'s vertices.
+    ///
+    /// Counted and filled in parallel (atomic counters: on the steady surface of a
+    /// 4M-particle splash, 32 M triangles, each of the two serial passes took about 0.2
+    /// s), then each list sorted, so the lists are the same whatever the thread count.
     pub(crate) fn new(mesh: &TriMesh) -> Self {
+        use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
         let nv = mesh.positions.len();
-        let mut start = vec![0u32; nv + 1];
-        for t in &mesh.triangles {
-            for &v in t {
-                start[v as usize + 1] += 1;
+        let counts: Vec<AtomicU32> = (0..=nv).map(|_| AtomicU32::new(0)).collect();
+        mesh.triangles.par_iter().for_each(|tri| {
+            for &v in tri {
+                counts[v as usize + 1].fetch_add(1, Relaxed);
             }
-        }
+        });
+        let mut start: Vec<u32> = counts.into_iter().map(AtomicU32::into_inner).collect();
         for i in 0..nv {
             start[i + 1] += start[i];
         }
-        let mut fill = start.clone();
-        let mut triangles = vec![0u32; start[nv] as usize];
-        for (t, tri) in mesh.triangles.iter().enumerate() {
+        let fill: Vec<AtomicU32> = start[..nv].iter().map(|&s| AtomicU32::new(s)).collect();
+        let slots: Vec<AtomicU32> = (0..start[nv]).map(|_| AtomicU32::new(0)).collect();
+        mesh.triangles.par_iter().enumerate().for_each(|(t, tri)| {
             for &v in tri {
-                triangles[fill[v as usize] as usize] = t as u32;
-                fill[v as usize] += 1;
+                let slot = fill[v as usize].fetch_add(1, Relaxed);
+                slots[slot as usize].store(t as u32, Relaxed);
             }
+        });
+        drop(fill);
+        let mut triangles: Vec<u32> = slots.into_iter().map(AtomicU32::into_inner).collect();
+        // Sort each vertex's list, the vertices in chunks of about equal list lengths.
+        const CHUNK: usize = 1 << 14;
+        let mut lists = Vec::with_capacity(nv.div_ceil(CHUNK));
+        let mut rest = &mut triangles[..];
+        for first in (0..nv).step_by(CHUNK) {
+            let last = (first + CHUNK).min(nv);
+            let (chunk, tail) = rest.split_at_mut((start[last] - start[first]) as usize);
+            lists.push((first..last, chunk));
+            rest = tail;
         }
+        lists.into_par_iter().for_each(|(vertices, chunk)| {
+            let base = start[vertices.start];
+            for v in vertices {
+                chunk[(start[v] - base) as usize..(start[v + 1] - base) as usize].sort_unstable();
+            }
+        });
         VertexTriangles { start, triangles }
     }
 
@@ -378,6 +402,34 @@ impl Surface {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn vertex_triangle_lists_hold_each_vertex_triangles_in_order_on_any_pool() {
+        // Vertices renumbered so that lists cross the chunks, and one vertex on no triangle.
+        let mesh = crate::isolated::icosphere(6, 1.0);
+        let n = mesh.positions.len() as u32 + 1;
+        let perm = |v: u32| (v * 7 + 5) % n;
+        assert_ne!(n % 7, 0);
+        let mesh = TriMesh {
+            positions: vec![Vec3::ZERO; n as usize],
+            triangles: mesh.triangles.iter().map(|t| t.map(perm)).collect(),
+            ..TriMesh::default()
+        };
+        let mut expected = vec![Vec::new(); n as usize];
+        for (t, tri) in mesh.triangles.iter().enumerate() {
+            for &v in tri {
+                expected[v as usize].push(t as u32);
+            }
+        }
+        assert!(expected.iter().any(Vec::is_empty), "a vertex on no triangle");
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let lists = pool.install(|| VertexTriangles::new(&mesh));
+            for (v, want) in expected.iter().enumerate() {
+                assert_eq!(lists.of(v as u32), &want[..], "vertex {v}, {threads} threads");
+            }
+        }
+    }
 
     #[test]
     fn normals_do_not_depend_on_the_split_of_the_vertices() {
