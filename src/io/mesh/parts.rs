@@ -73,7 +73,7 @@ impl Part<'_> {
             Part::Spheres(s) => s.attributes[k].item(i / s.template.vertex_count()),
         }
     }
-    fn triangle(&self, j: usize) -> [u32; 3] {
+    pub(super) fn triangle(&self, j: usize) -> [u32; 3] {
         match self {
             Part::Mesh(m) => m.triangles[j],
             Part::Spheres(s) => {
@@ -187,6 +187,42 @@ pub(super) fn write_chunked<T>(
         }
     }
     w.write_all(&buf)
+}
+
+/// Items encoded per task of [`write_chunked_par`].
+const PAR_CHUNK_ITEMS: usize = 1 << 15;
+
+/// [`write_chunked`] over the items `0..n`, encoded on every thread a window of a few
+/// chunks per thread at a time and written in order: the same bytes, and no more than
+/// the window (a few MiB) added to the memory peak. The 4M splash's steady PLY (40 M
+/// triangles): the write stage 1.85–2.19 s against 2.08–2.73 s encoding on one thread
+/// (two runs each, alternating, another job on the machine).
+pub(super) fn write_chunked_par(
+    w: &mut impl Write,
+    n: usize,
+    encode: impl Fn(&mut Vec<u8>, usize) + Sync,
+) -> Result<()> {
+    use rayon::prelude::*;
+    let window = PAR_CHUNK_ITEMS * 4 * rayon::current_num_threads();
+    for first in (0..n).step_by(window) {
+        let last = (first + window).min(n);
+        let chunks: Vec<Vec<u8>> = (first..last)
+            .step_by(PAR_CHUNK_ITEMS)
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map(|start| {
+                let mut buf = Vec::new();
+                for i in start..(start + PAR_CHUNK_ITEMS).min(last) {
+                    encode(&mut buf, i);
+                }
+                buf
+            })
+            .collect();
+        for chunk in &chunks {
+            w.write_all(chunk)?;
+        }
+    }
+    Ok(())
 }
 
 /// The triangles of all parts, with vertex indices offset to the shared numbering.

@@ -7,7 +7,7 @@
 //!   attributes (regrouped by [`super::columns::regroup`]).
 
 use super::columns;
-use super::parts::{all_triangles, counts, write_chunked, Part, Shared};
+use super::parts::{counts, write_chunked_par, Part, Shared};
 use crate::error::Result;
 use crate::io::ply_header;
 use crate::io::text::{Cursor, Scalar};
@@ -122,7 +122,7 @@ pub(super) fn write(
         "element face {nt}\nproperty list uchar uint vertex_indices\nend_header\n",
     )?;
     for (p, m) in parts.iter().enumerate() {
-        write_chunked(w, 0..m.vertex_count(), |buf, i| {
+        write_chunked_par(w, m.vertex_count(), |buf, i| {
             for v in m.position(i).to_array() {
                 buf.extend_from_slice(&v.to_le_bytes());
             }
@@ -134,10 +134,15 @@ pub(super) fn write(
             shared.encode(parts, p, i, None, false, buf);
         })?;
     }
-    write_chunked(w, all_triangles(parts), |buf, t| {
-        buf.push(3);
-        for i in t {
-            buf.extend_from_slice(&i.to_le_bytes());
-        }
-    })
+    let mut base = 0u32;
+    for m in parts {
+        write_chunked_par(w, m.triangle_count(), |buf, j| {
+            buf.push(3);
+            for i in m.triangle(j) {
+                buf.extend_from_slice(&(i + base).to_le_bytes());
+            }
+        })?;
+        base += m.vertex_count() as u32;
+    }
+    Ok(())
 }
