@@ -1,7 +1,7 @@
 //! `meniscus.Mesh`: a reconstructed or decoded surface, its arrays, figures and writer.
 
 use crate::arrays::{attribute_array, vec3s};
-use crate::edges::number_edges;
+use crate::edges::{flat_pairs, number_edges};
 use crate::interrupt::run_interruptible;
 use meniscus::io::mesh::{write_surface, MeshWriteOptions};
 use meniscus::io::usd::{write_stage, UsdFormat, UsdOptions};
@@ -133,8 +133,8 @@ impl Mesh {
         let fluid = &self.surface.fluid;
         let (edges, corners) =
             py.allow_threads(|| number_edges(&fluid.triangles, fluid.positions.len()));
-        let flat: Vec<i32> = edges.iter().flatten().copied().collect();
-        let edges = Array2::from_shape_vec((edges.len(), 2), flat)
+        let count = edges.len();
+        let edges = Array2::from_shape_vec((count, 2), flat_pairs(edges))
             .expect("2 per row")
             .into_pyarray_bound(py);
         PyTuple::new_bound(
