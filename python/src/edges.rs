@@ -300,3 +300,78 @@ pub(crate) fn flat_pairs(pairs: Vec<[i32; 2]>) -> Vec<i32> {
     // the vector's ownership passes to the new one.
     unsafe { Vec::from_raw_parts(ptr.cast::<i32>(), 2 * len, 2 * capacity) }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use meniscus::isolated::icosphere;
+    use meniscus::subdivision::{subdivide, SubdivideOptions};
+
+    fn subdivided(triangles: Vec<[u32; 3]>, vertices: Vec<glam::Vec3>) -> meniscus::TriMesh {
+        let mut mesh = meniscus::TriMesh {
+            positions: vertices,
+            triangles,
+            normals: Vec::new(),
+            attributes: Vec::new(),
+        };
+        subdivide(&mut mesh, &SubdivideOptions::levels(1));
+        mesh
+    }
+
+    #[test]
+    fn a_loop_step_is_numbered_as_the_closed_manifold_numbering_does() {
+        for level in 0..3 {
+            let control = icosphere(level, 1.0);
+            let fine = subdivided(control.triangles.clone(), control.positions.clone());
+            let n = fine.positions.len();
+            let want = number_edges_manifold(&fine.triangles, n).unwrap();
+            assert_eq!(number_edges_loop(&fine.triangles, n), Some(want.clone()));
+            assert_eq!(number_edges(&fine.triangles, n), want);
+            // Euler: a closed surface of T triangles has 3T/2 edges.
+            assert_eq!(2 * want.0.len(), 3 * fine.triangles.len());
+        }
+    }
+
+    #[test]
+    fn other_layouts_are_left_to_the_other_numberings() {
+        // Not subdivided (an icosahedron; icosphere(1) is its midpoint subdivision, laid
+        // out as a Loop step).
+        let ico = icosphere(0, 1.0);
+        assert_eq!(number_edges_loop(&ico.triangles, ico.positions.len()), None);
+        let control = icosphere(1, 1.0);
+        let fine = subdivided(control.triangles.clone(), control.positions.clone());
+        let nf = fine.positions.len();
+        // Two families swapped within: not children()'s order.
+        let mut shuffled = fine.triangles.clone();
+        shuffled.swap(0, 1);
+        assert_eq!(number_edges_loop(&shuffled, nf), None);
+        // Not closed: one family dropped.
+        let open = fine.triangles[4..].to_vec();
+        assert_eq!(number_edges_loop(&open, nf), None);
+        assert_eq!(
+            number_edges(&open, nf),
+            number_edges_sorted(&open, nf),
+            "an open surface takes the sorted numbering"
+        );
+        // Two control triangles on the same three vertices (a closed pillow): their inner
+        // edges coincide, so the mesh is no manifold and is numbered by sorting.
+        let pillow = subdivided(vec![[0, 1, 2], [0, 2, 1]], vec![glam::Vec3::ZERO; 3]);
+        let np = pillow.positions.len();
+        assert_eq!(number_edges_loop(&pillow.triangles, np), None);
+        let (edges, corners) = number_edges(&pillow.triangles, np);
+        assert_eq!(corners.len(), 3 * pillow.triangles.len());
+        let mut pairs: Vec<[i32; 2]> = edges.iter().map(|&[a, b]| [a.min(b), a.max(b)]).collect();
+        pairs.sort_unstable();
+        pairs.dedup();
+        assert_eq!(pairs.len(), edges.len(), "each vertex pair once");
+    }
+
+    #[test]
+    fn pairs_flatten_in_place() {
+        let pairs = vec![[1, 2], [3, 4], [5, 6]];
+        let ptr = pairs.as_ptr() as usize;
+        let flat = flat_pairs(pairs);
+        assert_eq!(flat, [1, 2, 3, 4, 5, 6]);
+        assert_eq!(flat.as_ptr() as usize, ptr);
+    }
+}
