@@ -11,6 +11,8 @@ python3 -m venv "$venv"
 pip install -q --upgrade pip
 pip install -q maturin pytest numpy "dask[distributed]" "usd-core==26.11"
 cargo clippy --release -p meniscus-python --all-targets -- -D warnings
+# The package's own Rust unit tests (its edge numbering); not among the default members.
+cargo test --release --quiet -p meniscus-python --lib
 (cd python && maturin develop --release)
 cargo build --release --quiet --bin meniscus
 pytest python/tests -q

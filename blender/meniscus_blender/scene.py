@@ -6,6 +6,7 @@ file meshed by the library (live). Both carry a ``velocity`` point attribute in 
 object's space, which Cycles uses for motion blur. The simulation's +Y is turned to
 Blender's +Z by the objects' rotation."""
 
+import ctypes
 import math
 import os
 import threading
@@ -74,6 +75,54 @@ def _fill(mesh, name, field, values, fallback):
         fallback[0].foreach_set(fallback[1], values)
 
 
+def _int32(values):
+    """``values`` as a flat int32 array: a view of the library's uint32 (its indices are
+    below 2^31) or int32 arrays, a copy of anything else."""
+    values = np.ascontiguousarray(values)
+    if values.dtype in (np.uint32, np.int32):
+        return values.view(np.int32).ravel()
+    return values.astype(np.int32).ravel()
+
+
+# Face offsets 0, 3, 6, ... of the largest triangle mesh swapped in so far (grown on
+# demand): every triangle mesh's loop_start is a prefix of it.
+_triangle_offsets = np.zeros(0, dtype=np.int32)
+
+
+def _offsets_of(count):
+    global _triangle_offsets
+    if len(_triangle_offsets) < count:
+        _triangle_offsets = np.arange(0, 3 * max(count, 2 * len(_triangle_offsets)), 3, dtype=np.int32)
+    return _triangle_offsets[:count]
+
+
+def _set_triangle_offsets(mesh, count):
+    """Sets the face offsets (``loop_start``) of ``mesh``'s ``count`` triangles, just
+    added: 0, 3, 6, ... RNA's ``polygons.foreach_set("loop_start")`` sets them one face
+    at a time (30 ms for 1 M faces in bpy 5.0.1; they are no attribute that ``foreach_set``
+    copies in one go, no bpy call removes faces so that a kept mesh keeps its offsets, and
+    ``clear_geometry`` frees them). A face's RNA pointer (``MeshPolygon.as_pointer()``) is
+    the address of its offset in the mesh's offsets array (``loop_start`` reads and writes
+    through it), so the offsets are copied there in one go (1 ms) when that layout is
+    seen: consecutive faces 4 bytes apart and the end offset, which ``polygons.add`` sets,
+    equal to the corner count; and read back through RNA. Otherwise, RNA's setter."""
+    offsets = _offsets_of(count)
+    if count == 0:
+        return
+    polygons = mesh.polygons
+    try:
+        first, last = polygons[0].as_pointer(), polygons[count - 1].as_pointer()
+        if first and last - first == 4 * (count - 1):
+            block = np.ctypeslib.as_array((ctypes.c_int32 * (count + 1)).from_address(first))
+            if block[count] == len(mesh.loops) == 3 * count:
+                block[:count] = offsets
+                if all(polygons[i].loop_start == 3 * i for i in (0, count // 2, count - 1)):
+                    return
+    except (TypeError, ValueError, AttributeError):
+        pass
+    polygons.foreach_set("loop_start", offsets)
+
+
 def set_fluid(mesh, vertices, triangles, attributes, edges=None):
     """Replaces ``mesh``'s geometry with a triangle mesh (smooth shaded). ``edges`` =
     (edges (E, 2), corner_edges (3T,)) as ``meniscus.Mesh.fluid_edges`` gives them;
@@ -85,16 +134,13 @@ def set_fluid(mesh, vertices, triangles, attributes, edges=None):
           (mesh.vertices, "co"))
     if edges is not None:
         mesh.edges.add(len(edges[0]))
-        _fill(mesh, ".edge_verts", "value", np.ascontiguousarray(edges[0], dtype=np.int32).ravel(),
-              (mesh.edges, "vertices"))
+        _fill(mesh, ".edge_verts", "value", _int32(edges[0]), (mesh.edges, "vertices"))
     mesh.loops.add(3 * nt)
-    _fill(mesh, ".corner_vert", "value", np.ascontiguousarray(triangles, dtype=np.int32).ravel(),
-          (mesh.loops, "vertex_index"))
+    _fill(mesh, ".corner_vert", "value", _int32(triangles), (mesh.loops, "vertex_index"))
     if edges is not None:
-        _fill(mesh, ".corner_edge", "value", np.ascontiguousarray(edges[1], dtype=np.int32),
-              (mesh.loops, "edge_index"))
+        _fill(mesh, ".corner_edge", "value", _int32(edges[1]), (mesh.loops, "edge_index"))
     mesh.polygons.add(nt)
-    mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * nt, 3, dtype=np.int32))
+    _set_triangle_offsets(mesh, nt)
     _set_attributes(mesh, attributes, nv)
     mesh.update()
 

@@ -8,6 +8,7 @@
 
 mod archive;
 mod arrays;
+mod edges;
 mod errors;
 mod functions;
 mod interrupt;
