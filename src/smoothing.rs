@@ -383,7 +383,11 @@ pub(crate) mod tests {
         let current: Vec<glam::DVec3> = mesh.positions.iter().map(|p| p.as_dvec3()).collect();
         for (v, p) in mesh.positions.iter_mut().enumerate() {
             let ring = rings.of(v).unwrap();
-            let mean = ring.iter().map(|&n| current[n as usize]).sum::<glam::DVec3>() / ring.len() as f64;
+            let mean = ring
+                .iter()
+                .map(|&n| current[n as usize])
+                .sum::<glam::DVec3>()
+                / ring.len() as f64;
             *p = (current[v] + 0.3 * (mean - current[v])).as_vec3();
         }
         let (after, _) = radii(&mesh);

@@ -421,12 +421,22 @@ mod tests {
                 expected[v as usize].push(t as u32);
             }
         }
-        assert!(expected.iter().any(Vec::is_empty), "a vertex on no triangle");
+        assert!(
+            expected.iter().any(Vec::is_empty),
+            "a vertex on no triangle"
+        );
         for threads in [1, 3] {
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
             let lists = pool.install(|| VertexTriangles::new(&mesh));
             for (v, want) in expected.iter().enumerate() {
-                assert_eq!(lists.of(v as u32), &want[..], "vertex {v}, {threads} threads");
+                assert_eq!(
+                    lists.of(v as u32),
+                    &want[..],
+                    "vertex {v}, {threads} threads"
+                );
             }
         }
     }
