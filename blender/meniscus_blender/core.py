@@ -67,6 +67,21 @@ class Sequence:
                              f"{self.frames[0]}–{self.frames[-1]})")
         return path
 
+    def rescan(self):
+        """Looks for the sequence's files again (the ``{}`` pattern's folder listed, the
+        ``.pvd`` read), so that files written since are found. Returns whether the files
+        changed; a listing that fails or finds nothing keeps the files known."""
+        if self.files is None:
+            return False
+        try:
+            fresh = resolve_sequence(self.source)
+        except (OSError, ValueError, ElementTree.ParseError):
+            return False
+        if fresh.files is None or fresh.files == self.files:
+            return False
+        self.frames, self.first, self.files = fresh.frames, fresh.first, fresh.files
+        return True
+
     def __repr__(self):
         return f"Sequence({self.source!r}, {len(self.frames)} frames)"
 
@@ -329,6 +344,11 @@ def live_attributes(attributes):
     return chosen
 
 
+# Live mode looks for a sequence's files again (``Sequence.rescan``) when a scene frame
+# has no known file, at most once in this many seconds.
+RESCAN_SECONDS = 1.0
+
+
 class LiveMesher:
     """Meshes a sequence's frames on demand, for live mode: ``frame(n, preset)`` reads
     the particle file shown at scene frame ``n`` (``held(n)``: its own, or across a gap
@@ -340,9 +360,13 @@ class LiveMesher:
     its first frame), and
     returns its ``mesh_parts``. The results of recent frames are kept per preset, the
     least recently used dropped first beyond ``cache_bytes``; a file changed on disk
-    (its size or time) is meshed again. ``stats``: ``meshed`` and ``hits`` (calls
+    (its size or time) is meshed again. A scene frame with no known file has the
+    sequence's files looked for again (``Sequence.rescan``) when the last look is
+    ``rescan_seconds`` old, so files written after Live was pressed are found.
+    ``stats``: ``meshed`` and ``hits`` (calls
     answered by meshing and from the cache), ``seconds`` (the last meshing's, by
-    preset), ``cached_frames``, ``cached_bytes``. Errors are the library's (a refused
+    preset), ``cached_frames``, ``cached_bytes``, ``rescans`` (looks that found the
+    files changed). Errors are the library's (a refused
     radius worded as the panel's, see ``library_error``), as ValueError/OSError."""
 
     def __init__(self, sequence, radius=None, radius_check=True, cache_bytes=512 << 20):
@@ -354,13 +378,23 @@ class LiveMesher:
         self.cache_bytes = int(cache_bytes)
         self._cache = collections.OrderedDict()  # key -> (parts, bytes)
         self._lock = threading.Lock()
-        self.stats = {"meshed": 0, "hits": 0, "seconds": {}, "cached_frames": 0, "cached_bytes": 0}
+        self.rescan_seconds = RESCAN_SECONDS
+        self._scanned = time.monotonic()
+        self.stats = {"meshed": 0, "hits": 0, "seconds": {}, "cached_frames": 0, "cached_bytes": 0,
+                      "rescans": 0}
 
     def _held(self, n):
+        files = self.sequence.files
+        if files is not None and n not in files and time.monotonic() - self._scanned >= self.rescan_seconds:
+            if self.sequence.rescan():
+                self.stats["rescans"] += 1
+            self._scanned = time.monotonic()
         return self.sequence.held(n)
 
     def held(self, n):
-        """The sequence frame whose file is shown at scene frame ``n`` (``Sequence.held``)."""
+        """The sequence frame whose file is shown at scene frame ``n`` (``Sequence.held``),
+        the files looked for again first when ``n`` has none and the last look is
+        ``rescan_seconds`` old."""
         with self._lock:
             return self._held(n)
 
