@@ -4,6 +4,7 @@ player (a frame decoded on demand) and the live mesher (a frame's particle file 
 by ``meniscus.reconstruct``, recent frames kept). Blender's side is in ``ui.py`` and
 ``scene.py``."""
 
+import bisect
 import collections
 import os
 import re
@@ -31,6 +32,15 @@ def preset_options(name):
     return dict(PRESETS[name])
 
 
+def held_frame(frames, n):
+    """The frame of ``frames`` (numbers, sorted, not empty) shown at scene frame ``n``:
+    the last one at or before ``n``, the first one before it. Playback of an archive and
+    live meshing both show a scene frame this way: a frame between two exported (or
+    archived) frames holds the one before, the frames after the last hold the last."""
+    i = bisect.bisect_right(frames, n)
+    return frames[i - 1] if i else frames[0]
+
+
 class Sequence:
     """A particle sequence as the user picked it: ``source`` (what reconstruct_file takes:
     a ``{}`` pattern or a ``.pvd``), ``frames`` (numbers, sorted), ``first`` (the
@@ -40,8 +50,15 @@ class Sequence:
     def __init__(self, source, frames, first, files=None):
         self.source, self.frames, self.first, self.files = source, frames, first, files
 
+    def held(self, n):
+        """The sequence frame whose file is shown at scene frame ``n`` (``held_frame``:
+        the last one at or before ``n``, the first before it); the only frame of one
+        unnumbered file."""
+        return held_frame(self.frames, n)
+
     def file(self, n):
-        """The particle file of frame ``n``; ValueError when the sequence has none."""
+        """The particle file of sequence frame ``n``; ValueError when the sequence has
+        none (``held`` gives the frame to ask for)."""
         if self.files is None:
             return self.first
         path = self.files.get(n)
@@ -49,6 +66,21 @@ class Sequence:
             raise ValueError(f"no particle file (the sequence has {len(self.frames)} frame(s), "
                              f"{self.frames[0]}–{self.frames[-1]})")
         return path
+
+    def rescan(self):
+        """Looks for the sequence's files again (the ``{}`` pattern's folder listed, the
+        ``.pvd`` read), so that files written since are found. Returns whether the files
+        changed; a listing that fails or finds nothing keeps the files known."""
+        if self.files is None:
+            return False
+        try:
+            fresh = resolve_sequence(self.source)
+        except (OSError, ValueError, ElementTree.ParseError):
+            return False
+        if fresh.files is None or fresh.files == self.files:
+            return False
+        self.frames, self.first, self.files = fresh.frames, fresh.first, fresh.files
+        return True
 
     def __repr__(self):
         return f"Sequence({self.source!r}, {len(self.frames)} frames)"
@@ -269,14 +301,8 @@ class ArchivePlayer:
             raise ValueError(f"{path}: the archive holds no frame")
 
     def held(self, n):
-        """The archive frame shown at scene frame ``n``."""
-        best = self.frames[0]
-        for f in self.frames:
-            if f <= n:
-                best = f
-            else:
-                break
-        return best
+        """The archive frame shown at scene frame ``n`` (``held_frame``)."""
+        return held_frame(self.frames, n)
 
     def decode(self, frame):
         """``(fluid, droplets)`` of archive frame ``frame`` (see ``mesh_parts``)."""
@@ -318,18 +344,29 @@ def live_attributes(attributes):
     return chosen
 
 
+# Live mode looks for a sequence's files again (``Sequence.rescan``) when a scene frame
+# has no known file, at most once in this many seconds.
+RESCAN_SECONDS = 1.0
+
+
 class LiveMesher:
     """Meshes a sequence's frames on demand, for live mode: ``frame(n, preset)`` reads
-    frame ``n``'s particle file (``meniscus.read_particles``) and meshes it
+    the particle file shown at scene frame ``n`` (``held(n)``: its own, or across a gap
+    the last one before, as playback holds an archive's frames) with
+    ``meniscus.read_particles`` and meshes it
     (``meniscus.reconstruct``) with the preset's keywords at one radius for the whole
     sequence (``radius``, or the first frame's estimate, as a bake takes it; a given
     radius is checked by the library on the first frame meshed, as a bake checks it on
     its first frame), and
     returns its ``mesh_parts``. The results of recent frames are kept per preset, the
     least recently used dropped first beyond ``cache_bytes``; a file changed on disk
-    (its size or time) is meshed again. ``stats``: ``meshed`` and ``hits`` (calls
+    (its size or time) is meshed again. A scene frame with no known file has the
+    sequence's files looked for again (``Sequence.rescan``) when the last look is
+    ``rescan_seconds`` old, so files written after Live was pressed are found.
+    ``stats``: ``meshed`` and ``hits`` (calls
     answered by meshing and from the cache), ``seconds`` (the last meshing's, by
-    preset), ``cached_frames``, ``cached_bytes``. Errors are the library's (a refused
+    preset), ``cached_frames``, ``cached_bytes``, ``rescans`` (looks that found the
+    files changed). Errors are the library's (a refused
     radius worded as the panel's, see ``library_error``), as ValueError/OSError."""
 
     def __init__(self, sequence, radius=None, radius_check=True, cache_bytes=512 << 20):
@@ -341,9 +378,28 @@ class LiveMesher:
         self.cache_bytes = int(cache_bytes)
         self._cache = collections.OrderedDict()  # key -> (parts, bytes)
         self._lock = threading.Lock()
-        self.stats = {"meshed": 0, "hits": 0, "seconds": {}, "cached_frames": 0, "cached_bytes": 0}
+        self.rescan_seconds = RESCAN_SECONDS
+        self._scanned = time.monotonic()
+        self.stats = {"meshed": 0, "hits": 0, "seconds": {}, "cached_frames": 0, "cached_bytes": 0,
+                      "rescans": 0}
+
+    def _held(self, n):
+        files = self.sequence.files
+        if files is not None and n not in files and time.monotonic() - self._scanned >= self.rescan_seconds:
+            if self.sequence.rescan():
+                self.stats["rescans"] += 1
+            self._scanned = time.monotonic()
+        return self.sequence.held(n)
+
+    def held(self, n):
+        """The sequence frame whose file is shown at scene frame ``n`` (``Sequence.held``),
+        the files looked for again first when ``n`` has none and the last look is
+        ``rescan_seconds`` old."""
+        with self._lock:
+            return self._held(n)
 
     def _key(self, n, preset):
+        n = self._held(n)
         path = self.sequence.file(n)
         st = os.stat(path)
         return (n, preset, path, st.st_mtime_ns, st.st_size)
@@ -366,7 +422,8 @@ class LiveMesher:
         return mesh_parts(mesh)
 
     def frame(self, n, preset):
-        """``(fluid, droplets)`` of frame ``n`` with preset ``preset`` (a key of PRESETS)."""
+        """``(fluid, droplets)`` of the file shown at scene frame ``n`` (``held(n)``) with
+        preset ``preset`` (a key of PRESETS)."""
         with self._lock:
             key = self._key(n, preset)
             cached = self._cache.get(key)

@@ -2,9 +2,10 @@
 child ``Droplets`` (a mesh of loose vertices that a Geometry Nodes modifier turns into a
 point cloud with each droplet's radius), whose geometry is swapped whenever the scene's
 frame changes: for the archive's frame (playback) or for the current frame's particle
-file meshed by the library (live). Both carry a ``velocity`` point attribute in the
-object's space, which Cycles uses for motion blur. The simulation's +Y is turned to
-Blender's +Z by the objects' rotation."""
+file meshed by the library (live); a frame between two archived or exported frames
+holds the one before (``core.held_frame``). Both carry a ``velocity`` point attribute
+in the object's space, which Cycles uses for motion blur. The simulation's +Y is turned
+to Blender's +Z by the objects' rotation."""
 
 import ctypes
 import math
@@ -253,8 +254,11 @@ def playback_objects(scene):
 # shows it).
 _meshers = {}
 _render = {"running": False}
-_NO_REPORT = {"frame": None, "preset": None, "error": None, "cached": False, "seconds": 0.0,
-              "mesh_seconds": 0.0, "triangles": 0, "droplets": 0}
+# "frame" is the scene frame; "held" the sequence frame whose file is shown there when
+# the scene frame has no file of its own (None when it has, or for one unnumbered
+# file); "kept" that the fluid already showed that file with that preset (no swap).
+_NO_REPORT = {"frame": None, "held": None, "preset": None, "error": None, "cached": False, "kept": False,
+              "seconds": 0.0, "mesh_seconds": 0.0, "triangles": 0, "droplets": 0}
 live_report = dict(_NO_REPORT)
 _report_lock = threading.Lock()
 
@@ -297,29 +301,42 @@ def _clear(fluid):
 
 
 def show_live(scene, fluid, frame=None, render=None):
-    """Meshes scene frame ``frame`` (default: the current one) of the live fluid's
-    sequence with the preset of the moment (``live_preset``), or takes it from the
-    cache, and swaps it into ``fluid`` and its droplets. A frame with no particle file,
-    or whose meshing fails, clears them; the error goes to ``live_report`` (the panel)
-    and the console, and is not raised. Returns the error or None."""
+    """Meshes the particle file shown at scene frame ``frame`` (default: the current
+    one) of the live fluid's sequence with the preset of the moment (``live_preset``),
+    or takes it from the cache, and swaps it into ``fluid`` and its droplets. The file
+    shown is the frame's own, or for a frame without one the last one before it (the
+    first before the sequence), as playback holds an archive's frames
+    (``core.held_frame``); the fluid is not swapped again while it shows that file with
+    that preset. A file that fails to read or mesh clears them; the error goes to
+    ``live_report`` (the panel) and the console, and is not raised. Returns the error
+    or None."""
     n = scene.frame_current if frame is None else frame
     preset = live_preset(scene, render)
-    shown = f"{n} {preset}"
-    if fluid.get("meniscus_live_shown") == shown:
-        return None
     start = time.perf_counter()
     report = dict(_NO_REPORT, frame=n, preset=preset)
+    held = n
     try:
         m = mesher(scene, fluid)
-        hits = m.stats["hits"]
-        parts = m.frame(n, preset)
-        report["cached"] = m.stats["hits"] > hits
-        report["mesh_seconds"] = 0.0 if report["cached"] else m.stats["seconds"][preset]
-        swap(fluid, parts)
-        report["triangles"], report["droplets"] = len(parts[0][1]), len(parts[1][0])
-        fluid["meniscus_live_shown"] = shown
+        held = m.held(n)
+        if m.sequence.files is not None and held != n:
+            report["held"] = held
+        shown = f"{held} {preset}"
+        if fluid.get("meniscus_live_shown") == shown:
+            # Already in the scene (a frame of the same gap, or the same frame again).
+            droplets = droplets_of(fluid)
+            report.update(cached=True, kept=True, triangles=len(fluid.data.polygons),
+                          droplets=len(droplets.data.vertices) if droplets is not None else 0)
+        else:
+            hits = m.stats["hits"]
+            parts = m.frame(n, preset)
+            report["cached"] = m.stats["hits"] > hits
+            report["mesh_seconds"] = 0.0 if report["cached"] else m.stats["seconds"][preset]
+            swap(fluid, parts)
+            report["triangles"], report["droplets"] = len(parts[0][1]), len(parts[1][0])
+            fluid["meniscus_live_shown"] = shown
     except Exception as e:  # reported, never raised out of a handler
-        report["error"] = f"frame {n}: {e}"
+        where = f"frame {n}" if report["held"] is None else f"frame {n} (no file; frame {held} held)"
+        report["error"] = f"{where}: {e}"
         print(f"meniscus: {fluid.name}: {report['error']}")
         try:
             _clear(fluid)
@@ -335,7 +352,8 @@ def show_live(scene, fluid, frame=None, render=None):
 
 def start_live(context, source, radius=0.0, force=False, up_axis="Y"):
     """Live mode on the particle sequence ``source``: one fluid object (and its
-    droplets) meshed from the current frame's particle file on every frame change. The
+    droplets) meshed from the current frame's particle file on every frame change (a
+    frame without one holds the last file before it, see ``show_live``). The
     live objects before it are removed; the scene's range becomes the sequence's. The
     first frame meshed checks a given radius: a refused one raises ValueError (the
     library's message) and leaves the scene as it was. Returns the fluid."""
@@ -345,8 +363,6 @@ def start_live(context, source, radius=0.0, force=False, up_axis="Y"):
     m = core.LiveMesher(sequence, radius, radius_check=not force,
                         cache_bytes=int(scene.meniscus.live_cache_mib) << 20)
     n = scene.frame_current
-    if n not in sequence.frames and sequence.files is not None:
-        n = sequence.frames[0]
     m.frame(n, live_preset(scene, False))  # the radius checked before anything changes
     stop_live(scene)
     _meshers[(absolute, float(radius), bool(force))] = m
@@ -357,9 +373,7 @@ def start_live(context, source, radius=0.0, force=False, up_axis="Y"):
     fluid[LIVE_FORCE] = bool(force)
     if sequence.files is not None:
         scene.frame_start, scene.frame_end = sequence.frames[0], sequence.frames[-1]
-    if scene.frame_current != n:
-        scene.frame_set(n)  # the handler shows it
-    show_live(scene, fluid)
+    show_live(scene, fluid)  # the current frame stays, as when an archive is loaded
     if live_report["frame"] == n and not live_report["error"]:
         # Meshed above (the radius check), shown here from the cache: report the meshing.
         live_report.update(cached=False, mesh_seconds=m.stats["seconds"][live_report["preset"]])

@@ -218,6 +218,22 @@ class MENISCUS_OT_live_stop(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def live_label(report):
+    """The panel's line on the live frame shown (``scene.live_report``, no error): the
+    scene frame, and the file frame it holds when it has no file of its own."""
+    if report["kept"]:
+        how = "already shown"
+    elif report["cached"]:
+        how = "from the cache"
+    else:
+        how = f"meshed in {report['mesh_seconds']:.2f} s"
+    frame = f"frame {report['frame']}"
+    if report["held"] is not None:
+        frame += f": no file, shows frame {report['held']}"
+    return (f"{frame} ({report['preset'].title()}): {report['triangles']} triangles, "
+            f"{report['droplets']} droplets, {how}")
+
+
 def _draw_live(layout, context, settings):
     box = layout.box()
     box.label(text="Live")
@@ -238,9 +254,7 @@ def _draw_live(layout, context, settings):
         row.alert = True
         row.label(text=report["error"], icon="ERROR")
     elif report["frame"] is not None:
-        how = "from the cache" if report["cached"] else f"meshed in {report['mesh_seconds']:.2f} s"
-        box.label(text=f"frame {report['frame']} ({report['preset'].title()}): {report['triangles']} triangles, "
-                       f"{report['droplets']} droplets, {how}")
+        box.label(text=live_label(report))
     for m in scene._meshers.values():
         stats = m.stats
         box.label(text=f"cache: {stats['cached_frames']} frame(s), {stats['cached_bytes'] / 2**20:.0f} MiB, "

@@ -17,8 +17,11 @@
   a wrong radius is refused as the bake refuses it; at each frame the live fluid's faces
   plus the droplets' sphere faces equal the CLI's PLY of that frame with the viewport
   preset (``WORK/cli_preview_{}.ply``), the radius is the estimate; a frame without a
-  file and a frame whose file fails to read clear the fluid and are reported, nothing
-  raised; going back to a meshed frame is a cache hit (no meshing); a small Cycles
+  file (in a gap, before the first, after the last) holds the file playback would hold
+  (the faces of its frame's PLY, nothing meshed again) and the panel names it; a frame
+  whose file fails to read (and the gap after it) clears the fluid and is reported,
+  nothing raised; going back to a meshed frame is a cache hit (no meshing); a file
+  written after Live is found once a look for files is due; a small Cycles
   render meshes with the render preset (the render's evaluated fluid has the faces of
   the CLI's steady PLY, ``WORK/cli_{}.ply``) and the viewport preset is back after it;
   the handler runs on after the blend file is saved and opened again; Stop Live removes
@@ -291,8 +294,24 @@ def live(work, dambreak, frames):
             check(len(fluid.data.edges) > 0 and not fluid.data.copy().validate(),
                   f"live frame {f}: the swapped-in mesh (with the library's edges) is valid as it is")
 
-    # Frames that fail: no file, a broken file. Reported, the fluid cleared, nothing raised.
-    for f, words in ((frames[0] + 1, "no particle file"), (broken, "")):
+    # Frames without a file hold the file before them (the first before the sequence), as
+    # playback holds an archive's frames, and the panel says which: after the last
+    # (the fluid kept as it is), before the first (from the cache), in a gap.
+    for f, held in ((frames[-1] + 1, frames[-1]), (frames[0] - 1, frames[0]), (frames[0] + 1, frames[0])):
+        meshed = mesher.stats["meshed"]
+        scene.frame_set(f)
+        faces, fl, drops = live_faces(fluid)
+        want = ply_faces(str(work / f"cli_preview_{held}.ply"))
+        label = f"frame {f}: no file, shows frame {held} (Preview): {fl} triangles, {drops} droplets, "
+        shown = [t for t in panel_texts() if t.startswith("frame ")]
+        check(faces == want and report["frame"] == f and report.get("held") == held and report["error"] is None
+              and mesher.stats["meshed"] == meshed and any(t.startswith(label) for t in shown),
+              f"live frame {f} (no file) holds frame {held}: {fl} faces + {drops} droplets = {faces}, the CLI's "
+              f"PLY of frame {held} {want}, nothing meshed ({mesher.stats['meshed'] - meshed}); the panel: {shown}")
+
+    # A file that exists but is broken is an error, not a gap: its frame and the gap after
+    # it are reported, the fluid cleared, nothing raised.
+    for f, where in ((broken, f"frame {broken}: "), (broken + 1, f"frame {broken + 1} (no file; frame {broken} held): ")):
         try:
             scene.frame_set(f)
             raised = None
@@ -300,7 +319,7 @@ def live(work, dambreak, frames):
             raised = e
         faces, fl, drops = live_faces(fluid)
         error = report["error"] or ""
-        check(raised is None and error.startswith(f"frame {f}:") and words in error and faces == 0
+        check(raised is None and error.startswith(where) and f"f_{broken}.xyz" in error and faces == 0
               and error in panel_texts(),
               f"live frame {f}: reported in the panel ({error!r}), the fluid cleared ({fl} faces, "
               f"{drops} droplets), nothing raised ({raised!r})")
@@ -314,6 +333,26 @@ def live(work, dambreak, frames):
           f"live: back to frame {frames[0]}, a cache hit ({mesher.stats['hits'] - hits} hit, "
           f"{mesher.stats['meshed'] - meshed} meshed; {mesher.stats['cached_frames']} frames, "
           f"{mesher.stats['cached_bytes'] / 2**20:.1f} MiB cached), {faces} faces")
+
+    # A file written after Live was pressed: found when a frame without a known file
+    # looks for the files again, at most once in rescan_seconds.
+    late = frames[-1] + 4
+    (folder / f"f_{late}.xyz").write_bytes(Path(dambreak.replace("{}", str(frames[1]))).read_bytes())
+    mesher.rescan_seconds = 3600.0  # no look due
+    scene.frame_set(late)
+    faces, _, _ = live_faces(fluid)
+    check(report.get("held") == frames[-1] and faces == ply_faces(str(work / f"cli_preview_{frames[-1]}.ply")),
+          f"live: frame {late}, its file written after Live, holds frame {report.get('held')} while no look is "
+          f"due ({faces} faces)")
+    mesher.rescan_seconds = 0.5
+    time.sleep(0.5)
+    meshed = mesher.stats["meshed"]
+    scene.frame_set(late)
+    faces, _, _ = live_faces(fluid)
+    check(report["frame"] == late and report.get("held") is None and report["error"] is None
+          and mesher.stats["meshed"] == meshed + 1
+          and faces == ply_faces(str(work / f"cli_preview_{frames[1]}.ply")),
+          f"live: frame {late} meshes its new file (a copy of frame {frames[1]}: {faces} faces) once a look is due")
 
     # A render meshes with the render preset; the viewport preset comes back after it.
     f = frames[1]
