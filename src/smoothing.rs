@@ -16,10 +16,8 @@
 //! * `v ← v + μ (mean(n_i) − v)`, `μ < −λ` (inflates back; skipped when `μ = 0`).
 //!
 //! Positions are stepped in f32, the mesh's own precision (a step's rounding, about
-//! 1e-7 of the coordinates, is far below any move that matters): on the steady surface
-//! of a 4M-particle splash (32 M triangles, ten steps) the passes read half the memory
-//! they read in f64, 4.8–3.9 s instead of 6.6–6.9 s on a loaded 2-core machine, and the
-//! run's peak fell by 360 MiB.
+//! 1e-7 of the coordinates, is far below any move that matters): the passes read half
+//! the memory f64 would (figures in `docs/performance-log.md`, session 17).
 //!
 //! Low frequencies pass (below `k_PB = 1/λ + 1/μ` in Taubin's terms), high ones are damped
 //! by `(1 − λk)(1 − μk)` per step. A vertex on a boundary edge or on an edge of more than

@@ -32,9 +32,8 @@ pub(crate) struct VertexTriangles {
 impl VertexTriangles {
     /// The lists of `mesh`'s vertices.
     ///
-    /// Counted and filled in parallel (atomic counters: on the steady surface of a
-    /// 4M-particle splash, 32 M triangles, each of the two serial passes took about 0.2
-    /// s), then each list sorted, so the lists are the same whatever the thread count.
+    /// Counted and filled in parallel (atomic counters), then each list sorted, so the
+    /// lists are the same whatever the thread count.
     pub(crate) fn new(mesh: &TriMesh) -> Self {
         use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
         let nv = mesh.positions.len();

@@ -194,9 +194,7 @@ const PAR_CHUNK_ITEMS: usize = 1 << 15;
 
 /// [`write_chunked`] over the items `0..n`, encoded on every thread a window of a few
 /// chunks per thread at a time and written in order: the same bytes, and no more than
-/// the window (a few MiB) added to the memory peak. The 4M splash's steady PLY (40 M
-/// triangles): the write stage 1.85–2.19 s against 2.08–2.73 s encoding on one thread
-/// (two runs each, alternating, another job on the machine).
+/// the window (a few MiB) added to the memory peak.
 pub(super) fn write_chunked_par(
     w: &mut impl Write,
     n: usize,
