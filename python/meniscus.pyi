@@ -79,6 +79,11 @@ class ReconstructOptions(TypedDict, total=False):
     smooth_max_inward: float | None
     """Farthest smoothing may move a vertex inwards, multiples of r; None: no bound.
     Default None (``"steady"``: 0.2)."""
+    smooth_feature_angle: float | None
+    """Feature weights of the smoothing's inward moves, degrees (Laplacian steps only):
+    neighbours whose normals differ by more than about this angle pull less, so the edges
+    of resting water and crests stay while flat noise goes; None: plain steps. Default None
+    (``"steady"``: 7)."""
     subdivide: int
     """Loop subdivision steps after decimation (0: off). Default 1 (``"steady"``: 0)."""
     defer_subdivision: bool
@@ -110,7 +115,7 @@ STEADY: ReconstructOptions
 """The keywords that make the defaults the steady surface for animation (``preset="steady"``,
 the CLI's ``--preset steady``): ``{"cell_size": 0.71, "iso_offset": -0.05, "decimate": None,
 "decimate_error": None, "smooth": 10, "smooth_method": "laplacian", "smooth_max_inward": 0.2,
-"subdivide": 0, "normal_smoothing": 3}``."""
+"smooth_feature_angle": 7.0, "subdivide": 0, "normal_smoothing": 3}``."""
 
 VELOCITY_NAMES: tuple[str, ...]
 """The attribute names a file's default attribute selection (``reconstruct_file``'s
@@ -221,8 +226,8 @@ def reconstruct(
         **options: the reconstruction settings (``ReconstructOptions``): influence_radius,
             cell_size, t_low, t_high, particle_coverage, iso_offset, kernel, kernel_radius,
             max_stretch, min_neighbours, centre_smoothing, isolated_spheres, decimate,
-            decimate_error, smooth, smooth_method, smooth_max_inward, subdivide,
-            defer_subdivision, keep_inside, normal_smoothing, tile_size, memory_budget,
+            decimate_error, smooth, smooth_method, smooth_max_inward,
+            smooth_feature_angle, subdivide, defer_subdivision, keep_inside, normal_smoothing, tile_size, memory_budget,
             temp_dir.
     """
 

@@ -39,6 +39,11 @@ use rayon::prelude::*;
 /// positions and normals (≈ 12 B), below the lists' building.
 pub(crate) const BYTES_PER_INPUT_TRIANGLE: f64 = 60.0;
 
+/// What feature weights ([`SmoothOptions::feature_angle`]) add per control-mesh
+/// triangle while the steps run: a weight per neighbour-list entry (≈ 12 B) and the
+/// guidance normals (≈ 6 B), bytes.
+pub(crate) const FEATURE_BYTES_PER_INPUT_TRIANGLE: f64 = 18.0;
+
 /// The vertices' neighbour lists ([`Rings`]) per triangle, bytes: what the pipeline
 /// holds between smoothing and the shading normals when it hands them over.
 pub(crate) const RINGS_BYTES_PER_TRIANGLE: f64 = 14.0;
@@ -60,6 +65,20 @@ pub struct SmoothOptions {
     /// (and every particle centre under them), and leaves the small-scale noise, whose
     /// moves are far smaller, to the steps.
     pub max_inward: Option<f32>,
+    /// Feature weights of the inward moves, degrees, or `None` for plain steps. Default
+    /// `None`. Where a step would move a vertex inwards (against its normal on a
+    /// *guidance* copy of the mesh, smoothed [`Self::feature_guide_steps`] plain steps),
+    /// each neighbour `n` counts with `exp(−(θ / angle)²)`, `θ` the angle between the
+    /// two vertices' guidance normals, and the move is `λ Σ w_n (n − v) / k` over the `k`
+    /// neighbours: across an edge or a crest the move fades, on a gently curved face it
+    /// is the plain one (outward moves always are). The edges of resting blocks and the
+    /// crests stay where the field put them while the faces' noise goes. Plain Laplacian
+    /// steps only (`μ = 0`).
+    pub feature_angle: Option<f32>,
+    /// Plain steps of the guidance copy whose normals give the feature weights: enough
+    /// that the lattice's noise is gone from them, few enough that edges stay edges.
+    /// Default 8.
+    pub feature_guide_steps: u32,
 }
 
 impl Default for SmoothOptions {
@@ -69,6 +88,8 @@ impl Default for SmoothOptions {
             lambda: 0.3,
             mu: -0.31,
             max_inward: None,
+            feature_angle: None,
+            feature_guide_steps: 8,
         }
     }
 }
@@ -89,7 +110,7 @@ impl SmoothOptions {
             steps,
             lambda: 1.0,
             mu: 0.0,
-            max_inward: None,
+            ..Default::default()
         }
     }
 
@@ -109,6 +130,20 @@ impl SmoothOptions {
                 option: "smooth.max_inward",
                 message: format!("must be finite and >= 0 (world units), got {bound}"),
             });
+        }
+        if let Some(angle) = self.feature_angle {
+            if !(angle.is_finite() && angle > 0.0 && angle <= 180.0) {
+                return Err(crate::error::Error::InvalidOption {
+                    option: "smooth.feature_angle",
+                    message: format!("must lie in (0, 180] degrees, got {angle}"),
+                });
+            }
+            if !laplacian {
+                return Err(crate::error::Error::InvalidOption {
+                    option: "smooth.feature_angle",
+                    message: format!("weights plain Laplacian steps (μ = 0) only, got μ = {m}"),
+                });
+            }
         }
         if !(laplacian || m > -1.0 && m < -l) {
             return Err(crate::error::Error::InvalidOption {
@@ -169,6 +204,15 @@ pub(crate) fn smooth_keeping_rings(
             std::mem::take(&mut mesh.normals),
         )
     });
+    let guide = options.feature_angle.map(|angle| {
+        Guide::new(
+            mesh,
+            &rings,
+            options.feature_guide_steps,
+            angle,
+            [&mut current, &mut next],
+        )
+    });
     for _ in 0..options.steps {
         for (pass, &weight) in passes.iter().enumerate() {
             // The bound after each step's last pass, in the same sweep.
@@ -176,9 +220,20 @@ pub(crate) fn smooth_keeping_rings(
             next.par_iter_mut().enumerate().for_each(|(v, out)| {
                 let mut p = match rings.of(v) {
                     Some(ring) => {
-                        let mean = ring.iter().map(|&n| current[n as usize]).sum::<Vec3>()
-                            / ring.len() as f32;
-                        current[v] + weight * (mean - current[v])
+                        let x = current[v];
+                        let k = ring.len() as f32;
+                        let mut step =
+                            ring.iter().map(|&n| current[n as usize]).sum::<Vec3>() / k - x;
+                        if let Some(guide) = guide.as_ref().filter(|g| step.dot(g.normals[v]) < 0.0)
+                        {
+                            step = ring
+                                .iter()
+                                .zip(guide.weights_of(&rings, v))
+                                .map(|(&n, &w)| w * (current[n as usize] - x))
+                                .sum::<Vec3>()
+                                / k;
+                        }
+                        x + weight * step
                     }
                     None => current[v],
                 };
@@ -194,7 +249,7 @@ pub(crate) fn smooth_keeping_rings(
             std::mem::swap(&mut current, &mut next);
         }
     }
-    drop(start);
+    drop((start, guide));
     drop(next);
     for (p, &new) in mesh.positions.iter_mut().zip(&current) {
         let shift = (new - *p).as_dvec3().length();
@@ -207,6 +262,63 @@ pub(crate) fn smooth_keeping_rings(
     stats.mean_shift /= current.len() as f64;
     mesh.normals.clear();
     (stats, Some(rings))
+}
+
+/// The feature weights' guidance ([`SmoothOptions::feature_angle`]): the vertex normals of
+/// a copy of the mesh smoothed by plain steps, and a weight per neighbour-list entry.
+struct Guide {
+    normals: Vec<Vec3>,
+    /// Aligned with [`Rings::neighbours`].
+    weights: Vec<f32>,
+}
+
+impl Guide {
+    /// Runs the guidance copy's `steps` plain steps in `buffers` (left holding the
+    /// mesh's positions again) and weighs every neighbour by the angle `angle` (degrees).
+    fn new(
+        mesh: &mut TriMesh,
+        rings: &Rings,
+        steps: u32,
+        angle: f32,
+        buffers: [&mut Vec<Vec3>; 2],
+    ) -> Guide {
+        let [current, next] = buffers;
+        for _ in 0..steps {
+            next.par_iter_mut().enumerate().for_each(|(v, out)| {
+                *out = match rings.of(v) {
+                    Some(ring) => {
+                        ring.iter().map(|&n| current[n as usize]).sum::<Vec3>() / ring.len() as f32
+                    }
+                    None => current[v],
+                };
+            });
+            std::mem::swap(current, next);
+        }
+        // The guidance copy's area-weighted normals, by the mesh's own code.
+        std::mem::swap(&mut mesh.positions, current);
+        mesh.compute_normals();
+        let normals = std::mem::take(&mut mesh.normals);
+        std::mem::swap(&mut mesh.positions, current);
+        current.copy_from_slice(&mesh.positions);
+        let sigma = angle.to_radians();
+        let weights = (0..rings.vertices())
+            .into_par_iter()
+            .flat_map_iter(|v| {
+                let range = rings.start[v] as usize..rings.start[v + 1] as usize;
+                let normals = &normals;
+                rings.neighbours[range].iter().map(move |&n| {
+                    let theta = normals[v].dot(normals[n as usize]).clamp(-1.0, 1.0).acos();
+                    (-(theta / sigma).powi(2)).exp()
+                })
+            })
+            .collect();
+        Guide { normals, weights }
+    }
+
+    /// The weights of `v`'s neighbours, in [`Rings::of`]'s order.
+    fn weights_of(&self, rings: &Rings, v: usize) -> &[f32] {
+        &self.weights[rings.start[v] as usize..rings.start[v + 1] as usize]
+    }
 }
 
 /// Every vertex's edge neighbours (sorted, once each), or none for a vertex that keeps
@@ -435,11 +547,89 @@ pub(crate) mod tests {
                 steps: 1,
                 lambda,
                 mu,
-                max_inward: None,
+                ..Default::default()
             };
             assert!(options.validate().is_err(), "{lambda} {mu}");
         }
         assert!(SmoothOptions::laplacian(10).validate().is_ok());
+        for (angle, options) in [
+            (7.0, SmoothOptions::default()),
+            (0.0, SmoothOptions::laplacian(10)),
+            (f32::INFINITY, SmoothOptions::laplacian(10)),
+            (181.0, SmoothOptions::laplacian(10)),
+        ] {
+            let options = SmoothOptions {
+                feature_angle: Some(angle),
+                ..options
+            };
+            assert!(options.validate().is_err(), "{angle} {options:?}");
+        }
+        let weighted = SmoothOptions {
+            feature_angle: Some(7.0),
+            ..SmoothOptions::laplacian(10)
+        };
+        assert!(weighted.validate().is_ok());
+    }
+
+    #[test]
+    fn feature_weights_keep_a_crest_and_remove_the_faces_noise() {
+        // A roof: two faces at 45° meeting in a crest along x = 12, normals up (+z),
+        // with a checkerboard of bumps of 0.05 on its faces (0.05 from their neighbours'
+        // mean along y).
+        let (n, crest) = (24, 12);
+        let roof = |i: u32| -(i as f32 - crest as f32).abs();
+        let mesh = bumpy_grid(n, |i, j| {
+            roof(i)
+                + if i != crest && (i + j) % 2 == 0 {
+                    0.05
+                } else {
+                    0.0
+                }
+        });
+        let plain = SmoothOptions::laplacian(10);
+        let weighted = SmoothOptions {
+            feature_angle: Some(7.0),
+            ..plain.clone()
+        };
+        let at = |i: u32, j: u32| (j * (n + 1) + i) as usize;
+        // How far the crest sank, and the faces' bumps left, away from the fixed rim.
+        let measure = |m: &TriMesh| {
+            let sunk = (6..=n - 6)
+                .map(|j| -m.positions[at(crest, j)].z)
+                .fold(0.0f32, f32::max);
+            let bumps = (6..=n - 6)
+                .flat_map(|j| (4..=n - 4).map(move |i| (i, j)))
+                .filter(|&(i, _)| i.abs_diff(crest) >= 6)
+                .map(|(i, j)| {
+                    // Along y the roof is level: what is left there is the bumps.
+                    let z = |j: u32| m.positions[at(i, j)].z;
+                    (z(j) - 0.5 * (z(j - 1) + z(j + 1))).abs()
+                })
+                .fold(0.0f32, f32::max);
+            (sunk, bumps)
+        };
+        let mut plain_mesh = mesh.clone();
+        smooth(&mut plain_mesh, &plain);
+        let mut weighted_mesh = mesh.clone();
+        smooth(&mut weighted_mesh, &weighted);
+        let (plain_sunk, plain_bumps) = measure(&plain_mesh);
+        let (sunk, bumps) = measure(&weighted_mesh);
+        // Ten plain steps sink the crest by two edges; the weights keep it within a
+        // hundredth, and the bumps of the faces go all the same, though not as far as
+        // with plain steps (up moves weighted, down moves plain). Within the guidance's
+        // reach of the crest (4 edges) its normals turn, and the bumps there stay.
+        assert!(plain_sunk > 0.3, "plain steps: the crest sank {plain_sunk}");
+        assert!(sunk < 0.1 * plain_sunk, "weighted: the crest sank {sunk}");
+        assert!(plain_bumps < 0.005, "plain steps: bumps {plain_bumps}");
+        assert!(bumps < 0.2 * 0.05, "weighted: bumps {bumps}");
+        // No output depends on the thread count.
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let mut single = mesh.clone();
+        one.install(|| smooth(&mut single, &weighted));
+        assert_eq!(single.positions, weighted_mesh.positions);
     }
 
     /// A flat grid of `n × n` quads (two triangles each) in the z = 0 plane, vertex

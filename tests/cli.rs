@@ -1563,6 +1563,8 @@ fn a_sequence_takes_the_steady_preset() {
         "laplacian",
         "--smooth-max-inward",
         "0.2",
+        "--smooth-feature-angle",
+        "7",
         "--subdivide",
         "0",
         "--normal-smoothing",

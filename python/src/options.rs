@@ -79,6 +79,10 @@ fn keyword_values(py: Python<'_>, s: &ReconstructSettings) -> Vec<(&'static str,
             "smooth_max_inward",
             s.smooth_max_inward.map(decimal).into_py(py),
         ),
+        (
+            "smooth_feature_angle",
+            s.smooth_feature_angle.map(decimal).into_py(py),
+        ),
         ("subdivide", s.subdivide.into_py(py)),
         ("defer_subdivision", s.defer_subdivision.into_py(py)),
         ("keep_inside", s.keep_inside.map(decimal).into_py(py)),
@@ -239,6 +243,9 @@ pub fn settings(
     }
     if let Some(v) = keywords.nullable("smooth_max_inward")? {
         s.smooth_max_inward = v;
+    }
+    if let Some(v) = keywords.nullable("smooth_feature_angle")? {
+        s.smooth_feature_angle = v;
     }
     if let Some(v) = keywords.value("subdivide")? {
         s.subdivide = v;

@@ -106,6 +106,7 @@ def test_write_formats(frame25, tmp_path, ext):
         # A setting given beside a preset wins.
         ({"preset": "steady", "cell_size": 1.0, "normal_smoothing": 0}, ["--preset", "steady", "-c", "1", "--normal-smoothing", "0"]),
         ({"smooth_method": "laplacian", "smooth_max_inward": 0.2}, ["--smooth-method", "laplacian", "--smooth-max-inward", "0.2"]),
+        ({"preset": "steady", "smooth_feature_angle": None}, ["--preset", "steady", "--smooth-feature-angle", "off"]),
         # The bound holds decimation back at 0.9 on this frame: off is seen.
         ({"decimate": 0.9, "decimate_error": None}, ["--decimate", "0.9", "--decimate-error", "off"]),
         ({"decimate": None, "subdivide": 2, "isolated_spheres": None}, ["--decimate", "off", "--subdivide", "2", "--isolated-spheres", "off"]),

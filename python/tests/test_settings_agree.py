@@ -39,6 +39,7 @@ CHANGED = {
     "smooth": ("1", 1),
     "smooth_method": ("laplacian", "laplacian"),
     "smooth_max_inward": ("0.3", 0.3),
+    "smooth_feature_angle": ("9", 9.0),
     "subdivide": ("0", 0),
     "keep_inside": ("0.5", 0.5),
     "normal_smoothing": ("2", 2),
@@ -46,6 +47,9 @@ CHANGED = {
     "memory_budget": ("1GiB", "1GiB"),
     "temp_dir": ("TMP", "TMP"),
 }
+# Settings that take effect only beside another one: that one, as flag and keyword.
+BESIDE = {"smooth_feature_angle": ("smooth_method", "laplacian")}
+
 # Keywords without a flag: the CLI defers subdivision by itself for a .mseq output.
 PYTHON_ONLY = {"defer_subdivision"}
 MULTIPLES_OF_R = "multiples of r"
@@ -173,6 +177,8 @@ def test_a_changed_setting_means_the_same_in_both(name, tmp_path):
     else:
         assert cli_text != cli_default(cli_flags()[name.replace("_", "-")]), "a changed value"
     flag = "--" + name.replace("_", "-")
-    run_cli("reconstruct", PARTICLES, "-r", R, flag, cli_text, "-o", tmp_path / "cli.ply", "--quiet")
-    meniscus.reconstruct_file(str(PARTICLES), str(tmp_path / "py.ply"), R, **{name: value})
+    beside = dict([BESIDE[name]]) if name in BESIDE else {}
+    beside_flags = [a for k, v in beside.items() for a in ("--" + k.replace("_", "-"), v)]
+    run_cli("reconstruct", PARTICLES, "-r", R, flag, cli_text, *beside_flags, "-o", tmp_path / "cli.ply", "--quiet")
+    meniscus.reconstruct_file(str(PARTICLES), str(tmp_path / "py.ply"), R, **{name: value}, **beside)
     assert (tmp_path / "py.ply").read_bytes() == (tmp_path / "cli.ply").read_bytes()

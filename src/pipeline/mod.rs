@@ -43,7 +43,8 @@ mod options;
 mod stats;
 pub use options::{
     ReconstructOptions, DEFAULT_DECIMATION, DEFAULT_DECIMATION_ERROR, STEADY_CELL_SIZE,
-    STEADY_ISO_OFFSET, STEADY_MAX_INWARD, STEADY_NORMAL_SMOOTHING, STEADY_SMOOTHING_STEPS,
+    STEADY_FEATURE_ANGLE, STEADY_ISO_OFFSET, STEADY_MAX_INWARD, STEADY_NORMAL_SMOOTHING,
+    STEADY_SMOOTHING_STEPS,
 };
 use stats::Recorder;
 pub use stats::{peak_rss_bytes, ReconstructionStats, StageTiming};

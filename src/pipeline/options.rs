@@ -50,6 +50,13 @@ pub const STEADY_SMOOTHING_STEPS: u32 = 10;
 /// (normal error 5.3°; a tighter bound leaves them: `docs/quality.md`).
 pub const STEADY_MAX_INWARD: f32 = 0.2;
 
+/// Feature angle of the steady surface's smoothing, degrees
+/// ([`SmoothOptions::feature_angle`]): its inward moves fade across the edges of resting
+/// blocks and crests, whose normals differ by more than this on the guidance copy, and
+/// the flat faces' noise still goes (dam break frame 1's block edges and the sphere's
+/// lattice bumps together: `docs/quality.md`, "Guided feature weights").
+pub const STEADY_FEATURE_ANGLE: f32 = 7.0;
+
 /// Iso-surface offset of the steady surface, multiples of `r`: the smoothed surface sits
 /// about 0.04 r further out than the particles' shell (it flattens the crests between
 /// them less than their tops), so the field's level is taken this much further in.
@@ -129,7 +136,8 @@ impl ReconstructOptions {
     /// (its triangulation changes from frame to frame, and smoothing cannot remove what
     /// that changes), the level [`STEADY_ISO_OFFSET`] further in,
     /// [`STEADY_SMOOTHING_STEPS`] plain Laplacian steps on the regular marching-cubes mesh
-    /// (no vertex moved inwards by more than [`STEADY_MAX_INWARD`]), every non-isolated
+    /// (no vertex moved inwards by more than [`STEADY_MAX_INWARD`], the inward moves
+    /// weighted by [`STEADY_FEATURE_ANGLE`]), every non-isolated
     /// centre kept inside, no subdivision,
     /// shading normals smoothed by [`STEADY_NORMAL_SMOOTHING`] steps, icospheres of
     /// level 2. Measured in `docs/quality.md` ("Steady in motion").
@@ -140,6 +148,7 @@ impl ReconstructOptions {
         options.decimate = None;
         options.smooth = Some(SmoothOptions {
             max_inward: Some(STEADY_MAX_INWARD * particle_radius),
+            feature_angle: Some(STEADY_FEATURE_ANGLE),
             ..SmoothOptions::laplacian(STEADY_SMOOTHING_STEPS)
         });
         options.subdivide = SubdivideOptions { levels: 0 };
@@ -232,9 +241,13 @@ impl ReconstructOptions {
                 peak = (bytes, advice);
             }
         };
-        if self.smooth.is_some() {
+        if let Some(smooth) = &self.smooth {
+            let features = match smooth.feature_angle {
+                Some(_) => crate::smoothing::FEATURE_BYTES_PER_INPUT_TRIANGLE,
+                None => 0.0,
+            };
             raise(
-                triangles * crate::smoothing::BYTES_PER_INPUT_TRIANGLE,
+                triangles * (crate::smoothing::BYTES_PER_INPUT_TRIANGLE + features),
                 "no smoothing",
             );
         }

@@ -60,6 +60,8 @@ pub(crate) struct ReconstructArgs {
     pub(crate) smooth_method: Option<SmoothMethod>,
     #[arg(long, allow_hyphen_values = true, help = with_defaults(SMOOTH_MAX_INWARD_HELP, |s| off_or(s.smooth_max_inward)))]
     pub(crate) smooth_max_inward: Option<String>,
+    #[arg(long, help = with_defaults(SMOOTH_FEATURE_ANGLE_HELP, |s| off_or(s.smooth_feature_angle)))]
+    pub(crate) smooth_feature_angle: Option<String>,
     #[arg(long, help = with_defaults(SUBDIVIDE_HELP, |s| s.subdivide))]
     pub(crate) subdivide: Option<u32>,
     #[arg(long, help = with_defaults(KEEP_INSIDE_HELP, |s| off_or(s.keep_inside)))]
@@ -202,6 +204,7 @@ const SMOOTH_HELP: &str =
 const SMOOTH_METHOD_HELP: &str = "How the smoothing steps move the vertices: `taubin` (little shrinkage, the finest noise stays) or `laplacian` (each vertex to its neighbours' mean: removes the noise, shrinks unless bounded by --smooth-max-inward)";
 const SMOOTH_MAX_INWARD_HELP: &str =
     "Farthest smoothing may move a vertex inwards, multiples of r, or `off`";
+const SMOOTH_FEATURE_ANGLE_HELP: &str = "Feature weights of the smoothing's inward moves, degrees (Laplacian steps only): neighbours whose normals differ by more than about this angle pull less, so the edges of resting water and crests stay while flat noise goes; `off` for plain steps";
 const SUBDIVIDE_HELP: &str = "Loop subdivision steps after decimation (0 = off)";
 const NORMAL_SMOOTHING_HELP: &str = "Smoothing steps of the written vertex normals (0 = the area-weighted normals): steadier shading from frame to frame";
 const KEEP_INSIDE_HELP: &str = "Least depth of every non-isolated particle centre under the final surface, multiples of r (0 to 1): where decimation or subdivision left one shallower or outside, the surface over it is pushed out; `off` leaves the surface as they made it";

@@ -154,6 +154,10 @@ fn options_from(args: &ReconstructArgs) -> Result<ReconstructOptions, Failure> {
             None => base.smooth_max_inward,
             Some(v) => parse_or_off(v, "--smooth-max-inward", "a distance (multiples of r)")?,
         },
+        smooth_feature_angle: match &args.smooth_feature_angle {
+            None => base.smooth_feature_angle,
+            Some(v) => parse_or_off(v, "--smooth-feature-angle", "an angle (degrees)")?,
+        },
         subdivide: args.subdivide.unwrap_or(base.subdivide),
         // A `.mseq` output defers it by itself (see `job`).
         defer_subdivision: false,

@@ -125,6 +125,7 @@ pub(crate) fn ineffective_options(
     for (id, option) in [
         ("smooth_method", "--smooth-method"),
         ("smooth_max_inward", "--smooth-max-inward"),
+        ("smooth_feature_angle", "--smooth-feature-angle"),
     ] {
         if given(id) && smooth == 0 {
             warnings.push(format!(
