@@ -152,7 +152,8 @@ impl AnisotropyOptions {
 
 /// Bytes per particle that anisotropic kernels add to a tile or an untiled run: the
 /// kernel of every loaded particle (64), then for the field particles the kernels kept
-/// (64), the prepared copy (64) and the sort by centre (16).
+/// (64), the prepared copy (48, 52 sized; counted as 64: the tile sizes a budget picks,
+/// and so the decimated output, stay as they were) and the sort by centre (16).
 pub(crate) const BYTES_PER_PARTICLE: u64 = 208;
 
 /// The kernel of one particle.
