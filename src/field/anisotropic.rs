@@ -43,17 +43,18 @@ use crate::grid::{
 };
 use rayon::prelude::*;
 
-/// A kernel ready for the lattice: centre, quadratic form and bounding box in cells.
+/// A kernel ready for the lattice: centre, quadratic form and bounding box. 48 bytes,
+/// held beside the field's blocks while they are evaluated (the 4M still run's peak):
+/// the centre stays in world units (f32) and is taken to cells (f64) where it is read,
+/// the same product as before, and the radii of sized particles are a separate array.
 #[derive(Clone, Copy)]
 struct Prepared {
-    /// Centre, cells (global lattice coordinates).
-    centre: [f64; 3],
+    /// Centre, world units (the kernel's own).
+    centre: [f32; 3],
     /// Quadratic form in cells⁻², `[xx, xy, xz, yy, yz, zz]`.
     form: [f32; 6],
     /// Half-extents of the bounding box, cells.
     extent: [f32; 3],
-    /// The particle's radius, multiples of r (1 unless sized).
-    ratio: f32,
 }
 
 /// Number of running sums per vertex: Σw, Σw·r (3) and Σ(1 − s²)²·M r (3), with
@@ -64,8 +65,8 @@ const SUMS: usize = 8;
 /// from `kernels`, which must include every kernel that reaches those blocks, in a
 /// canonical order. Coverage and the iso offset are applied afterwards, as for the
 /// isotropic field. Options must be valid. The kernels are dropped once prepared for the
-/// lattice, before the blocks are evaluated: they and their prepared copy (64 bytes a
-/// particle each) never sit beside the field's blocks together. `sizes`: each kernel's
+/// lattice, before the blocks are evaluated: the kernels (64 bytes a particle) never sit
+/// beside the field's blocks, only the prepared copy (48 bytes) does. `sizes`: each kernel's
 /// particle radius, multiples of r, for particles of several sizes.
 pub(crate) fn compute_blocks(
     kernels: Vec<ParticleKernel>,
@@ -98,15 +99,18 @@ fn compute_blocks_with(
         .par_iter()
         .map(|&i| {
             let k = &kernels[i as usize];
-            let c = k.centre.as_dvec3() * inv_h;
             Prepared {
-                centre: [c.x, c.y, c.z],
+                centre: k.centre.to_array(),
                 form: k.quadratic_form(h).map(|v| v as f32),
                 extent: k.half_extents(h).map(|v| v as f32),
-                ratio: sizes.map_or(1.0, |s| s.ratios[i as usize]),
             }
         })
         .collect();
+    // The radius of each of `sorted`, multiples of r (sized particles only).
+    let ratios: Vec<f32> = match sizes {
+        Some(s) => order.par_iter().map(|&i| s.ratios[i as usize]).collect(),
+        None => Vec::new(),
+    };
     drop(order);
     let particles = kernels.len();
     drop(kernels);
@@ -121,9 +125,11 @@ fn compute_blocks_with(
         None => {
             let evaluator = Evaluator::<false> {
                 sorted: &sorted,
+                ratios: &ratios,
                 index: &index,
                 half_reach,
                 h,
+                inv_h,
                 outside,
                 surface,
             };
@@ -132,9 +138,11 @@ fn compute_blocks_with(
         Some(_) => {
             let evaluator = Evaluator::<true> {
                 sorted: &sorted,
+                ratios: &ratios,
                 index: &index,
                 half_reach,
                 h,
+                inv_h,
                 outside,
                 surface,
             };
@@ -158,10 +166,14 @@ struct Scratch {
 /// `SIZED`: particles of several sizes (the mean radius is summed).
 struct Evaluator<'a, const SIZED: bool> {
     sorted: &'a [Prepared],
+    /// The radius of each of `sorted`, multiples of r (`SIZED` only).
+    ratios: &'a [f32],
     index: &'a HalfRowIndex,
     /// Half-blocks, per axis, beyond a block's own two whose kernels can reach it.
     half_reach: i32,
     h: f64,
+    /// `1 / h`.
+    inv_h: f64,
     outside: f32,
     /// `ρ_s·r`, world units.
     surface: f64,
@@ -194,8 +206,9 @@ impl<const SIZED: bool> BlockEvaluator for Evaluator<'_, SIZED> {
         );
         for hz in first[2]..=last[2] {
             for hy in first[1]..=last[1] {
-                for p in &self.sorted[self.index.run(hy, hz, first[0], last[0])] {
-                    let x = [0, 1, 2].map(|a| (p.centre[a] - origin[a]) as f32);
+                let run = self.index.run(hy, hz, first[0], last[0]);
+                for (n, p) in self.sorted[run.clone()].iter().enumerate() {
+                    let x = [0, 1, 2].map(|a| (p.centre[a] as f64 * self.inv_h - origin[a]) as f32);
                     let lo = [0, 1, 2].map(|a| ((x[a] - p.extent[a]).ceil() as i32).max(0));
                     let hi = [0, 1, 2]
                         .map(|a| ((x[a] + p.extent[a]).floor() as i32).min(BLOCK_EDGE - 1));
@@ -214,7 +227,7 @@ impl<const SIZED: bool> BlockEvaluator for Evaluator<'_, SIZED> {
                     group[index % 64] = (y_bits * 0x0101_0101_0101_0101) & z_bytes;
                     scratch.particles.push((x, p.form));
                     if SIZED {
-                        scratch.ratios.push(p.ratio);
+                        scratch.ratios.push(self.ratios[run.start + n]);
                     }
                 }
             }

@@ -27,6 +27,16 @@
 //! then input index), in f64 relative to `x_i`; a tile sees the same neighbours in the
 //! same order as the whole scene, so the kernels do not depend on the tiling or the
 //! thread count.
+//!
+//! **Every field particle gets its kernel, deep inside the fluid too.** The field
+//! evaluates every vertex a kernel reaches, and each kernel reaches the corners of its
+//! own particle's cell, which coverage reads as well (at the default options the
+//! shortest semi-axis, at least `h_a k_r^{-2/3}` = 2.41 r, exceeds the cell's
+//! diagonal); which values the surface actually depends on (corners of the cells
+//! marching cubes triangulates) is known only from the signs of the finished field.
+//! Skipping kernels exactly would need those signs first; no test before the kernels
+//! bounds them (`docs/performance-log.md`, session 18, with what a perfect oracle would
+//! skip: about half the kernels, `examples/kernel_skip_census.rs`).
 
 use super::eigen::symmetric_eigen;
 use super::gather::{row_groups, Around, Gathered, Reaches, Source};
@@ -142,7 +152,8 @@ impl AnisotropyOptions {
 
 /// Bytes per particle that anisotropic kernels add to a tile or an untiled run: the
 /// kernel of every loaded particle (64), then for the field particles the kernels kept
-/// (64), the prepared copy (64) and the sort by centre (16).
+/// (64), the prepared copy (48, 52 sized; counted as 64: the tile sizes a budget picks,
+/// and so the decimated output, stay as they were) and the sort by centre (16).
 pub(crate) const BYTES_PER_PARTICLE: u64 = 208;
 
 /// The kernel of one particle.
