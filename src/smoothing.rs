@@ -300,18 +300,26 @@ impl Guide {
         let normals = std::mem::take(&mut mesh.normals);
         std::mem::swap(&mut mesh.positions, current);
         current.copy_from_slice(&mesh.positions);
+        // Written in place in chunks of entries, each starting at the vertex whose list
+        // holds its first entry.
+        const CHUNK: usize = 1 << 16;
         let sigma = angle.to_radians();
-        let weights = (0..rings.vertices())
-            .into_par_iter()
-            .flat_map_iter(|v| {
-                let range = rings.start[v] as usize..rings.start[v + 1] as usize;
-                let normals = &normals;
-                rings.neighbours[range].iter().map(move |&n| {
-                    let theta = normals[v].dot(normals[n as usize]).clamp(-1.0, 1.0).acos();
-                    (-(theta / sigma).powi(2)).exp()
-                })
-            })
-            .collect();
+        let mut weights = vec![0.0f32; rings.neighbours.len()];
+        weights
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .for_each(|(c, out)| {
+                let first = c * CHUNK;
+                let mut v = rings.start.partition_point(|&s| s as usize <= first) - 1;
+                for (e, w) in (first..).zip(out) {
+                    while rings.start[v + 1] as usize <= e {
+                        v += 1;
+                    }
+                    let u = rings.neighbours[e] as usize;
+                    let theta = normals[v].dot(normals[u]).clamp(-1.0, 1.0).acos();
+                    *w = (-(theta / sigma).powi(2)).exp();
+                }
+            });
         Guide { normals, weights }
     }
 
