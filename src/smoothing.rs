@@ -5,7 +5,10 @@
 //! marching-cubes mesh (the steady surface, [`crate::pipeline::ReconstructOptions::steady`]):
 //! there the field's lattice noise sits at the scale of a few edges, below Taubin's pass
 //! band but well within what plain steps remove, and containment then keeps the centres
-//! under what it shrank.
+//! under what it shrank. There the inward moves can be weighted by how far the
+//! neighbours' normals turn on a smoothed guidance copy
+//! ([`SmoothOptions::feature_angle`]): the edges of resting water and the crests keep
+//! their place while the faces' noise goes.
 //!
 //! **Input:** the decimated mesh (closed or with boundaries). **Output:** the same
 //! triangles, vertices moved. Each step is two passes over every vertex `v` with
