@@ -383,22 +383,15 @@ impl ReconstructSettings {
                 });
             }
         }
+        // Checked as given: with no smoothing steps there is no smoothing to check it.
         if let Some(angle) = self.smooth_feature_angle {
-            if !(angle.is_finite() && angle > 0.0 && angle <= 180.0) {
-                return Err(Error::InvalidOption {
+            let method = self.smooth_method.to_string();
+            crate::smoothing::check_feature_angle(angle, &method).map_err(|message| {
+                Error::InvalidOption {
                     option: "smooth_feature_angle",
-                    message: format!("must lie in (0, 180] degrees, got {angle}"),
-                });
-            }
-            if self.smooth_method != SmoothMethod::Laplacian {
-                return Err(Error::InvalidOption {
-                    option: "smooth_feature_angle",
-                    message: format!(
-                        "weights Laplacian steps only (the smoothing here is {})",
-                        self.smooth_method
-                    ),
-                });
-            }
+                    message,
+                }
+            })?;
         }
         options.smooth = (self.smooth > 0).then(|| SmoothOptions {
             max_inward: self.smooth_max_inward.map(|d| d * r),

@@ -135,18 +135,12 @@ impl SmoothOptions {
             });
         }
         if let Some(angle) = self.feature_angle {
-            if !(angle.is_finite() && angle > 0.0 && angle <= 180.0) {
-                return Err(crate::error::Error::InvalidOption {
+            check_feature_angle(angle, if laplacian { "laplacian" } else { "taubin" }).map_err(
+                |message| crate::error::Error::InvalidOption {
                     option: "smooth.feature_angle",
-                    message: format!("must lie in (0, 180] degrees, got {angle}"),
-                });
-            }
-            if !laplacian {
-                return Err(crate::error::Error::InvalidOption {
-                    option: "smooth.feature_angle",
-                    message: format!("weights plain Laplacian steps (μ = 0) only, got μ = {m}"),
-                });
-            }
+                    message,
+                },
+            )?;
         }
         if !(laplacian || m > -1.0 && m < -l) {
             return Err(crate::error::Error::InvalidOption {
@@ -156,6 +150,20 @@ impl SmoothOptions {
         }
         Ok(())
     }
+}
+
+/// Checks a feature angle ([`SmoothOptions::feature_angle`], degrees) for smoothing of
+/// the kind `method` (`laplacian` or `taubin`): the message of the error.
+pub(crate) fn check_feature_angle(angle: f32, method: &str) -> Result<(), String> {
+    if !(angle.is_finite() && angle > 0.0 && angle <= 180.0) {
+        return Err(format!("must lie in (0, 180] degrees, got {angle}"));
+    }
+    if method != "laplacian" {
+        return Err(format!(
+            "weights Laplacian steps only (the smoothing here is {method})"
+        ));
+    }
+    Ok(())
 }
 
 /// What [`smooth`] did.
@@ -225,8 +233,7 @@ pub(crate) fn smooth_keeping_rings(
                     Some(ring) => {
                         let x = current[v];
                         let k = ring.len() as f32;
-                        let mut step =
-                            ring.iter().map(|&n| current[n as usize]).sum::<Vec3>() / k - x;
+                        let mut step = ring_mean(ring, &current) - x;
                         if let Some(guide) = guide.as_ref().filter(|g| step.dot(g.normals[v]) < 0.0)
                         {
                             step = ring
@@ -267,6 +274,11 @@ pub(crate) fn smooth_keeping_rings(
     (stats, Some(rings))
 }
 
+/// The mean of the positions of `ring`'s vertices.
+fn ring_mean(ring: &[u32], positions: &[Vec3]) -> Vec3 {
+    ring.iter().map(|&n| positions[n as usize]).sum::<Vec3>() / ring.len() as f32
+}
+
 /// The feature weights' guidance ([`SmoothOptions::feature_angle`]): the vertex normals of
 /// a copy of the mesh smoothed by plain steps, and a weight per neighbour-list entry.
 struct Guide {
@@ -288,12 +300,9 @@ impl Guide {
         let [current, next] = buffers;
         for _ in 0..steps {
             next.par_iter_mut().enumerate().for_each(|(v, out)| {
-                *out = match rings.of(v) {
-                    Some(ring) => {
-                        ring.iter().map(|&n| current[n as usize]).sum::<Vec3>() / ring.len() as f32
-                    }
-                    None => current[v],
-                };
+                *out = rings
+                    .of(v)
+                    .map_or(current[v], |ring| ring_mean(ring, current));
             });
             std::mem::swap(current, next);
         }
